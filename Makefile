@@ -1,0 +1,30 @@
+# make run  - set up .venv from nothing and run the HST roll step through the ROS 2 graph
+# make test - set up .venv from nothing, lint, and run the test suite
+PYTHON ?= python3
+VENV := .venv
+BIN := $(VENV)/bin
+STAMP := $(VENV)/.installed
+
+.PHONY: run test lint bench clean
+
+$(STAMP): setup.py package.xml
+	$(PYTHON) -m venv $(VENV)
+	$(BIN)/pip install --quiet --upgrade pip
+	$(BIN)/pip install --quiet 'ros-jazzy-rclpy[fastrtps]' ros-jazzy-common-interfaces ros-jazzy-std-srvs ros-jazzy-rosgraph-msgs
+	$(BIN)/pip install --quiet -e '.[test]'
+	touch $(STAMP)
+
+run: $(STAMP)
+	$(BIN)/attitude-sil run config/hst_roll_step.yaml
+
+lint: $(STAMP)
+	$(BIN)/ruff check attitude_sil test bench
+
+test: $(STAMP) lint
+	$(BIN)/python -m pytest -q test
+
+bench: $(STAMP)
+	$(BIN)/python bench/bench_engine.py
+
+clean:
+	rm -rf $(VENV) build *.egg-info

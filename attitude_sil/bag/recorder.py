@@ -1,0 +1,77 @@
+"""``recorder`` node: writes every topic of the run to a rosbag2 MCAP bag.
+
+Raw (serialized CDR) subscriptions go straight into
+:class:`attitude_sil.bag.writer.BagWriter`, so recording costs no
+deserialization. The log time of a message is its header stamp (sim time),
+read from the CDR bytes, so a bag replays with its simulated timing. The
+node also keeps the raw messages of chosen topics in memory for the runner's
+metrics.
+"""
+
+from __future__ import annotations
+
+import struct
+from collections import defaultdict
+
+from rclpy.node import Node
+from rclpy.qos import qos_profile_parameter_events
+
+from attitude_sil.bag.writer import BagWriter
+from attitude_sil.nodes.common import LOCKSTEP_QOS
+from attitude_sil.topics import RECORDED_TOPICS, message_class
+
+_STAMP = struct.Struct("<iI")
+
+
+def stamp_from_cdr(data: bytes) -> int | None:
+    """Nanoseconds of the ``builtin_interfaces/Time`` that opens a message, or None.
+
+    Every recorded type starts with a stamp (a ``Header``, ``Clock.clock`` or
+    ``ParameterEvent.stamp``), right after the 4-byte CDR encapsulation header.
+    """
+    if len(data) < 12 or data[1] not in (0, 1):
+        return None
+    sec, nsec = _STAMP.unpack_from(data, 4) if data[1] == 1 else struct.unpack_from(">iI", data, 4)
+    return sec * 1_000_000_000 + nsec
+
+
+class Recorder(Node):
+    """Records topics to a bag and/or keeps them for metrics.
+
+    Parameters
+    ----------
+    writer : BagWriter or None
+        Where to record; None keeps only the in-memory copies.
+    keep : iterable of str
+        Relative topic names whose raw messages stay in memory (``kept``).
+    topics : dict, optional
+        ``name -> type``; default every topic of DESIGN.md section 3 plus
+        ``/parameter_events``.
+    """
+
+    def __init__(self, writer: BagWriter | None, keep=(), topics: dict[str, str] | None = None, **kwargs) -> None:
+        super().__init__("recorder", **kwargs)
+        self.writer = writer
+        self.counts: dict[str, int] = defaultdict(int)
+        self.kept: dict[str, list[tuple[int, bytes]]] = {name: [] for name in keep}
+        self.subs = {}
+        for name, type_name in (topics or RECORDED_TOPICS).items():
+            qos = qos_profile_parameter_events if name == "/parameter_events" else LOCKSTEP_QOS
+            sub = self.create_subscription(
+                message_class(type_name), name, lambda data, n=name: self._on_message(n, data), qos, raw=True
+            )
+            self.subs[name] = sub
+            if writer is not None:
+                writer.add_topic(sub.topic_name, type_name)
+        self.resolved = {name: sub.topic_name for name, sub in self.subs.items()}
+
+    def _on_message(self, name: str, data: bytes) -> None:
+        t = stamp_from_cdr(data)
+        if t is None:
+            t = self.get_clock().now().nanoseconds
+        self.counts[name] += 1
+        if self.writer is not None:
+            self.writer.write(self.resolved[name], data, t)
+        kept = self.kept.get(name)
+        if kept is not None:
+            kept.append((t, data))

@@ -1,0 +1,316 @@
+"""The lockstep step objects and the batch engine.
+
+The five graph nodes each hold one of the objects below and call exactly the
+methods the batch engine calls, in the same order, so a run through the ROS
+graph and :func:`simulate` with P = 1 produce the same numbers (DESIGN.md
+section 2). One control step k of the lockstep protocol:
+
+1. ``Plant.state`` at t_k (published as ``attitude``, ``body_rate``);
+2. ``Guidance.setpoint(t_k)`` and ``Disturbance.torque(q_BN)``;
+3. ``Controller.compute(...)`` -> command held over ``[t_k, t_k+1]``;
+4. ``Wheels.advance(command)`` -> momentum at t_k and mean torque;
+5. ``Plant.advance(tau_c, h_w, tau_ext)`` -> state at t_k+1.
+
+Every object carries a leading episode axis P.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .controllers import PID
+from .disturbance import DisturbanceModel
+from .quaternion import quat_from_euler
+from .rigid_body import BodyState, rk4_step
+from .scenario import Scenario
+from .wheels import GEOMETRIES, MotorParams, WheelAssembly
+
+__all__ = [
+    "Plant",
+    "Wheels",
+    "Guidance",
+    "build_plant",
+    "build_wheels",
+    "build_disturbance",
+    "build_guidance",
+    "build_controller",
+    "Trajectory",
+    "simulate",
+]
+
+RPM = 2.0 * np.pi / 60.0
+
+
+def inertia_matrix(values) -> np.ndarray:
+    """3 principal values or 9 row-major entries -> (3, 3) kg m^2 (symmetric, positive definite)."""
+    v = np.asarray(values, dtype=float)
+    m = np.diag(v) if v.shape[-1] == 3 else v.reshape(v.shape[:-1] + (3, 3))
+    if not np.allclose(m, np.swapaxes(m, -1, -2)):
+        raise ValueError("inertia must be symmetric")
+    if np.any(np.linalg.eigvalsh(m) <= 0.0):
+        raise ValueError("inertia must be positive definite")
+    return m
+
+
+def _per_episode(value, n: int, width: int) -> np.ndarray:
+    """Broadcast a (width,) or (P, width) value to (P, width)."""
+    a = np.asarray(value, dtype=float)
+    return np.array(np.broadcast_to(a, (n, width)))
+
+
+class Plant:
+    """Spacecraft body: RK4 over each held-input interval (paper 000 eq. 4, 10-11)."""
+
+    def __init__(self, inertia: np.ndarray, dt: float, substeps: int,
+                 q0: np.ndarray, omega0: np.ndarray) -> None:
+        self.inertia = np.asarray(inertia, dtype=float)
+        self.inertia_inv = np.linalg.inv(self.inertia)
+        self.dt = float(dt)
+        self.substeps = int(substeps)
+        self.q0 = np.asarray(q0, dtype=float)
+        self.omega0 = np.asarray(omega0, dtype=float)
+        self.reset()
+
+    @property
+    def n_episodes(self) -> int:
+        return self.q0.shape[0]
+
+    def reset(self) -> None:
+        """Return to the initial state (wheel momentum comes from the wheels each step)."""
+        self.state = BodyState(self.q0.copy(), self.omega0.copy(), np.zeros_like(self.omega0))
+
+    def advance(self, tau_c_B: np.ndarray, h_wheels_B: np.ndarray, tau_ext_B: np.ndarray) -> BodyState:
+        """Integrate from t_k to t_k+1 with the step's inputs.
+
+        Parameters
+        ----------
+        tau_c_B : (P, 3) N m, mean wheel torque on the body over the step
+        h_wheels_B : (P, 3) N m s, wheel momentum at t_k
+        tau_ext_B : (P, 3) N m, disturbance torque held over the step
+        """
+        self.state.h_wheels_B = np.asarray(h_wheels_B, dtype=float)
+        self.state = rk4_step(self.state, self.inertia, self.inertia_inv, tau_c_B, tau_ext_B,
+                              self.dt, self.substeps)
+        return self.state
+
+
+@dataclass
+class WheelStep:
+    """What the wheels publish for step k (all at or from t_k)."""
+
+    h_wheels_B: np.ndarray  # (P, 3) momentum at t_k
+    tau_c_B: np.ndarray  # (P, 3) mean torque on the body over [t_k, t_k+1]
+    position: np.ndarray  # (P, n) rad at t_k
+    velocity: np.ndarray  # (P, n) rad/s at t_k
+    effort: np.ndarray  # (P, n) N m motor torque at t_k
+
+
+class Wheels:
+    """Reaction-wheel assembly driven by a body-axis voltage command."""
+
+    def __init__(self, assembly: WheelAssembly, n_episodes: int, speed0: np.ndarray | None) -> None:
+        self.assembly = assembly
+        self.n_episodes = n_episodes
+        self.speed0 = speed0
+        self.reset()
+
+    def reset(self) -> None:
+        self.x = self.assembly.initial_state(self.n_episodes, self.speed0)
+
+    @property
+    def names(self) -> list[str]:
+        return [f"wheel_{i + 1}" for i in range(self.assembly.n_wheels)]
+
+    def advance(self, v_cmd_B: np.ndarray) -> WheelStep:
+        """Hold ``v_cmd_B`` (P, 3) V over one step; return the step's outputs."""
+        x = self.x
+        e = self.assembly.wheel_voltages(np.asarray(v_cmd_B, dtype=float), x)
+        self.x, tau_c = self.assembly.step(x, e)
+        return WheelStep(self.assembly.momentum_B(x), tau_c, x[:, :, 0], x[:, :, 2],
+                         self.assembly.motor_torque(x))
+
+
+class Guidance:
+    """Step setpoint: ``initial`` attitude until ``step_time``, then ``final``; zero rate."""
+
+    def __init__(self, initial_rpy_deg, final_rpy_deg, step_time: float, n_episodes: int) -> None:
+        self.q_initial = _per_episode(quat_from_euler(np.radians(initial_rpy_deg)), n_episodes, 4)
+        self.q_final = _per_episode(quat_from_euler(np.radians(final_rpy_deg)), n_episodes, 4)
+        self.step_time = float(step_time)
+        self.omega = np.zeros((n_episodes, 3))
+
+    def setpoint(self, t: float) -> tuple[np.ndarray, np.ndarray]:
+        """Reference (q_RN (P, 4), omega_RN_R (P, 3) rad/s) at sim time t."""
+        # compare in integer-safe form: t is k*dt computed from integer ns
+        q = self.q_final if t >= self.step_time - 1e-12 else self.q_initial
+        return q, self.omega
+
+
+def build_plant(scn: Scenario, n_episodes: int = 1, inertia=None, rpy0_deg=None, omega0=None) -> Plant:
+    """Plant from the scenario's ``plant`` parameters (per-episode overrides optional)."""
+    p = scn.values["plant"]
+    m = inertia_matrix(p["inertia"] if inertia is None else inertia)
+    m = np.array(np.broadcast_to(m, (n_episodes, 3, 3)))
+    rpy = _per_episode(p["initial_attitude_rpy_deg"] if rpy0_deg is None else rpy0_deg, n_episodes, 3)
+    w0 = _per_episode(p["initial_body_rate"] if omega0 is None else omega0, n_episodes, 3)
+    return Plant(m, p["control_period"], p["substeps"], quat_from_euler(np.radians(rpy)), w0)
+
+
+def motor_params(values: dict) -> MotorParams:
+    """MotorParams from the ``wheels`` node's ``motor.*`` parameters."""
+    return MotorParams(
+        resistance=values["motor.resistance"],
+        inductance=values["motor.inductance"],
+        torque_constant=values["motor.torque_constant"],
+        back_emf_constant=values["motor.back_emf_constant"],
+        rotor_inertia=values["motor.rotor_inertia"],
+        viscous_friction=values["motor.viscous_friction"],
+        v_max=values["motor.v_max"],
+        torque_max=values["motor.torque_max"],
+        speed_max=values["motor.speed_max_rpm"] * RPM,
+    )
+
+
+def build_wheels(scn: Scenario, n_episodes: int = 1) -> Wheels:
+    """Wheels from the scenario's ``wheels`` parameters."""
+    w = scn.values["wheels"]
+    axes = GEOMETRIES[w["geometry"]]()
+    assembly = WheelAssembly(axes, motor_params(w), w["control_period"])
+    speed0 = None
+    if w["initial_speed_rpm"]:
+        if len(w["initial_speed_rpm"]) != assembly.n_wheels:
+            raise ValueError(
+                f"wheels.initial_speed_rpm has {len(w['initial_speed_rpm'])} values for {assembly.n_wheels} wheels"
+            )
+        speed0 = np.asarray(w["initial_speed_rpm"]) * RPM
+    return Wheels(assembly, n_episodes, speed0)
+
+
+def build_disturbance(scn: Scenario, n_episodes: int = 1, seeds=None, inertia=None) -> DisturbanceModel:
+    """Disturbance model from the ``disturbance`` parameters; seeds default to seed + p."""
+    d = scn.values["disturbance"]
+    m = inertia_matrix(d["inertia"] if inertia is None else inertia)
+    diag = np.diagonal(m, axis1=-2, axis2=-1)
+    if seeds is None:
+        seeds = [d["noise.seed"] + p for p in range(n_episodes)]
+    return DisturbanceModel(d["models"], d["control_period"], diag, np.asarray(d["noise.power"]),
+                            d["noise.sample_time"], seeds, d["gravity_gradient.mu"],
+                            d["gravity_gradient.orbit_radius"])
+
+
+def build_guidance(scn: Scenario, n_episodes: int = 1) -> Guidance:
+    g = scn.values["guidance"]
+    return Guidance(g["initial_setpoint_rpy_deg"], g["setpoint_rpy_deg"], g["step_time"], n_episodes)
+
+
+def build_controller(scn: Scenario, n_episodes: int = 1, gains: dict | None = None) -> PID:
+    """Controller of the scenario's ``controller_type`` (per-episode gain arrays optional).
+
+    ``gains`` maps ``kp``/``ki``/``kd``/``n`` to (P, 3) arrays.
+    """
+    c = scn.values["controller"]
+    g = {k: _per_episode(c[f"pid.{k}"], n_episodes, 3) for k in ("kp", "ki", "kd", "n")}
+    if gains:
+        for k, v in gains.items():
+            g[k] = _per_episode(v, n_episodes, 3)
+    return PID(g["kp"], g["ki"], g["kd"], g["n"], c["control_period"], c["output_limit"])
+
+
+@dataclass
+class Trajectory:
+    """Batch run result; arrays hold step k = 0..K on axis 1.
+
+    Attributes
+    ----------
+    t : (K+1,) s
+    q_BN : (P, K+1, 4)
+    omega_BN_B : (P, K+1, 3) rad/s
+    q_RN : (P, K+1, 4) setpoint
+    h_wheels_B : (P, K+1, 3) N m s
+    u_cmd : (P, K+1, 3) controller command (V)
+    tau_c_B : (P, K+1, 3) mean wheel torque on the body over [t_k, t_k+1], N m
+    tau_ext_B : (P, K+1, 3) disturbance torque, N m
+    wheel_speed : (P, K+1, n) rad/s
+    """
+
+    t: np.ndarray
+    q_BN: np.ndarray
+    omega_BN_B: np.ndarray
+    q_RN: np.ndarray
+    h_wheels_B: np.ndarray
+    u_cmd: np.ndarray
+    tau_c_B: np.ndarray
+    tau_ext_B: np.ndarray
+    wheel_speed: np.ndarray
+
+
+def simulate(
+    scn: Scenario,
+    n_episodes: int = 1,
+    duration: float | None = None,
+    gains: dict | None = None,
+    inertia=None,
+    seeds=None,
+) -> Trajectory:
+    """Run P episodes of the scenario in lockstep, vectorised over episodes.
+
+    Parameters
+    ----------
+    scn : Scenario
+    n_episodes : int
+        P.
+    duration : float, optional
+        Overrides ``plant.duration``, s.
+    gains : dict, optional
+        Per-episode PID gains ``{'kp': (P, 3), ...}``.
+    inertia : array_like, optional
+        Per-episode inertia, (P, 3) principal values or (P, 3, 3).
+    seeds : sequence of int, optional
+        Per-episode noise seeds.
+
+    Returns
+    -------
+    Trajectory
+    """
+    P = n_episodes
+    K = scn.steps(duration)
+    dt = scn.dt
+    plant = build_plant(scn, P, inertia=inertia)
+    wheels = build_wheels(scn, P)
+    dist = build_disturbance(scn, P, seeds=seeds, inertia=inertia)
+    guide = build_guidance(scn, P)
+    ctrl = build_controller(scn, P, gains=gains)
+    ctrl.reset(P)
+    nw = wheels.assembly.n_wheels
+    tr = Trajectory(
+        t=np.arange(K + 1) * dt,
+        q_BN=np.empty((P, K + 1, 4)),
+        omega_BN_B=np.empty((P, K + 1, 3)),
+        q_RN=np.empty((P, K + 1, 4)),
+        h_wheels_B=np.empty((P, K + 1, 3)),
+        u_cmd=np.empty((P, K + 1, 3)),
+        tau_c_B=np.empty((P, K + 1, 3)),
+        tau_ext_B=np.empty((P, K + 1, 3)),
+        wheel_speed=np.empty((P, K + 1, nw)),
+    )
+    dt_ns = int(round(dt * 1e9))
+    for k in range(K + 1):
+        t = k * dt_ns * 1e-9
+        s = plant.state
+        q_RN, w_RN = guide.setpoint(t)
+        tau_ext = dist.torque(s.q_BN)
+        u = ctrl.compute(s.q_BN, s.omega_BN_B, q_RN, w_RN)
+        ws = wheels.advance(u)
+        tr.q_BN[:, k] = s.q_BN
+        tr.omega_BN_B[:, k] = s.omega_BN_B
+        tr.q_RN[:, k] = q_RN
+        tr.h_wheels_B[:, k] = ws.h_wheels_B
+        tr.u_cmd[:, k] = u
+        tr.tau_c_B[:, k] = ws.tau_c_B
+        tr.tau_ext_B[:, k] = tau_ext
+        tr.wheel_speed[:, k] = ws.velocity
+        if k < K:
+            plant.advance(ws.tau_c_B, ws.h_wheels_B, tau_ext)
+    return tr

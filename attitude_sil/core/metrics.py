@@ -1,0 +1,141 @@
+"""Step-response metrics and the paper 000 cost, batch over episodes.
+
+All functions take a time vector ``t`` (K+1,) and arrays with a leading
+episode axis. Times are measured from the step time. A metric that the
+response never reaches (a time constant of a response that never gets to
+63.2 %) is NaN, and so is a cost built from it.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .quaternion import euler_from_quat
+
+__all__ = ["step_metrics", "metrics_from_trajectory"]
+
+
+def _first_crossing(t: np.ndarray, y: np.ndarray, level: float | np.ndarray) -> np.ndarray:
+    """First time each row of y (P, K) reaches ``level`` (P,), linearly interpolated; NaN if never."""
+    level = np.broadcast_to(np.asarray(level, dtype=float), (y.shape[0],))[:, None]
+    above = y >= level
+    idx = np.argmax(above, axis=1)
+    hit = above[np.arange(y.shape[0]), idx]
+    out = np.full(y.shape[0], np.nan)
+    for p in np.nonzero(hit)[0]:
+        i = idx[p]
+        if i == 0:
+            out[p] = t[0]
+        else:
+            y0, y1 = y[p, i - 1], y[p, i]
+            frac = (level[p, 0] - y0) / (y1 - y0) if y1 != y0 else 0.0
+            out[p] = t[i - 1] + frac * (t[i] - t[i - 1])
+    return out
+
+
+def step_metrics(
+    t: np.ndarray,
+    y: np.ndarray,
+    r: np.ndarray,
+    y0: np.ndarray,
+    step_time: float = 0.0,
+    settling_band: float = 0.02,
+) -> dict[str, np.ndarray]:
+    """Metrics of a step from ``y0`` to ``r`` on one axis.
+
+    Parameters
+    ----------
+    t : (K+1,) s
+    y : (P, K+1) response, rad
+    r : (P,) final setpoint, rad
+    y0 : (P,) value before the step, rad
+    step_time : float, s
+    settling_band : float
+        Fraction of the step size.
+
+    Returns
+    -------
+    dict of (P,) arrays: ``time_constant_s`` (63.2 %), ``rise_time_s`` (10-90 %),
+    ``settling_time_s`` (first time after which |y - r| stays within the band),
+    ``overshoot_pct``, ``steady_state_error_rad`` (|r - y| at the end), and the
+    error integrals ``iae``, ``ise``, ``itae`` of ``r - y`` after the step.
+    """
+    r = np.asarray(r, dtype=float)
+    y0 = np.asarray(y0, dtype=float)
+    after = t >= step_time - 1e-12
+    ta = t[after] - step_time
+    ya = y[:, after]
+    span = r - y0
+    safe = np.where(span == 0.0, 1.0, span)
+    frac = (ya - y0[:, None]) / safe[:, None]
+    tc = _first_crossing(ta, frac, 0.632)
+    t10 = _first_crossing(ta, frac, 0.1)
+    t90 = _first_crossing(ta, frac, 0.9)
+    overshoot = np.maximum(0.0, np.max(frac, axis=1) - 1.0) * 100.0
+    outside = np.abs(ya - r[:, None]) > settling_band * np.abs(span)[:, None]
+    settle = np.full(y.shape[0], np.nan)
+    for p in range(y.shape[0]):
+        idx = np.nonzero(outside[p])[0]
+        if idx.size == 0:
+            settle[p] = 0.0
+        elif idx[-1] < ta.size - 1:
+            settle[p] = ta[idx[-1] + 1]
+    err = r[:, None] - ya
+    dts = np.diff(ta)
+    # trapezoidal integrals
+    iae = np.sum(0.5 * (np.abs(err[:, 1:]) + np.abs(err[:, :-1])) * dts, axis=1)
+    ise = np.sum(0.5 * (err[:, 1:] ** 2 + err[:, :-1] ** 2) * dts, axis=1)
+    itae = np.sum(0.5 * (ta[1:] * np.abs(err[:, 1:]) + ta[:-1] * np.abs(err[:, :-1])) * dts, axis=1)
+    zero_step = span == 0.0
+    for arr in (tc, t10, t90, overshoot, settle):
+        arr[zero_step] = np.nan
+    return {
+        "time_constant_s": tc,
+        "rise_time_s": t90 - t10,
+        "settling_time_s": settle,
+        "overshoot_pct": overshoot,
+        "steady_state_error_rad": np.abs(err[:, -1]),
+        "iae": iae,
+        "ise": ise,
+        "itae": itae,
+    }
+
+
+def metrics_from_trajectory(
+    t: np.ndarray,
+    q_BN: np.ndarray,
+    q_RN: np.ndarray,
+    tau_c_B: np.ndarray,
+    axis: int = 0,
+    step_time: float = 0.0,
+    settling_band: float = 0.02,
+    tau_d: float = 1.5,
+    w_os: float = 1.0,
+) -> dict[str, np.ndarray]:
+    """Step metrics, control effort and cost J of a run.
+
+    Parameters
+    ----------
+    t : (K+1,) s
+    q_BN, q_RN : (P, K+1, 4) attitude and setpoint
+    tau_c_B : (P, K+1, 3) N m, mean control torque of each step (the last
+        entry, after the final state, is not counted)
+    axis : int, body axis of the step (0 roll, 1 pitch, 2 yaw)
+    step_time, settling_band : see :func:`step_metrics`
+    tau_d, w_os : desired time constant (s) and overshoot weight of
+        ``J = |tau - tau_d| + w_os OS`` (paper 000 eq. 19, OS in percent)
+
+    Returns
+    -------
+    dict of (P,) arrays: those of :func:`step_metrics` plus
+    ``control_effort_Nms`` (sum of ||tau_c|| dt) and ``cost_J``.
+    """
+    y = euler_from_quat(q_BN)[..., axis]
+    ref = euler_from_quat(q_RN)[..., axis]
+    before = t < step_time - 1e-12
+    y0 = ref[:, np.nonzero(before)[0][-1]] if before.any() else euler_from_quat(q_BN[:, 0])[..., axis]
+    m = step_metrics(t, y, ref[:, -1], y0, step_time, settling_band)
+    dt = np.diff(t)
+    m["control_effort_Nms"] = np.sum(np.linalg.norm(tau_c_B[:, :-1], axis=-1) * dt, axis=1)
+    m["cost_J"] = np.abs(m["time_constant_s"] - tau_d) + w_os * m["overshoot_pct"]
+    return m

@@ -1,0 +1,255 @@
+"""Parameter schema of every node: names, types, defaults, units, ranges.
+
+One table serves three users: the nodes declare their ROS parameters from it
+(``ParameterDescriptor`` with description and range), the scenario loader
+validates YAML files against it, and the batch engine reads its defaults. A
+name here is a ROS contract (DESIGN.md section 3).
+
+Values whose source paper gives no number are marked ``assumed`` in their
+description, with the reason.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Any
+
+__all__ = ["ParamSpec", "NODE_PARAMS", "GLOBAL_NODE", "SCENARIO_NODE", "spec_for", "HST_MOTOR"]
+
+GLOBAL_NODE = "/**"
+SCENARIO_NODE = "scenario"
+
+_KINDS = ("double", "integer", "bool", "string", "double_array", "integer_array", "string_array")
+
+
+@dataclass(frozen=True)
+class ParamSpec:
+    """One parameter: its type, default and the rule a value must satisfy.
+
+    Attributes
+    ----------
+    name : str
+        Parameter name, dotted for groups (``pid.kp``).
+    kind : str
+        One of ``double``, ``integer``, ``bool``, ``string`` and their
+        ``*_array`` forms.
+    default : Any
+    description : str
+        One line, with the unit.
+    min, max : float, optional
+        Inclusive bounds for numbers and for every array element.
+    min_exclusive : bool
+        ``min`` itself is not allowed (strictly positive quantities).
+    lengths : tuple of int, optional
+        Allowed array lengths.
+    choices : tuple of str, optional
+        Allowed values for strings (and string-array elements).
+    """
+
+    name: str
+    kind: str
+    default: Any
+    description: str
+    min: float | None = None
+    max: float | None = None
+    min_exclusive: bool = False
+    lengths: tuple[int, ...] | None = None
+    choices: tuple[str, ...] | None = None
+    runtime: bool = field(default=False)
+
+    def __post_init__(self) -> None:
+        assert self.kind in _KINDS, self.kind
+
+    # -- validation ------------------------------------------------------------
+    def _check_number(self, value: Any, where: str) -> float | int:
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            raise ValueError(f"{where} must be a number, got {type(value).__name__} {value!r}")
+        if self.kind.startswith("integer"):
+            if isinstance(value, float):
+                if not value.is_integer():
+                    raise ValueError(f"{where} must be an integer, got {value!r}")
+                value = int(value)
+        else:
+            value = float(value)
+            if not math.isfinite(value):
+                raise ValueError(f"{where} must be finite, got {value!r}")
+        if self.min is not None:
+            if value < self.min or (self.min_exclusive and value == self.min):
+                rel = ">" if self.min_exclusive else ">="
+                raise ValueError(f"{where} must be {rel} {self.min}, got {value!r}")
+        if self.max is not None and value > self.max:
+            raise ValueError(f"{where} must be <= {self.max}, got {value!r}")
+        return value
+
+    def _check_string(self, value: Any, where: str) -> str:
+        if not isinstance(value, str):
+            raise ValueError(f"{where} must be a string, got {type(value).__name__} {value!r}")
+        if self.choices is not None and value not in self.choices:
+            raise ValueError(f"{where} must be one of {', '.join(self.choices)}; got {value!r}")
+        return value
+
+    def validate(self, value: Any, node: str = "") -> Any:
+        """Return the value converted to this parameter's type or raise ``ValueError``.
+
+        The message names the parameter and the rule it broke, on one line.
+        """
+        where = f"{node}.{self.name}" if node else self.name
+        if self.kind == "bool":
+            if not isinstance(value, bool):
+                raise ValueError(f"{where} must be true or false, got {value!r}")
+            return value
+        if self.kind == "string":
+            return self._check_string(value, where)
+        if self.kind in ("double", "integer"):
+            return self._check_number(value, where)
+        # arrays
+        if isinstance(value, (str, bytes)) or not hasattr(value, "__iter__"):
+            raise ValueError(f"{where} must be a list, got {type(value).__name__} {value!r}")
+        items = list(value)
+        if self.lengths is not None and len(items) not in self.lengths:
+            allowed = " or ".join(str(n) for n in self.lengths)
+            raise ValueError(f"{where} must have {allowed} elements, got {len(items)}")
+        if self.kind == "string_array":
+            return [self._check_string(v, f"{where}[{i}]") for i, v in enumerate(items)]
+        return [self._check_number(v, f"{where}[{i}]") for i, v in enumerate(items)]
+
+
+def _d(name, default, description, **kw) -> ParamSpec:
+    return ParamSpec(name, "double", float(default), description, **kw)
+
+
+def _da(name, default, description, **kw) -> ParamSpec:
+    return ParamSpec(name, "double_array", [float(v) for v in default], description, **kw)
+
+
+# HST wheel motor. Paper 000 gives J_m = 0.84 kg m^2, 0.8 N m and 3000 rpm and
+# names a commercial PMDC motor without its constants; the rest is assumed.
+_RATED_SPEED = 3000.0 * 2.0 * math.pi / 60.0  # rad/s, paper 000
+_K_MOTOR = 1.5  # assumed, see below
+
+HST_MOTOR = {
+    # assumed: K_i = K_b = 1.5 (SI units, ideal PMDC) and R_a = 1.5 ohm. Chosen by
+    # sweeping (K, R) in the batch engine so the paper's GA gains give the 1 deg
+    # roll step a time constant near 1.5 s with no overshoot (1.43 s, 0 %); the
+    # root-locus gains then saturate the 0.8 N m wheels and respond in about
+    # 3.3 s, also without overshoot. README, "HST model".
+    "motor.back_emf_constant": _K_MOTOR,
+    "motor.torque_constant": _K_MOTOR,
+    "motor.resistance": 1.5,
+    # assumed: drive voltage that gives the paper's 3000 rpm no-load speed.
+    "motor.v_max": _K_MOTOR * _RATED_SPEED,
+    # assumed: electrical time constant L/R = 1 ms.
+    "motor.inductance": 1.5e-3,
+    "motor.rotor_inertia": 0.84,
+    # assumed: small bearing friction, 1e-4 N m per rad/s.
+    "motor.viscous_friction": 1.0e-4,
+    "motor.torque_max": 0.8,
+    "motor.speed_max_rpm": 3000.0,
+}
+
+_HST_INERTIA = [31.046, 77.217, 78.754]
+
+NODE_PARAMS: dict[str, list[ParamSpec]] = {
+    GLOBAL_NODE: [],  # filled below: names any node declares may be set for all
+    "plant": [
+        _d("control_period", 0.01, "control step dt, s (shared by every node)", min=0.0, min_exclusive=True, max=1.0),
+        _da("inertia", _HST_INERTIA,
+            "body inertia, kg m^2: 3 principal values or 9 row-major entries (paper 000: HST)",
+            lengths=(3, 9)),
+        _da("initial_attitude_rpy_deg", [0, 0, 0], "initial roll, pitch, yaw of B in N, deg",
+            lengths=(3,), min=-360.0, max=360.0),
+        _da("initial_body_rate", [0, 0, 0], "initial omega_BN in B, rad/s", lengths=(3,)),
+        ParamSpec("substeps", "integer", 1, "RK4 steps per control period", min=1, max=1000),
+        _d("duration", 20.0, "episode length, s of sim time (0: run until stopped)", min=0.0),
+        _d("real_time_factor", 0.0, "pace sim time to wall time: 1.0 real time, 0 as fast as possible",
+           min=0.0, max=1000.0, runtime=True),
+        _d("input_timeout", 10.0, "wall time the plant waits for a step's inputs before it stops, s",
+           min=0.0, min_exclusive=True, runtime=True),
+        ParamSpec("autostart", "bool", True,
+                  "start the episode once every input and output topic is matched"),
+    ],
+    "wheels": [
+        _d("control_period", 0.01, "control step dt, s (shared by every node)", min=0.0, min_exclusive=True, max=1.0),
+        ParamSpec("geometry", "string", "hst_pyramid", "wheel axes: hst_pyramid (paper 000 eq. 13) or orthogonal",
+                  choices=("hst_pyramid", "orthogonal")),
+        _d("motor.resistance", HST_MOTOR["motor.resistance"], "armature resistance R_a, ohm (assumed)",
+           min=0.0, min_exclusive=True),
+        _d("motor.inductance", HST_MOTOR["motor.inductance"], "armature inductance L_a, H (assumed)",
+           min=0.0, min_exclusive=True),
+        _d("motor.torque_constant", HST_MOTOR["motor.torque_constant"], "torque constant K_i, N m/A (assumed)",
+           min=0.0, min_exclusive=True),
+        _d("motor.back_emf_constant", HST_MOTOR["motor.back_emf_constant"],
+           "back-EMF constant K_b, V s/rad (assumed)", min=0.0, min_exclusive=True),
+        _d("motor.rotor_inertia", HST_MOTOR["motor.rotor_inertia"], "wheel rotor inertia J_m, kg m^2",
+           min=0.0, min_exclusive=True),
+        _d("motor.viscous_friction", HST_MOTOR["motor.viscous_friction"],
+           "viscous friction B_m, N m s/rad (assumed)", min=0.0),
+        _d("motor.v_max", HST_MOTOR["motor.v_max"], "drive bus voltage limit, V (assumed)",
+           min=0.0, min_exclusive=True),
+        _d("motor.torque_max", HST_MOTOR["motor.torque_max"], "motor torque limit, N m", min=0.0, min_exclusive=True),
+        _d("motor.speed_max_rpm", HST_MOTOR["motor.speed_max_rpm"], "wheel speed limit, rpm",
+           min=0.0, min_exclusive=True),
+        _da("initial_speed_rpm", [], "initial wheel speeds, rpm (empty: all zero)"),
+    ],
+    "disturbance": [
+        _d("control_period", 0.01, "control step dt, s (shared by every node)", min=0.0, min_exclusive=True, max=1.0),
+        _da("inertia", _HST_INERTIA, "body inertia for the gravity gradient, kg m^2 (3 or 9 values)",
+            lengths=(3, 9)),
+        ParamSpec("models", "string_array", [], "disturbance models summed: noise, gravity_gradient_linear",
+                  choices=("noise", "gravity_gradient_linear")),
+        _da("noise.power", [5e-6, 5e-6, 5e-6], "band-limited white noise power per body axis, N^2 m^2 s",
+            lengths=(3,), min=0.0),
+        _d("noise.sample_time", 0.001, "noise sample time T_s, s", min=0.0, min_exclusive=True),
+        ParamSpec("noise.seed", "integer", 0, "noise seed", min=0),
+        _d("gravity_gradient.mu", 3.986004418e14, "Earth gravitational parameter, m^3/s^2",
+           min=0.0, min_exclusive=True),
+        _d("gravity_gradient.orbit_radius", 6.913e6,
+           "circular orbit radius, m (assumed: HST at about 535 km altitude)", min=0.0, min_exclusive=True),
+    ],
+    "guidance": [
+        _d("control_period", 0.01, "control step dt, s (shared by every node)", min=0.0, min_exclusive=True, max=1.0),
+        _da("initial_setpoint_rpy_deg", [0, 0, 0], "reference roll, pitch, yaw before the step, deg",
+            lengths=(3,), min=-360.0, max=360.0, runtime=True),
+        _da("setpoint_rpy_deg", [0, 0, 0], "reference roll, pitch, yaw from step_time on, deg",
+            lengths=(3,), min=-360.0, max=360.0, runtime=True),
+        _d("step_time", 0.0, "sim time of the setpoint step, s", min=0.0, runtime=True),
+    ],
+    "controller": [
+        _d("control_period", 0.01, "control step dt, s (shared by every node)", min=0.0, min_exclusive=True, max=1.0),
+        ParamSpec("controller_type", "string", "pid", "active control law", choices=("pid",), runtime=True),
+        _da("pid.kp", [48.894] * 3, "proportional gain per body axis, V per unit quaternion error",
+            lengths=(3,), min=0.0, runtime=True),
+        _da("pid.ki", [0.071] * 3, "integral gain per body axis, V/s per unit error", lengths=(3,), min=0.0,
+            runtime=True),
+        _da("pid.kd", [106.046] * 3, "derivative gain per body axis, V s per unit error", lengths=(3,), min=0.0,
+            runtime=True),
+        _da("pid.n", [1.427] * 3, "derivative filter coefficient N per body axis, rad/s", lengths=(3,),
+            min=0.0, min_exclusive=True, runtime=True),
+        _d("output_limit", HST_MOTOR["motor.v_max"], "command saturation, V (voltage presets)",
+           min=0.0, min_exclusive=True, runtime=True),
+    ],
+    SCENARIO_NODE: [
+        ParamSpec("name", "string", "", "scenario name (read by the runner, not a node)"),
+        ParamSpec("description", "string", "", "one-line description"),
+        ParamSpec("metrics.axis", "integer", 0, "body axis of the step metrics: 0 roll, 1 pitch, 2 yaw",
+                  min=0, max=2),
+        _d("metrics.settling_band", 0.02, "settling band, fraction of the step", min=0.0, min_exclusive=True,
+           max=1.0),
+        _d("metrics.tau_d", 1.5, "desired time constant tau_d of the cost J (paper 000 eq. 19), s", min=0.0),
+        _d("metrics.w_os", 1.0, "overshoot weight w_os of the cost J (paper 000 eq. 19), per %", min=0.0),
+    ],
+}
+
+# A name under "/**" applies to every node that declares it.
+NODE_PARAMS[GLOBAL_NODE] = list(
+    {s.name: s for node, specs in NODE_PARAMS.items() if node != SCENARIO_NODE for s in specs}.values()
+)
+
+
+def spec_for(node: str, name: str) -> ParamSpec:
+    """The spec of ``node``'s parameter ``name``; ``KeyError`` if it has none."""
+    for spec in NODE_PARAMS[node]:
+        if spec.name == name:
+            return spec
+    raise KeyError(f"{node} has no parameter {name!r}")

@@ -1,0 +1,198 @@
+"""Batch quaternion algebra in ROS order (x, y, z, w), Hamilton convention.
+
+Every function takes arrays with a leading episode axis (shape ``(P, 4)`` for
+quaternions, ``(P, 3)`` for vectors) and also accepts a single ``(4,)`` /
+``(3,)`` array. ``q_BN`` is the orientation of frame B relative to frame N: it
+maps body-frame vectors to inertial ones, ``v_N = q_BN ⊗ v_B ⊗ q_BN*``.
+
+References are to paper 000 (Sayin et al., HST): eq. 8 (Euler to quaternion),
+eq. 9 (quaternion to Euler), eq. 10-11 (kinematics).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+__all__ = [
+    "cross",
+    "quat_multiply",
+    "quat_conjugate",
+    "quat_normalize",
+    "quat_from_euler",
+    "euler_from_quat",
+    "quat_to_dcm",
+    "quat_error",
+    "error_vector",
+    "quat_derivative",
+]
+
+
+def cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Cross product over the last axis, shapes ``(..., 3)``.
+
+    Written out by components: ``np.cross`` costs several times more on the
+    small arrays of the lockstep loop.
+    """
+    a1, a2, a3 = a[..., 0], a[..., 1], a[..., 2]
+    b1, b2, b3 = b[..., 0], b[..., 1], b[..., 2]
+    return np.stack((a2 * b3 - a3 * b2, a3 * b1 - a1 * b3, a1 * b2 - a2 * b1), axis=-1)
+
+
+def quat_multiply(q: np.ndarray, p: np.ndarray) -> np.ndarray:
+    """Hamilton product ``q ⊗ p`` of quaternions in (x, y, z, w) order.
+
+    Parameters
+    ----------
+    q, p : ndarray, shape (..., 4)
+
+    Returns
+    -------
+    ndarray, shape (..., 4)
+    """
+    qx, qy, qz, qw = q[..., 0], q[..., 1], q[..., 2], q[..., 3]
+    px, py, pz, pw = p[..., 0], p[..., 1], p[..., 2], p[..., 3]
+    return np.stack(
+        (
+            qw * px + pw * qx + qy * pz - qz * py,
+            qw * py + pw * qy + qz * px - qx * pz,
+            qw * pz + pw * qz + qx * py - qy * px,
+            qw * pw - qx * px - qy * py - qz * pz,
+        ),
+        axis=-1,
+    )
+
+
+def quat_conjugate(q: np.ndarray) -> np.ndarray:
+    """Conjugate (inverse of a unit quaternion), shape (..., 4)."""
+    out = -np.asarray(q, dtype=float)
+    out[..., 3] = -out[..., 3]
+    return out
+
+
+def quat_normalize(q: np.ndarray) -> np.ndarray:
+    """Scale to unit norm, shape (..., 4). Raises ``ValueError`` on a zero quaternion."""
+    q = np.asarray(q, dtype=float)
+    n = np.sqrt(np.sum(q * q, axis=-1, keepdims=True))
+    if np.any(n == 0.0) or not np.all(np.isfinite(n)):
+        raise ValueError("quaternion has zero or non-finite norm")
+    return q / n
+
+
+def quat_from_euler(rpy: np.ndarray) -> np.ndarray:
+    """Quaternion q_BN from roll, pitch, yaw (rad), ZYX sequence (paper 000 eq. 8).
+
+    Parameters
+    ----------
+    rpy : ndarray, shape (..., 3)
+        Roll (x), pitch (y), yaw (z) in rad.
+
+    Returns
+    -------
+    ndarray, shape (..., 4)
+        Unit quaternion (x, y, z, w).
+    """
+    rpy = np.asarray(rpy, dtype=float)
+    hr, hp, hy = rpy[..., 0] / 2, rpy[..., 1] / 2, rpy[..., 2] / 2
+    cr, sr = np.cos(hr), np.sin(hr)
+    cp, sp = np.cos(hp), np.sin(hp)
+    cy, sy = np.cos(hy), np.sin(hy)
+    return np.stack(
+        (
+            sr * cp * cy - cr * sp * sy,
+            cr * sp * cy + sr * cp * sy,
+            cr * cp * sy - sr * sp * cy,
+            cr * cp * cy + sr * sp * sy,
+        ),
+        axis=-1,
+    )
+
+
+def euler_from_quat(q: np.ndarray) -> np.ndarray:
+    """Roll, pitch, yaw (rad) of q_BN, ZYX sequence (paper 000 eq. 9).
+
+    Parameters
+    ----------
+    q : ndarray, shape (..., 4)
+
+    Returns
+    -------
+    ndarray, shape (..., 3)
+        Roll in (-pi, pi], pitch in [-pi/2, pi/2], yaw in (-pi, pi].
+    """
+    x, y, z, w = q[..., 0], q[..., 1], q[..., 2], q[..., 3]
+    roll = np.arctan2(2.0 * (w * x + y * z), 1.0 - 2.0 * (x * x + y * y))
+    pitch = np.arcsin(np.clip(2.0 * (w * y - z * x), -1.0, 1.0))
+    yaw = np.arctan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
+    return np.stack((roll, pitch, yaw), axis=-1)
+
+
+def quat_to_dcm(q: np.ndarray) -> np.ndarray:
+    """Rotation matrix R_NB (maps B components to N components), shape (..., 3, 3)."""
+    x, y, z, w = q[..., 0], q[..., 1], q[..., 2], q[..., 3]
+    r = np.empty(q.shape[:-1] + (3, 3))
+    r[..., 0, 0] = 1 - 2 * (y * y + z * z)
+    r[..., 0, 1] = 2 * (x * y - z * w)
+    r[..., 0, 2] = 2 * (x * z + y * w)
+    r[..., 1, 0] = 2 * (x * y + z * w)
+    r[..., 1, 1] = 1 - 2 * (x * x + z * z)
+    r[..., 1, 2] = 2 * (y * z - x * w)
+    r[..., 2, 0] = 2 * (x * z - y * w)
+    r[..., 2, 1] = 2 * (y * z + x * w)
+    r[..., 2, 2] = 1 - 2 * (x * x + y * y)
+    return r
+
+
+def quat_error(q_BN: np.ndarray, q_RN: np.ndarray) -> np.ndarray:
+    """Error quaternion q_BR = q_RN* ⊗ q_BN: the body's attitude relative to the reference.
+
+    Returned with a non-negative scalar part (the short way round).
+
+    Parameters
+    ----------
+    q_BN, q_RN : ndarray, shape (..., 4)
+
+    Returns
+    -------
+    ndarray, shape (..., 4)
+    """
+    q_BR = quat_multiply(quat_conjugate(q_RN), q_BN)
+    sign = np.where(q_BR[..., 3:4] < 0.0, -1.0, 1.0)
+    return q_BR * sign
+
+
+def error_vector(q_BN: np.ndarray, q_RN: np.ndarray) -> np.ndarray:
+    """Quaternion error vector the controllers act on, shape (..., 3).
+
+    ``e = -vec(q_BR)`` with q_BR from :func:`quat_error`: for small angles
+    ``e ≈ (setpoint - attitude) / 2`` per body axis, so a positive entry asks
+    for a positive torque about that axis (paper 000, section 2.B: "a
+    quaternion error vector ... used as input to the controller").
+    """
+    return -quat_error(q_BN, q_RN)[..., :3]
+
+
+def quat_derivative(q: np.ndarray, omega_B: np.ndarray) -> np.ndarray:
+    """Kinematics dq/dt = 1/2 Ω(ω) q (paper 000 eq. 10-11), i.e. 1/2 q ⊗ (ω, 0).
+
+    Parameters
+    ----------
+    q : ndarray, shape (..., 4)
+        q_BN, (x, y, z, w).
+    omega_B : ndarray, shape (..., 3)
+        omega_BN in B, rad/s.
+
+    Returns
+    -------
+    ndarray, shape (..., 4)
+    """
+    x, y, z, w = q[..., 0], q[..., 1], q[..., 2], q[..., 3]
+    w1, w2, w3 = omega_B[..., 0], omega_B[..., 1], omega_B[..., 2]
+    return 0.5 * np.stack(
+        (
+            w3 * y - w2 * z + w1 * w,
+            -w3 * x + w1 * z + w2 * w,
+            w2 * x - w1 * y + w3 * w,
+            -w1 * x - w2 * y - w3 * z,
+        ),
+        axis=-1,
+    )

@@ -1,0 +1,202 @@
+"""Scenario files: ROS 2 parameter YAML validated against the node schema.
+
+A scenario is a standard ``node_name: ros__parameters: {...}`` file, so the
+same file can be handed to ``ros2 run ... --params-file``. Sections:
+
+* one per node (``plant``, ``wheels``, ``disturbance``, ``guidance``,
+  ``controller``), a leading ``/`` allowed;
+* ``/**`` for names shared by every node that declares them (``control_period``);
+* ``scenario`` for what only the runner reads (name, metrics settings).
+
+Unknown sections and keys, wrong types and out-of-range values raise
+:class:`ScenarioError` with one line naming the file, the key and the rule.
+"""
+
+from __future__ import annotations
+
+import copy
+import difflib
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+from .params import GLOBAL_NODE, NODE_PARAMS, SCENARIO_NODE
+
+__all__ = ["ScenarioError", "Scenario", "load_scenario", "scenario_from_dict", "GRAPH_NODES"]
+
+#: nodes of the graph, in the order the runner starts them
+GRAPH_NODES = ("plant", "wheels", "disturbance", "guidance", "controller")
+
+
+class ScenarioError(ValueError):
+    """A scenario file or value that cannot be used; the message is one line."""
+
+
+def _suggest(name: str, options) -> str:
+    close = difflib.get_close_matches(name, list(options), n=1)
+    return f" (did you mean {close[0]!r}?)" if close else ""
+
+
+@dataclass
+class Scenario:
+    """Validated parameter values of every node.
+
+    Attributes
+    ----------
+    values : dict
+        ``node -> name -> value`` for every declared parameter, defaults filled in.
+    explicit : dict
+        ``node -> name -> value`` of what the file set (after ``/**`` expansion);
+        this is what is handed to the nodes as parameter overrides.
+    source : str
+        File path or a label, for messages.
+    """
+
+    values: dict[str, dict[str, Any]]
+    explicit: dict[str, dict[str, Any]]
+    source: str = "<scenario>"
+    schedule: list = field(default_factory=list)
+
+    def param(self, node: str, name: str) -> Any:
+        """Value of ``node``'s parameter ``name``."""
+        return self.values[node][name]
+
+    @property
+    def name(self) -> str:
+        return self.values[SCENARIO_NODE]["name"] or Path(self.source).stem
+
+    @property
+    def dt(self) -> float:
+        return self.values["plant"]["control_period"]
+
+    @property
+    def duration(self) -> float:
+        return self.values["plant"]["duration"]
+
+    def steps(self, duration: float | None = None) -> int:
+        """Number of control steps K in the episode (states at k = 0..K)."""
+        d = self.duration if duration is None else duration
+        return int(round(d / self.dt))
+
+    def with_values(self, node: str, **updates: Any) -> Scenario:
+        """A copy with some of ``node``'s parameters replaced (validated)."""
+        new = copy.deepcopy(self)
+        specs = {s.name: s for s in NODE_PARAMS[node]}
+        for key, value in updates.items():
+            name = key.replace("__", ".")
+            if name not in specs:
+                raise ScenarioError(f"{node} has no parameter {name!r}{_suggest(name, specs)}")
+            try:
+                v = specs[name].validate(value, node)
+            except ValueError as exc:
+                raise ScenarioError(str(exc)) from None
+            new.values[node][name] = v
+            new.explicit.setdefault(node, {})[name] = v
+        _check_consistency(new)
+        return new
+
+    def params_file_dict(self) -> dict:
+        """The explicit values as a ROS 2 parameter YAML mapping."""
+        return {
+            node: {"ros__parameters": dict(vals)}
+            for node, vals in self.explicit.items()
+            if node in GRAPH_NODES and vals
+        }
+
+
+def _check_consistency(scn: Scenario) -> None:
+    periods = {n: scn.values[n]["control_period"] for n in GRAPH_NODES}
+    if len(set(periods.values())) > 1:
+        listing = ", ".join(f"{n}={p}" for n, p in periods.items())
+        raise ScenarioError(f"{scn.source}: control_period differs between nodes ({listing}); set it under /**")
+    dt = scn.dt
+    k = scn.duration / dt
+    if abs(k - round(k)) > 1e-6:
+        raise ScenarioError(f"{scn.source}: plant.duration {scn.duration} s is not a whole number of control periods")
+    dt_ns = dt * 1e9
+    if abs(dt_ns - round(dt_ns)) > 1e-3:
+        raise ScenarioError(f"{scn.source}: control_period {dt} s is not a whole number of nanoseconds")
+
+
+def scenario_from_dict(data: Any, source: str = "<dict>", check: bool = True) -> Scenario:
+    """Validate a parsed parameter mapping into a :class:`Scenario`.
+
+    ``check=False`` skips the cross-node rules (one node's own view).
+    """
+    if not isinstance(data, dict):
+        raise ScenarioError(f"{source}: expected a mapping of node names to ros__parameters")
+    known_nodes = set(NODE_PARAMS)
+    values = {node: {s.name: copy.deepcopy(s.default) for s in specs}
+              for node, specs in NODE_PARAMS.items() if node != GLOBAL_NODE}
+    explicit: dict[str, dict[str, Any]] = {}
+    sections: dict[str, dict] = {}
+    for raw_node, section in data.items():
+        node = str(raw_node)
+        if node != GLOBAL_NODE:
+            node = node.lstrip("/")
+        if node not in known_nodes:
+            raise ScenarioError(f"{source}: unknown section {raw_node!r}{_suggest(node, known_nodes)}")
+        if not isinstance(section, dict) or set(section) != {"ros__parameters"}:
+            raise ScenarioError(f"{source}: section {raw_node!r} must hold exactly one key, ros__parameters")
+        params = section["ros__parameters"]
+        if params is None:
+            params = {}
+        if not isinstance(params, dict):
+            raise ScenarioError(f"{source}: {raw_node}.ros__parameters must be a mapping")
+        sections[node] = _flatten(params)
+    # wildcard first, node sections override it
+    order = [GLOBAL_NODE] + [n for n in sections if n != GLOBAL_NODE]
+    for node in order:
+        if node not in sections:
+            continue
+        specs = {s.name: s for s in NODE_PARAMS[node]}
+        for name, value in sections[node].items():
+            if name not in specs:
+                raise ScenarioError(f"{source}: unknown key {node}.{name}{_suggest(name, specs)}")
+            try:
+                v = specs[name].validate(value, node)
+            except ValueError as exc:
+                raise ScenarioError(f"{source}: {exc}") from None
+            targets = [n for n in GRAPH_NODES if any(s.name == name for s in NODE_PARAMS[n])] \
+                if node == GLOBAL_NODE else [node]
+            for target in targets:
+                values[target][name] = copy.deepcopy(v)
+                explicit.setdefault(target, {})[name] = copy.deepcopy(v)
+    scn = Scenario(values=values, explicit=explicit, source=source)
+    if check:
+        _check_consistency(scn)
+    return scn
+
+
+def _flatten(params: dict, prefix: str = "") -> dict[str, Any]:
+    """``{'pid': {'kp': [..]}}`` -> ``{'pid.kp': [..]}`` as ROS does for nested YAML."""
+    out: dict[str, Any] = {}
+    for key, value in params.items():
+        name = f"{prefix}{key}"
+        if isinstance(value, dict):
+            out.update(_flatten(value, name + "."))
+        else:
+            out[name] = value
+    return out
+
+
+def load_scenario(path: str | Path) -> Scenario:
+    """Read and validate a scenario YAML file.
+
+    Raises
+    ------
+    ScenarioError
+        Missing file, YAML syntax error, unknown key, wrong type or value.
+    """
+    p = Path(path)
+    if not p.is_file():
+        raise ScenarioError(f"{p}: no such scenario file")
+    try:
+        data = yaml.safe_load(p.read_text())
+    except yaml.YAMLError as exc:
+        mark = getattr(exc, "problem_mark", None)
+        where = f" at line {mark.line + 1}" if mark is not None else ""
+        raise ScenarioError(f"{p}: not valid YAML{where}") from None
+    return scenario_from_dict(data, source=str(p))

@@ -1,0 +1,197 @@
+"""Reaction-wheel assembly: geometry, voltage allocation and PMDC motors.
+
+* Geometry: the HST four-wheel pyramid, paper 000 eq. 13 (the ``A`` matrix,
+  columns are wheel spin axes in B), and pseudo-inverse allocation eq. 14.
+* Motor: the permanent-magnet DC motor of paper 000 eq. 15-16 with the wheel as
+  its rotor (no external load, ``T_L = 0``), plus the wheel angle. Per wheel
+  the state ``x = (theta rad, i_a A, omega_m rad/s)`` obeys the linear system
+  ``x' = A_m x + B_m e_a``, so one held-voltage interval is integrated exactly
+  with the matrix exponential (the electrical time constant ``L/R`` never
+  limits the step).
+* Wheel momentum (eq. 17): ``h_w = G J_m omega_m`` in B. ``omega_m`` is taken
+  as the spin rate about the wheel axis; the body-rate part of the absolute
+  spin rate (``a^T omega_BN``) is neglected in the back-EMF, which is standard
+  for wheels spinning far faster than the body (HST: 1e-3 rad/s against
+  up to 314 rad/s). Momentum is still exchanged exactly with the body: the
+  body sees ``tau_c = -dh_w/dt``.
+* Drive limits, applied to the held voltage at the start of each interval:
+  bus voltage ``v_max``; a back-EMF-compensated current limit
+  (``|e - K_b omega| <= R i_max``, i.e. motor torque ``<= K_i i_max``); and a
+  speed limit that refuses voltage which would accelerate a wheel already at
+  ``speed_max`` (it then coasts).
+
+Sign convention: a positive body-axis voltage command asks for a positive
+torque on the body about that axis; the wheels are driven the other way
+(``e_w = -A_dagger v_B``, reaction ``tau_c = -A T_w``).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.linalg import expm
+
+__all__ = [
+    "MotorParams",
+    "hst_pyramid",
+    "orthogonal_triad",
+    "GEOMETRIES",
+    "WheelAssembly",
+]
+
+
+def hst_pyramid() -> np.ndarray:
+    """Spin-axis matrix of the HST RWA (paper 000 eq. 13), shape (3, 4).
+
+    Two pairs 90 deg apart, each wheel tilted 20 deg from the y-z plane.
+    """
+    s20, c20 = np.sin(np.radians(20.0)), np.cos(np.radians(20.0))
+    c45, s45 = np.cos(np.radians(45.0)), np.sin(np.radians(45.0))
+    return np.array(
+        [
+            [-s20 * c45, s20 * c45, s20 * c45, -s20 * c45],
+            [-c20 * c45, -c20 * c45, c20 * c45, c20 * c45],
+            [s45, s45, s45, s45],
+        ]
+    )
+
+
+def orthogonal_triad() -> np.ndarray:
+    """Three wheels along the body axes, shape (3, 3)."""
+    return np.eye(3)
+
+
+GEOMETRIES = {"hst_pyramid": hst_pyramid, "orthogonal": orthogonal_triad}
+
+
+@dataclass(frozen=True)
+class MotorParams:
+    """PMDC wheel-motor constants (paper 000 eq. 15-16), SI units.
+
+    Attributes
+    ----------
+    resistance : R_a, ohm
+    inductance : L_a, H
+    torque_constant : K_i, N m / A
+    back_emf_constant : K_b, V s / rad
+    rotor_inertia : J_m, kg m^2 (wheel plus rotor)
+    viscous_friction : B_m, N m s / rad
+    v_max : drive bus voltage, V
+    torque_max : motor torque limit, N m (sets i_max = torque_max / K_i)
+    speed_max : wheel speed limit, rad/s
+    """
+
+    resistance: float
+    inductance: float
+    torque_constant: float
+    back_emf_constant: float
+    rotor_inertia: float
+    viscous_friction: float
+    v_max: float
+    torque_max: float
+    speed_max: float
+
+    def validate(self) -> None:
+        """Raise ``ValueError`` naming the first non-physical constant."""
+        for name in ("resistance", "inductance", "torque_constant", "back_emf_constant",
+                     "rotor_inertia", "v_max", "torque_max", "speed_max"):
+            value = getattr(self, name)
+            if not np.isfinite(value) or value <= 0.0:
+                raise ValueError(f"motor {name} must be a positive finite number, got {value}")
+        if not np.isfinite(self.viscous_friction) or self.viscous_friction < 0.0:
+            raise ValueError(f"motor viscous_friction must be >= 0, got {self.viscous_friction}")
+
+    @property
+    def current_max(self) -> float:
+        """Armature current limit, A."""
+        return self.torque_max / self.torque_constant
+
+
+class WheelAssembly:
+    """A set of identical PMDC reaction wheels on fixed axes, batch over episodes.
+
+    Parameters
+    ----------
+    axes_B : ndarray, shape (3, n)
+        Spin axes in B (columns).
+    motor : MotorParams
+    dt : float
+        Held-voltage interval, s.
+    """
+
+    def __init__(self, axes_B: np.ndarray, motor: MotorParams, dt: float) -> None:
+        motor.validate()
+        self.axes_B = np.asarray(axes_B, dtype=float)
+        self.n_wheels = self.axes_B.shape[1]
+        self.motor = motor
+        self.dt = float(dt)
+        # eq. 14: body-axis command -> wheel command
+        self.allocation = np.linalg.pinv(self.axes_B)
+        m = motor
+        a_m = np.array(
+            [
+                [0.0, 0.0, 1.0],
+                [0.0, -m.resistance / m.inductance, -m.back_emf_constant / m.inductance],
+                [0.0, m.torque_constant / m.rotor_inertia, -m.viscous_friction / m.rotor_inertia],
+            ]
+        )
+        b_m = np.array([0.0, 1.0 / m.inductance, 0.0])
+        aug = np.zeros((4, 4))
+        aug[:3, :3] = a_m
+        aug[:3, 3] = b_m
+        e = expm(aug * self.dt)
+        self.phi_T = e[:3, :3].T.copy()  # x_next = x @ phi_T + e_a * gamma
+        self.gamma = e[:3, 3].copy()
+
+    # -- helpers -------------------------------------------------------------
+    def initial_state(self, n_episodes: int, speed0: np.ndarray | None = None) -> np.ndarray:
+        """Wheel state array (P, n, 3): angle rad, current A, speed rad/s."""
+        x = np.zeros((n_episodes, self.n_wheels, 3))
+        if speed0 is not None:
+            x[:, :, 2] = speed0
+        return x
+
+    def momentum_B(self, x: np.ndarray) -> np.ndarray:
+        """Wheel angular momentum in B (eq. 17), (P, 3) N m s."""
+        return (x[:, :, 2] * self.motor.rotor_inertia) @ self.axes_B.T
+
+    def motor_torque(self, x: np.ndarray) -> np.ndarray:
+        """Electromagnetic torque K_i i_a on each wheel, (P, n) N m."""
+        return self.motor.torque_constant * x[:, :, 1]
+
+    def wheel_voltages(self, v_cmd_B: np.ndarray, x: np.ndarray) -> np.ndarray:
+        """Body-axis voltage command to limited per-wheel voltages, (P, n) V.
+
+        Pseudo-inverse allocation (eq. 14) with the sign convention of the
+        module docstring, then the drive limits (bus voltage, back-EMF
+        compensated current limit, speed limit).
+        """
+        m = self.motor
+        e = -(v_cmd_B @ self.allocation.T)
+        speed = x[:, :, 2]
+        emf = m.back_emf_constant * speed
+        headroom = m.resistance * m.current_max
+        e = np.clip(e, emf - headroom, emf + headroom)
+        over = np.abs(speed) >= m.speed_max
+        accel = (e - emf) * speed > 0.0
+        e = np.where(over & accel, emf, e)
+        return np.clip(e, -m.v_max, m.v_max)
+
+    def step(self, x: np.ndarray, e_wheels: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Integrate the motors exactly over one held-voltage interval.
+
+        Parameters
+        ----------
+        x : (P, n, 3) state at t_k
+        e_wheels : (P, n) V, held over [t_k, t_k + dt]
+
+        Returns
+        -------
+        x_next : (P, n, 3) state at t_k + dt
+        tau_c_B : (P, 3) N m, interval-mean control torque on the body,
+            ``-(h_w(t_k+1) - h_w(t_k)) / dt``
+        """
+        x_next = x @ self.phi_T + e_wheels[:, :, None] * self.gamma
+        tau_c_B = -(self.momentum_B(x_next) - self.momentum_B(x)) / self.dt
+        return x_next, tau_c_B

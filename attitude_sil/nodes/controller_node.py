@@ -1,0 +1,102 @@
+"""``controller`` node: the attitude control law.
+
+Once it holds ``attitude``, ``body_rate``, ``attitude_setpoint`` and
+``rate_setpoint`` all stamped t_k, it computes the command for the step and
+publishes ``voltage_cmd`` (V, body axes) and ``attitude_error`` (roll, pitch,
+yaw of the rotation still to go, setpoint minus attitude, rad), stamped t_k.
+
+``controller_type`` and the gains (``pid.kp``, ``pid.ki``, ``pid.kd``,
+``pid.n``, ``output_limit``) may change while the graph runs; new gains apply
+from the next step and keep the integrator and filter states.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from geometry_msgs.msg import QuaternionStamped, Vector3Stamped
+
+from attitude_sil.core.engine import build_controller
+from attitude_sil.core.quaternion import euler_from_quat, quat_conjugate, quat_error
+from attitude_sil.nodes.common import LOCKSTEP_QOS, SchemaNode, StepSequencer, run_node, stamp_to_ns
+
+INPUTS = ("attitude", "body_rate", "attitude_setpoint", "rate_setpoint")
+
+
+def _quat(msg: QuaternionStamped) -> np.ndarray:
+    q = msg.quaternion
+    return np.array([[q.x, q.y, q.z, q.w]])
+
+
+def _vec(msg: Vector3Stamped) -> np.ndarray:
+    v = msg.vector
+    return np.array([[v.x, v.y, v.z]])
+
+
+class ControllerNode(SchemaNode):
+    """Attitude controller in lockstep; see the module docstring."""
+
+    schema_name = "controller"
+
+    def __init__(self, **kwargs) -> None:
+        super().__init__(**kwargs)
+        self.pub_cmd = self.create_publisher(Vector3Stamped, "voltage_cmd", LOCKSTEP_QOS)
+        self.pub_err = self.create_publisher(Vector3Stamped, "attitude_error", LOCKSTEP_QOS)
+        for name, mtype, conv in (
+            ("attitude", QuaternionStamped, _quat),
+            ("body_rate", Vector3Stamped, _vec),
+            ("attitude_setpoint", QuaternionStamped, _quat),
+            ("rate_setpoint", Vector3Stamped, _vec),
+        ):
+            self.create_subscription(mtype, name, lambda m, n=name, c=conv: self._on_input(n, c(m), m),
+                                     LOCKSTEP_QOS)
+        self.seq = StepSequencer()
+        self._pending: dict[int, dict[str, np.ndarray]] = {}
+        self._rebuild()
+
+    def _rebuild(self) -> None:
+        scn = self.scenario()
+        self.core = build_controller(scn, 1)
+        self.core.reset(1)
+        self.dt_ns = int(round(scn.dt * 1e9))
+
+    def on_parameters_set(self, names: list[str]) -> None:
+        v = self.values()
+        self.core.set_gains(v["pid.kp"], v["pid.ki"], v["pid.kd"], v["pid.n"])
+        self.core.u_max = v["output_limit"]
+
+    def _on_input(self, name: str, value: np.ndarray, msg) -> None:
+        t = stamp_to_ns(msg.header.stamp)
+        if not self.finite(value):
+            self.get_logger().error(f"{name} at t={t * 1e-9:.6f} s is not finite: {value[0].tolist()}; ignored")
+            return
+        slot = self._pending.setdefault(t, {})
+        slot[name] = value
+        if len(slot) < len(INPUTS):
+            return
+        del self._pending[t]
+        # anything older than a complete step can never complete
+        for stale in [s for s in self._pending if s < t]:
+            del self._pending[stale]
+        kind = self.seq.classify(t, self.dt_ns)
+        if kind == StepSequencer.NEW:
+            self._rebuild()
+        elif kind != StepSequencer.NEXT:
+            self.get_logger().error(f"inputs stamped {t * 1e-9:.6f} s out of sequence ({kind}); ignored")
+            return
+        u = self.core.compute(slot["attitude"], slot["body_rate"], slot["attitude_setpoint"], slot["rate_setpoint"])
+        err = euler_from_quat(quat_conjugate(quat_error(slot["attitude"], slot["attitude_setpoint"])))
+        for pub, vec, frame in ((self.pub_cmd, u[0], "body"), (self.pub_err, err[0], "body")):
+            m = Vector3Stamped()
+            m.header.stamp = msg.header.stamp
+            m.header.frame_id = frame
+            m.vector.x, m.vector.y, m.vector.z = (float(x) for x in vec)
+            pub.publish(m)
+
+
+def main(args: list[str] | None = None) -> int:
+    """Console script ``controller_node``."""
+    return run_node(ControllerNode, args)
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

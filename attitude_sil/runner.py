@@ -1,0 +1,421 @@
+"""Headless runner: starts the node graph, runs one episode in lockstep, records it.
+
+``launch`` is not available from PyPI, so this module is the project's own
+launcher. Two modes:
+
+* in one process (default): every node in one rclpy context, spun by the
+  ``EventsExecutor`` (about 7x less overhead per message than the
+  ``SingleThreadedExecutor`` here);
+* ``processes=True``: one process per node (their console-script modules),
+  talking over DDS; this process runs the recorder.
+
+Discovery is awaited by condition (matched publisher/subscription counts and
+``wait_for_service``), never by sleeping. Unless the user chose a domain or a
+discovery range, the graph stays on this machine
+(``ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST``).
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import signal
+import subprocess
+import sys
+import tempfile
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import yaml
+
+from attitude_sil.core.metrics import metrics_from_trajectory
+from attitude_sil.core.params import spec_for
+from attitude_sil.core.scenario import GRAPH_NODES, Scenario
+from attitude_sil.topics import STEP_TOPICS
+
+__all__ = ["RunError", "RunResult", "run_graph", "localhost_environment"]
+
+_DISCOVERY_VARS = ("ROS_DOMAIN_ID", "ROS_AUTOMATIC_DISCOVERY_RANGE", "ROS_STATIC_PEERS", "ROS_LOCALHOST_ONLY")
+
+#: who subscribes to what in the graph (the recorder comes on top)
+_SUBSCRIBERS = {
+    "attitude": 2, "body_rate": 1, "attitude_setpoint": 1, "rate_setpoint": 1, "voltage_cmd": 1,
+    "wheel_torque": 1, "wheel_momentum": 1, "disturbance_torque": 1, "/clock": 1,
+}
+
+
+class RunError(RuntimeError):
+    """The episode could not run or did not finish; the message is one line."""
+
+
+@dataclass
+class RunResult:
+    """Outcome of one graph run."""
+
+    metrics: dict[str, Any]
+    bag: Path | None
+    counts: dict[str, int]
+    trajectory: dict[str, np.ndarray] = field(default_factory=dict)
+
+
+def localhost_environment(env: dict[str, str] | None = None) -> dict[str, str]:
+    """Keep discovery on this machine unless the user set a discovery variable.
+
+    Returns the (possibly updated) mapping; with ``env=None`` it updates
+    ``os.environ`` in place, which rmw reads at ``rclpy.init``.
+    """
+    target = os.environ if env is None else env
+    if not any(v in target for v in _DISCOVERY_VARS):
+        target["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
+    return target
+
+
+def _node_overrides(scn: Scenario, node: str, extra: dict[str, Any]) -> dict[str, Any]:
+    values = dict(scn.explicit.get(node, {}))
+    values.update({k: v for k, v in extra.items() if k in {s for s in _names(node)}})
+    return values
+
+
+def _names(node: str) -> set[str]:
+    from attitude_sil.core.params import NODE_PARAMS
+
+    return {s.name for s in NODE_PARAMS[node]}
+
+
+def _extra_params(scn: Scenario, duration: float | None, controller: str | None, real_time: bool) -> dict:
+    extra: dict[str, Any] = {"autostart": False}
+    if duration is not None:
+        extra["duration"] = float(duration)
+    if controller is not None:
+        extra["controller_type"] = controller
+    if real_time:
+        extra["real_time_factor"] = 1.0
+    return extra
+
+
+class _Progress:
+    """A progress line on stderr: sim time, wall time, real-time factor."""
+
+    def __init__(self, enabled: bool, sim_end: float) -> None:
+        self.enabled = enabled
+        self.sim_end = sim_end
+        self.tty = sys.stderr.isatty()
+        self.t0 = time.monotonic()
+        self.last = self.t0
+
+    def update(self, sim_t: float, force: bool = False) -> None:
+        now = time.monotonic()
+        if not self.enabled or (not force and now - self.last < (0.25 if self.tty else 2.0)):
+            return
+        self.last = now
+        wall = now - self.t0
+        rtf = sim_t / wall if wall > 0 else 0.0
+        line = f"sim {sim_t:7.2f} / {self.sim_end:.2f} s   wall {wall:6.2f} s   {rtf:6.1f}x real time"
+        if self.tty:
+            print("\r" + line, end="\n" if force else "", file=sys.stderr, flush=True)
+        else:
+            print(line, file=sys.stderr, flush=True)
+
+
+def run_graph(
+    scn: Scenario,
+    *,
+    duration: float | None = None,
+    controller: str | None = None,
+    record_dir: str | Path | None = None,
+    processes: bool = False,
+    real_time: bool = False,
+    progress: bool = True,
+    connect_timeout: float = 20.0,
+) -> RunResult:
+    """Run one episode of ``scn`` through the ROS graph.
+
+    Parameters
+    ----------
+    scn : Scenario
+    duration : float, optional
+        Episode length, s (default ``plant.duration``).
+    controller : str, optional
+        ``controller_type`` to start with.
+    record_dir : path, optional
+        Bag directory to record to; None records nothing.
+    processes : bool
+        One process per node instead of one process for all.
+    real_time : bool
+        Pace the plant at real time (``real_time_factor`` 1.0).
+    progress : bool
+        Print a progress line on stderr.
+    connect_timeout : float
+        Wall seconds to wait for discovery.
+
+    Returns
+    -------
+    RunResult
+
+    Raises
+    ------
+    RunError
+        The graph did not connect, an input timed out, or a node failed.
+    KeyboardInterrupt
+        After the bag is closed, so nothing recorded is lost.
+    """
+    import rclpy
+    from rclpy.experimental import EventsExecutor
+
+    from attitude_sil.bag.recorder import Recorder
+    from attitude_sil.bag.writer import BagWriter
+
+    if controller is not None:
+        spec_for("controller", "controller_type").validate(controller, "controller")
+    extra = _extra_params(scn, duration, controller, real_time)
+    dur = scn.duration if duration is None else float(duration)
+    if dur <= 0.0:
+        raise RunError("the runner needs a finite episode: give plant.duration or --duration > 0")
+    k_steps = scn.steps(dur)
+    localhost_environment()
+    writer = None
+    if record_dir is not None:
+        try:
+            writer = BagWriter(record_dir)
+        except (FileExistsError, ValueError, OSError) as exc:
+            raise RunError(str(exc)) from None
+    context = rclpy.Context()
+    rclpy.init(args=[], context=context)
+    nodes = []
+    children: list[subprocess.Popen] = []
+    tmpdir = None
+    prog = _Progress(progress, dur)
+    try:
+        recorder = Recorder(writer, keep=("attitude", "attitude_setpoint", "wheel_torque", "body_rate"),
+                            context=context)
+        executor = EventsExecutor(context=context)
+        executor.add_node(recorder)
+        plant = None
+        if processes:
+            tmpdir = tempfile.TemporaryDirectory(prefix="attitude_sil_")
+            children = _start_processes(scn, extra, Path(tmpdir.name))
+        else:
+            plant = _start_nodes(scn, extra, context, executor, nodes)
+        _wait_connected(recorder, executor, nodes, children, connect_timeout)
+        _call_reset(recorder, executor, connect_timeout)
+        wall0 = time.monotonic()
+        prog.t0 = wall0
+        _spin_episode(recorder, executor, plant, children, k_steps, scn, extra, prog)
+        wall = time.monotonic() - wall0
+        prog.update(dur, force=True)
+    finally:
+        for node in nodes:
+            node.destroy_node()
+        _stop_processes(children)
+        if writer is not None:
+            writer.close()
+        try:
+            recorder.destroy_node()
+        except Exception:  # noqa: BLE001 - best effort during teardown
+            pass
+        rclpy.try_shutdown(context=context)
+        if tmpdir is not None:
+            tmpdir.cleanup()
+    traj = _trajectory(recorder.kept)
+    ctrl_type = controller or scn.param("controller", "controller_type")
+    metrics = _metrics(scn, traj, ctrl_type, dur, wall, writer)
+    return RunResult(metrics=metrics, bag=None if writer is None else writer.run_dir,
+                     counts=dict(recorder.counts), trajectory=traj)
+
+
+def _start_nodes(scn, extra, context, executor, nodes):
+    from rclpy.parameter import Parameter
+
+    from attitude_sil.nodes.common import typed_parameter
+    from attitude_sil.nodes.controller_node import ControllerNode
+    from attitude_sil.nodes.disturbance_node import DisturbanceNode
+    from attitude_sil.nodes.guidance_node import GuidanceNode
+    from attitude_sil.nodes.plant_node import PlantNode
+    from attitude_sil.nodes.wheels_node import WheelsNode
+
+    classes = {"plant": PlantNode, "wheels": WheelsNode, "disturbance": DisturbanceNode,
+               "guidance": GuidanceNode, "controller": ControllerNode}
+    plant = None
+    for name in GRAPH_NODES:
+        values = _node_overrides(scn, name, extra)
+        # an empty list cannot be typed through an override; every empty value is a default here
+        overrides = [typed_parameter(spec_for(name, k), v) for k, v in values.items() if v != []]
+        overrides.append(Parameter("use_sim_time", Parameter.Type.BOOL, True))
+        try:
+            node = classes[name](context=context, parameter_overrides=overrides)
+        except ValueError as exc:
+            raise RunError(str(exc)) from None
+        nodes.append(node)
+        executor.add_node(node)
+        if name == "plant":
+            plant = node
+    return plant
+
+
+def _start_processes(scn, extra, tmp: Path) -> list[subprocess.Popen]:
+    children = []
+    for name in GRAPH_NODES:
+        values = {k: v for k, v in _node_overrides(scn, name, extra).items() if v != []}
+        values["use_sim_time"] = True
+        path = tmp / f"{name}.yaml"
+        path.write_text(yaml.safe_dump({name: {"ros__parameters": values}}))
+        cmd = [sys.executable, "-m", f"attitude_sil.nodes.{name}_node", "--ros-args", "--params-file", str(path)]
+        children.append(subprocess.Popen(cmd, stdin=subprocess.DEVNULL))
+    return children
+
+
+def _stop_processes(children: list[subprocess.Popen]) -> None:
+    for child in children:
+        if child.poll() is None:
+            child.send_signal(signal.SIGINT)
+    deadline = time.monotonic() + 5.0
+    for child in children:
+        try:
+            child.wait(timeout=max(0.1, deadline - time.monotonic()))
+        except subprocess.TimeoutExpired:
+            child.kill()
+            child.wait()
+
+
+def _wait_connected(recorder, executor, nodes, children, timeout: float) -> None:
+    """Spin until every publisher has met every subscriber it should."""
+    deadline = time.monotonic() + timeout
+
+    def in_process_ready() -> bool:
+        subs_per_topic: dict[str, int] = {}
+        pubs_per_topic: dict[str, int] = {}
+        for node in nodes + [recorder]:
+            for s in node.subscriptions:
+                subs_per_topic[s.topic_name] = subs_per_topic.get(s.topic_name, 0) + 1
+            for p in node.publishers:
+                pubs_per_topic[p.topic_name] = pubs_per_topic.get(p.topic_name, 0) + 1
+        for node in nodes:
+            for p in node.publishers:
+                if p.get_subscription_count() < subs_per_topic.get(p.topic_name, 0):
+                    return False
+        for node in nodes + [recorder]:
+            for s in node.subscriptions:
+                if s.get_publisher_count() < pubs_per_topic.get(s.topic_name, 0):
+                    return False
+        return True
+
+    def multi_process_ready() -> bool:
+        for name, sub in recorder.subs.items():
+            if name in STEP_TOPICS and sub.get_publisher_count() < 1:
+                return False
+        for name, n in _SUBSCRIBERS.items():
+            if recorder.count_subscribers(recorder.resolved[name]) < n + 1:
+                return False
+        return True
+
+    ready = multi_process_ready if children else in_process_ready
+    while not ready():
+        for child in children:
+            if child.poll() is not None:
+                raise RunError(f"node process {child.args[2]} exited with code {child.returncode} during start-up")
+        if time.monotonic() > deadline:
+            raise RunError(f"the graph did not connect within {timeout:g} s (DDS discovery)")
+        executor.spin_once(timeout_sec=0.02)
+
+
+def _call_reset(recorder, executor, timeout: float) -> None:
+    from std_srvs.srv import Trigger
+
+    client = recorder.create_client(Trigger, "plant/reset")
+    deadline = time.monotonic() + timeout
+    while not client.service_is_ready():
+        if time.monotonic() > deadline:
+            raise RunError("service plant/reset did not appear")
+        executor.spin_once(timeout_sec=0.02)
+    future = client.call_async(Trigger.Request())
+    while not future.done():
+        if time.monotonic() > deadline:
+            raise RunError("plant/reset did not answer")
+        executor.spin_once(timeout_sec=0.02)
+    response = future.result()
+    if not response.success:
+        raise RunError(response.message)
+    recorder.destroy_client(client)
+
+
+def _spin_episode(recorder, executor, plant, children, k_steps, scn, extra, prog) -> None:
+    counts = recorder.counts
+    needed = k_steps + 1
+    dt = scn.dt
+    timeout = scn.param("plant", "input_timeout") + 2.0
+    last_count, last_change = -1, time.monotonic()
+    step_topics = list(STEP_TOPICS)
+    while True:
+        executor.spin_once(timeout_sec=0.1)
+        n = counts["wheel_torque"]
+        if n >= needed and all(counts[t] >= needed for t in step_topics):
+            return
+        if plant is not None and plant.error:
+            raise RunError(plant.error)
+        now = time.monotonic()
+        if n != last_count:
+            last_count, last_change = n, now
+            prog.update(max(n - 1, 0) * dt)
+        elif now - last_change > timeout:
+            missing = [t for t in step_topics if counts[t] < needed]
+            raise RunError(f"episode stalled at t={max(n - 1, 0) * dt:.3f} s: no progress on {', '.join(missing)}")
+        for child in children:
+            if child.poll() is not None:
+                raise RunError(f"node process {child.args[2]} exited with code {child.returncode}")
+
+
+def _trajectory(kept: dict[str, list[tuple[int, bytes]]]) -> dict[str, np.ndarray]:
+    """Decode the kept raw messages into arrays ordered by stamp (last copy per stamp wins)."""
+    from rclpy.serialization import deserialize_message
+
+    from attitude_sil.topics import message_class
+
+    out = {}
+    for name, items in kept.items():
+        by_t: dict[int, bytes] = {}
+        for t, data in items:
+            by_t[t] = data
+        cls = message_class(STEP_TOPICS[name])
+        times = sorted(by_t)
+        rows = []
+        for t in times:
+            m = deserialize_message(by_t[t], cls)
+            if hasattr(m, "quaternion"):
+                q = m.quaternion
+                rows.append((q.x, q.y, q.z, q.w))
+            else:
+                v = m.vector
+                rows.append((v.x, v.y, v.z))
+        out[name] = np.array(rows, dtype=float).reshape(len(rows), -1)
+        out[name + "_t"] = np.array(times, dtype=np.int64)
+    return out
+
+
+def _nan_to_none(x: float) -> float | None:
+    return None if x is None or not math.isfinite(x) else float(x)
+
+
+def _metrics(scn, traj, ctrl_type, dur, wall, writer) -> dict[str, Any]:
+    n = min(len(traj["attitude"]), len(traj["attitude_setpoint"]), len(traj["wheel_torque"]))
+    t = traj["attitude_t"][:n] * 1e-9
+    s = scn.values["scenario"]
+    m = metrics_from_trajectory(
+        t, traj["attitude"][None, :n], traj["attitude_setpoint"][None, :n], traj["wheel_torque"][None, :n],
+        axis=s["metrics.axis"], step_time=scn.param("guidance", "step_time"),
+        settling_band=s["metrics.settling_band"], tau_d=s["metrics.tau_d"], w_os=s["metrics.w_os"],
+    )
+    out: dict[str, Any] = {
+        "scenario": scn.name,
+        "controller_type": ctrl_type,
+        "sim_time_s": float(dur),
+        "wall_time_s": float(wall),
+        "real_time_factor": float(dur / wall) if wall > 0 else None,
+    }
+    for key in ("time_constant_s", "rise_time_s", "settling_time_s", "overshoot_pct", "steady_state_error_rad",
+                "control_effort_Nms", "cost_J", "iae", "ise", "itae"):
+        out[key] = _nan_to_none(float(m[key][0]))
+    out["bag"] = None if writer is None else str(writer.run_dir)
+    return out

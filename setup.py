@@ -1,0 +1,39 @@
+"""ament_python package set-up of attitude_sil (also a plain pip-installable package)."""
+
+from glob import glob
+
+from setuptools import find_packages, setup
+
+PACKAGE = "attitude_sil"
+
+NODES = ("plant", "wheels", "disturbance", "guidance", "controller")
+
+setup(
+    name=PACKAGE,
+    version="0.1.0",
+    packages=find_packages(exclude=["test", "bench"]),
+    data_files=[
+        ("share/ament_index/resource_index/packages", [f"resource/{PACKAGE}"]),
+        (f"share/{PACKAGE}", ["package.xml"]),
+        (f"share/{PACKAGE}/config", glob("config/*.yaml")),
+    ],
+    python_requires=">=3.11",
+    # The ROS 2 Jazzy wheels (ros-jazzy-rclpy[fastrtps], ros-jazzy-common-interfaces)
+    # are installed by the Makefile; a ROS 2 install provides them instead.
+    install_requires=[
+        "numpy>=1.26",
+        "scipy>=1.11",
+        "PyYAML>=6.0",
+        "mcap>=1.2",
+        "mcap-ros2-support>=0.5",
+    ],
+    extras_require={"test": ["pytest>=8.0", "ruff>=0.5", "rosbags>=0.10"]},
+    zip_safe=True,
+    maintainer="attitude_sil developers",
+    description="Spacecraft attitude-control software-in-the-loop simulator on ROS 2 Jazzy",
+    license="Apache-2.0",
+    entry_points={
+        "console_scripts": [f"attitude-sil = {PACKAGE}.cli:main"]
+        + [f"{n}_node = {PACKAGE}.nodes.{n}_node:main" for n in NODES],
+    },
+)
