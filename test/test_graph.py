@@ -45,7 +45,7 @@ def test_bag_holds_every_topic_with_types_and_counts(roll_run):
     counts, types, stamps = {}, {}, {}
     with open(mcap_file, "rb") as f:
         reader = make_reader(f, decoder_factories=[DecoderFactory()])
-        for schema, channel, message, decoded in reader.iter_decoded_messages():
+        for schema, channel, _message, decoded in reader.iter_decoded_messages():
             counts[channel.topic] = counts.get(channel.topic, 0) + 1
             types[channel.topic] = schema.name
             assert channel.message_encoding == "cdr" and schema.encoding == "ros2msg"

@@ -1,0 +1,89 @@
+"""Bad input reaches the user as one line and a non-zero exit, never a traceback."""
+
+import subprocess
+import sys
+
+import pytest
+
+from attitude_sil.core.scenario import ScenarioError, load_scenario
+from conftest import CONFIG, ROOT
+
+GOOD = (CONFIG / "hst_roll_step.yaml").read_text()
+
+
+def run_cli(*args, timeout=60):
+    return subprocess.run([sys.executable, "-m", "attitude_sil.cli", *args], cwd=ROOT, capture_output=True,
+                          text=True, timeout=timeout, stdin=subprocess.DEVNULL)
+
+
+def assert_one_line_error(proc, *needles):
+    assert proc.returncode == 2, proc.stderr
+    lines = [ln for ln in proc.stderr.splitlines() if ln.strip()]
+    assert len(lines) == 1, proc.stderr
+    assert "Traceback" not in proc.stderr
+    for n in needles:
+        assert n in lines[0], lines[0]
+
+
+def test_missing_file():
+    assert_one_line_error(run_cli("run", "config/nope.yaml"), "config/nope.yaml", "no such scenario file")
+
+
+@pytest.mark.parametrize(
+    "old,new,needles",
+    [
+        ("    step_time: 0.0", "    step_tme: 0.0", ("guidance.step_tme", "did you mean 'step_time'")),
+        ("    duration: 20.0", "    duration: fast", ("plant.duration", "must be a number")),
+        ("    control_period: 0.01          # s, 100 Hz control", "    control_period: -0.01",
+         ("control_period", "must be > 0.0")),
+        ("    pid.kp: [48.894, 48.894, 48.894]", "    pid.kp: [48.894, 48.894]", ("pid.kp", "3 elements")),
+        ("    geometry: hst_pyramid", "    geometry: tetrahedron", ("wheels.geometry", "one of")),
+        ("guidance:", "guidanse:", ("unknown section", "did you mean 'guidance'")),
+        ("    duration: 20.0", "    duration: 20.005", ("whole number of control periods",)),
+    ],
+)
+def test_bad_scenario_values(tmp_path, old, new, needles):
+    assert old in GOOD
+    path = tmp_path / "bad.yaml"
+    path.write_text(GOOD.replace(old, new))
+    with pytest.raises(ScenarioError):
+        load_scenario(path)
+    assert_one_line_error(run_cli("run", str(path), "--no-record", "--quiet"), str(path), *needles)
+
+
+def test_not_yaml(tmp_path):
+    path = tmp_path / "broken.yaml"
+    path.write_text("plant: [unclosed\n")
+    assert_one_line_error(run_cli("run", str(path)), "not valid YAML")
+
+
+def test_bad_flags():
+    assert_one_line_error(run_cli("run", "config/hst_roll_step.yaml", "--duration", "-1", "--no-record"),
+                          "--duration")
+    assert_one_line_error(run_cli("run", "config/hst_roll_step.yaml", "--controller", "bangbang", "--no-record"),
+                          "controller_type")
+
+
+def test_existing_bag_is_not_overwritten(tmp_path):
+    bag = tmp_path / "run1"
+    first = run_cli("run", "config/hst_roll_step.yaml", "--duration", "0.5", "--record", str(bag), "--quiet")
+    assert first.returncode == 0, first.stderr
+    size = (bag / "run1_0.mcap").stat().st_size
+    second = run_cli("run", "config/hst_roll_step.yaml", "--duration", "0.5", "--record", str(bag), "--quiet")
+    assert_one_line_error(second, "already contains a bag")
+    assert (bag / "run1_0.mcap").stat().st_size == size
+
+
+def test_run_json_is_last_stdout_line(tmp_path):
+    import json
+
+    proc = run_cli("run", "config/hst_roll_step.yaml", "--duration", "3", "--json", "--record", str(tmp_path / "b"))
+    assert proc.returncode == 0, proc.stderr
+    metrics = json.loads(proc.stdout.strip().splitlines()[-1])
+    for key in ("controller_type", "sim_time_s", "wall_time_s", "real_time_factor", "time_constant_s",
+                "rise_time_s", "settling_time_s", "overshoot_pct", "steady_state_error_rad",
+                "control_effort_Nms", "cost_J", "iae", "ise", "itae", "bag"):
+        assert key in metrics
+    assert metrics["sim_time_s"] == 3.0 and metrics["controller_type"] == "pid"
+    assert metrics["bag"] == str(tmp_path / "b")
+    assert "real time" in proc.stderr  # the progress line
