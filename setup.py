@@ -26,6 +26,7 @@ setup(
         "PyYAML>=6.0",
         "mcap>=1.2",
         "mcap-ros2-support>=0.5",
+        "numba>=0.59",
     ],
     extras_require={"test": ["pytest>=8.0", "ruff>=0.5", "rosbags>=0.10"]},
     zip_safe=True,

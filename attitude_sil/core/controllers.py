@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .quaternion import error_vector
+from .kernels import pid_step
 
 __all__ = ["PID", "CONTROLLER_TYPES"]
 
@@ -31,6 +31,7 @@ class PID:
       ``a = exp(-N dt)``; derivative term ``N (e[k] - x_f[k])``. ``x_f`` starts
       at 0, so a step at t = 0 gives the derivative kick a continuous PID has.
     * integrator: forward Euler, ``I[k+1] = I[k] + e[k] dt``;
+    * the error vector is :func:`~attitude_sil.core.quaternion.error_vector`;
     * output saturation at ``±u_max`` with anti-windup by conditional
       integration: the integrator holds while the output is saturated and the
       error pushes further into the limit.
@@ -59,6 +60,7 @@ class PID:
         self.kd = np.atleast_2d(np.asarray(kd, dtype=float))
         self.n = np.atleast_2d(np.asarray(n, dtype=float))
         self.a = np.exp(-self.n * self.dt)
+        self._gains = None  # contiguous (P, 3) copies for the kernel, made on first use
 
     def reset(self, n_episodes: int) -> None:
         """Zero the integrator and derivative-filter states for P episodes."""
@@ -82,11 +84,10 @@ class PID:
         """
         if self.integral is None:
             self.reset(q_BN.shape[0])
-        e = error_vector(q_BN, q_RN)
-        deriv = self.n * (e - self.filter_state)
-        u_raw = self.kp * e + self.ki * self.integral + self.kd * deriv
-        u = np.clip(u_raw, -self.u_max, self.u_max)
-        winding = (u != u_raw) & (e * u_raw > 0.0)
-        self.integral = self.integral + np.where(winding, 0.0, e * self.dt)
-        self.filter_state = self.a * self.filter_state + (1.0 - self.a) * e
-        return u
+        if self._gains is None or self._gains[0].shape != self.integral.shape:
+            shape = self.integral.shape
+            self._gains = [np.ascontiguousarray(np.broadcast_to(g, shape))
+                           for g in (self.kp, self.ki, self.kd, self.n, self.a)]
+        gains = self._gains
+        return pid_step(np.ascontiguousarray(q_BN, dtype=float), np.ascontiguousarray(q_RN, dtype=float),
+                        *gains, self.integral, self.filter_state, self.dt, self.u_max)

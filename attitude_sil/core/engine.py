@@ -126,10 +126,8 @@ class Wheels:
     def advance(self, v_cmd_B: np.ndarray) -> WheelStep:
         """Hold ``v_cmd_B`` (P, 3) V over one step; return the step's outputs."""
         x = self.x
-        e = self.assembly.wheel_voltages(np.asarray(v_cmd_B, dtype=float), x)
-        self.x, tau_c = self.assembly.step(x, e)
-        return WheelStep(self.assembly.momentum_B(x), tau_c, x[:, :, 0], x[:, :, 2],
-                         self.assembly.motor_torque(x))
+        self.x, tau_c, h = self.assembly.advance(x, np.ascontiguousarray(v_cmd_B, dtype=float))
+        return WheelStep(h, tau_c, x[:, :, 0], x[:, :, 2], self.assembly.motor_torque(x))
 
 
 class Guidance:

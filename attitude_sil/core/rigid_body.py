@@ -20,6 +20,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .kernels import rk4_body
 from .quaternion import cross, quat_derivative, quat_to_dcm
 
 __all__ = ["BodyState", "body_derivatives", "rk4_step", "inertial_momentum"]
@@ -89,6 +90,9 @@ def rk4_step(
 ) -> BodyState:
     """Advance the body over one held-input interval with classic RK4.
 
+    The arithmetic of :func:`body_derivatives`, compiled
+    (:func:`attitude_sil.core.kernels.rk4_body`).
+
     The torques are held over ``[t, t + dt]``; the interval is split into
     ``substeps`` equal RK4 steps. The quaternion is renormalised at the end.
 
@@ -104,20 +108,17 @@ def rk4_step(
     -------
     BodyState at t + dt (new arrays).
     """
-    q, w, h = state.q_BN, state.omega_BN_B, state.h_wheels_B
-    step = dt / substeps
-    half = 0.5 * step
-    args = (inertia, inertia_inv, tau_c_B, tau_ext_B)
-    for _ in range(substeps):
-        k1q, k1w, k1h = body_derivatives(q, w, h, *args)
-        k2q, k2w, k2h = body_derivatives(q + half * k1q, w + half * k1w, h + half * k1h, *args)
-        k3q, k3w, k3h = body_derivatives(q + half * k2q, w + half * k2w, h + half * k2h, *args)
-        k4q, k4w, k4h = body_derivatives(q + step * k3q, w + step * k3w, h + step * k3h, *args)
-        sixth = step / 6.0
-        q = q + sixth * (k1q + 2.0 * (k2q + k3q) + k4q)
-        w = w + sixth * (k1w + 2.0 * (k2w + k3w) + k4w)
-        h = h + sixth * (k1h + 2.0 * (k2h + k3h) + k4h)
-    q = q / np.sqrt(np.sum(q * q, axis=-1, keepdims=True))
+    q, w, h = rk4_body(
+        np.ascontiguousarray(state.q_BN, dtype=float),
+        np.ascontiguousarray(state.omega_BN_B, dtype=float),
+        np.ascontiguousarray(state.h_wheels_B, dtype=float),
+        np.ascontiguousarray(inertia, dtype=float),
+        np.ascontiguousarray(inertia_inv, dtype=float),
+        np.ascontiguousarray(tau_c_B, dtype=float),
+        np.ascontiguousarray(tau_ext_B, dtype=float),
+        float(dt),
+        int(substeps),
+    )
     return BodyState(q, w, h)
 
 

@@ -32,6 +32,8 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.linalg import expm
 
+from .kernels import wheel_step
+
 __all__ = [
     "MotorParams",
     "hst_pyramid",
@@ -178,13 +180,16 @@ class WheelAssembly:
         e = np.where(over & accel, emf, e)
         return np.clip(e, -m.v_max, m.v_max)
 
-    def step(self, x: np.ndarray, e_wheels: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def step(self, x: np.ndarray, e_wheels: np.ndarray,
+             h_start: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
         """Integrate the motors exactly over one held-voltage interval.
 
         Parameters
         ----------
         x : (P, n, 3) state at t_k
         e_wheels : (P, n) V, held over [t_k, t_k + dt]
+        h_start : (P, 3) N m s, optional
+            ``momentum_B(x)`` if the caller has it already.
 
         Returns
         -------
@@ -193,5 +198,20 @@ class WheelAssembly:
             ``-(h_w(t_k+1) - h_w(t_k)) / dt``
         """
         x_next = x @ self.phi_T + e_wheels[:, :, None] * self.gamma
-        tau_c_B = -(self.momentum_B(x_next) - self.momentum_B(x)) / self.dt
+        if h_start is None:
+            h_start = self.momentum_B(x)
+        tau_c_B = -(self.momentum_B(x_next) - h_start) / self.dt
         return x_next, tau_c_B
+
+    def advance(self, x: np.ndarray, v_cmd_B: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """:meth:`wheel_voltages` then :meth:`step`, compiled in one loop.
+
+        Returns
+        -------
+        x_next : (P, n, 3)
+        tau_c_B : (P, 3) N m, mean torque on the body over the step
+        h_start : (P, 3) N m s, wheel momentum at t_k
+        """
+        m = self.motor
+        return wheel_step(x, v_cmd_B, self.allocation, self.axes_B, self.phi_T, self.gamma, m.rotor_inertia,
+                          m.back_emf_constant, m.resistance * m.current_max, m.speed_max, m.v_max, self.dt)
