@@ -47,6 +47,37 @@ _SUBSCRIBERS = {
 }
 
 
+class _Interrupt:
+    """Turns Ctrl-C into a flag the spin loops check between callbacks.
+
+    A ``KeyboardInterrupt`` raised inside a node callback would tear a step in
+    half (and the executor logs it as a fatal callback error); checking a flag
+    between ``spin_once`` calls stops the run at a clean point instead.
+    """
+
+    def __init__(self) -> None:
+        self.requested = False
+        self._old = None
+
+    def __enter__(self) -> _Interrupt:
+        try:
+            self._old = signal.signal(signal.SIGINT, self._on_signal)
+        except ValueError:  # not the main thread: leave signals alone
+            self._old = None
+        return self
+
+    def _on_signal(self, signum, frame) -> None:
+        self.requested = True
+
+    def check(self) -> None:
+        if self.requested:
+            raise KeyboardInterrupt
+
+    def __exit__(self, *exc) -> None:
+        if self._old is not None:
+            signal.signal(signal.SIGINT, self._old)
+
+
 class RunError(RuntimeError):
     """The episode could not run or did not finish; the message is one line."""
 
@@ -164,6 +195,7 @@ def run_graph(
     """
     import rclpy
     from rclpy.experimental import EventsExecutor
+    from rclpy.signals import SignalHandlerOptions
 
     from attitude_sil.bag.recorder import Recorder
     from attitude_sil.bag.writer import BagWriter
@@ -183,7 +215,8 @@ def run_graph(
         except (FileExistsError, ValueError, OSError) as exc:
             raise RunError(str(exc)) from None
     context = rclpy.Context()
-    rclpy.init(args=[], context=context)
+    interrupt = _Interrupt().__enter__()
+    rclpy.init(args=[], context=context, signal_handler_options=SignalHandlerOptions.NO)
     nodes = []
     children: list[subprocess.Popen] = []
     tmpdir = None
@@ -199,11 +232,15 @@ def run_graph(
             children = _start_processes(scn, extra, Path(tmpdir.name))
         else:
             plant = _start_nodes(scn, extra, context, executor, nodes)
-        _wait_connected(recorder, executor, nodes, children, connect_timeout)
-        _call_reset(recorder, executor, connect_timeout)
+        def spin(timeout_sec: float) -> None:
+            interrupt.check()
+            executor.spin_once(timeout_sec=timeout_sec)
+
+        _wait_connected(recorder, spin, nodes, children, connect_timeout)
+        _call_reset(recorder, spin, connect_timeout)
         wall0 = time.monotonic()
         prog.t0 = wall0
-        _spin_episode(recorder, executor, plant, children, k_steps, scn, extra, prog)
+        _spin_episode(recorder, spin, plant, children, k_steps, scn, extra, prog)
         wall = time.monotonic() - wall0
         prog.update(dur, force=True)
     finally:
@@ -219,6 +256,7 @@ def run_graph(
         rclpy.try_shutdown(context=context)
         if tmpdir is not None:
             tmpdir.cleanup()
+        interrupt.__exit__()
     traj = _trajectory(recorder.kept)
     ctrl_type = controller or scn.param("controller", "controller_type")
     metrics = _metrics(scn, traj, ctrl_type, dur, wall, writer)
@@ -280,7 +318,7 @@ def _stop_processes(children: list[subprocess.Popen]) -> None:
             child.wait()
 
 
-def _wait_connected(recorder, executor, nodes, children, timeout: float) -> None:
+def _wait_connected(recorder, spin, nodes, children, timeout: float) -> None:
     """Spin until every publisher has met every subscriber it should."""
     deadline = time.monotonic() + timeout
 
@@ -318,10 +356,10 @@ def _wait_connected(recorder, executor, nodes, children, timeout: float) -> None
                 raise RunError(f"node process {child.args[2]} exited with code {child.returncode} during start-up")
         if time.monotonic() > deadline:
             raise RunError(f"the graph did not connect within {timeout:g} s (DDS discovery)")
-        executor.spin_once(timeout_sec=0.02)
+        spin(0.02)
 
 
-def _call_reset(recorder, executor, timeout: float) -> None:
+def _call_reset(recorder, spin, timeout: float) -> None:
     from std_srvs.srv import Trigger
 
     client = recorder.create_client(Trigger, "plant/reset")
@@ -329,19 +367,19 @@ def _call_reset(recorder, executor, timeout: float) -> None:
     while not client.service_is_ready():
         if time.monotonic() > deadline:
             raise RunError("service plant/reset did not appear")
-        executor.spin_once(timeout_sec=0.02)
+        spin(0.02)
     future = client.call_async(Trigger.Request())
     while not future.done():
         if time.monotonic() > deadline:
             raise RunError("plant/reset did not answer")
-        executor.spin_once(timeout_sec=0.02)
+        spin(0.02)
     response = future.result()
     if not response.success:
         raise RunError(response.message)
     recorder.destroy_client(client)
 
 
-def _spin_episode(recorder, executor, plant, children, k_steps, scn, extra, prog) -> None:
+def _spin_episode(recorder, spin, plant, children, k_steps, scn, extra, prog) -> None:
     counts = recorder.counts
     needed = k_steps + 1
     dt = scn.dt
@@ -349,7 +387,7 @@ def _spin_episode(recorder, executor, plant, children, k_steps, scn, extra, prog
     last_count, last_change = -1, time.monotonic()
     step_topics = list(STEP_TOPICS)
     while True:
-        executor.spin_once(timeout_sec=0.1)
+        spin(0.1)
         n = counts["wheel_torque"]
         if n >= needed and all(counts[t] >= needed for t in step_topics):
             return

@@ -74,3 +74,32 @@ def test_multi_process_graph_completes_and_matches_batch(tmp_path):
     result = run_graph(scn, duration=2.0, record_dir=tmp_path / "mp", processes=True, progress=False)
     assert result.counts["wheel_torque"] == 201
     _assert_same_as_batch(scn, result, 2.0)
+
+
+def test_ctrl_c_keeps_a_readable_bag(tmp_path):
+    """Ctrl-C mid-run: exit 130, one line, and the bag holds whole steps up to the stop."""
+    import signal
+    import subprocess
+    import sys
+
+    from conftest import ROOT
+
+    bag = tmp_path / "interrupted"
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "attitude_sil.cli", "run", "config/hst_roll_step.yaml", "--real-time",
+         "--record", str(bag)],
+        cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, stdin=subprocess.DEVNULL,
+        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
+    first = proc.stderr.readline()  # the first progress line: the episode is running
+    assert "real time" in first, first
+    proc.send_signal(signal.SIGINT)
+    _, err = proc.communicate(timeout=30)
+    assert proc.returncode == 130
+    assert "Traceback" not in err and "interrupted" in err
+    counts = {}
+    with open(bag / "interrupted_0.mcap", "rb") as f:
+        for _schema, channel, _msg, _decoded in make_reader(f, decoder_factories=[DecoderFactory()]) \
+                .iter_decoded_messages():
+            counts[channel.topic] = counts.get(channel.topic, 0) + 1
+    assert counts["/attitude"] >= 100  # at least the first second at 100 Hz
+    assert counts["/attitude"] < 2001  # and it stopped before the end

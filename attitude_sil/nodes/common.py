@@ -203,7 +203,10 @@ def run_node(factory: Callable[[], Node], args: list[str] | None = None) -> int:
         node = factory()
         executor = EventsExecutor()
         executor.add_node(node)
-        executor.spin()
+        # spin_once in a loop: EventsExecutor.spin() of rclpy 7.1 left service
+        # requests unanswered in a separate process (measured here)
+        while rclpy.ok():
+            executor.spin_once(timeout_sec=0.5)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     except ValueError as exc:
