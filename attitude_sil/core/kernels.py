@@ -43,6 +43,16 @@ def _deriv(q, w, h, inertia, inertia_inv, tc, te, dq, dw, dh):
     dh[2] = -tc[2]
 
 
+@njit(cache=True, inline="always")
+def _stage(cq, cw, ch, kq, kw, kh, c, tq, tw, th):
+    # RK4 intermediate state: t = current + c * k
+    for i in range(4):
+        tq[i] = cq[i] + c * kq[i]
+    for i in range(3):
+        tw[i] = cw[i] + c * kw[i]
+        th[i] = ch[i] + c * kh[i]
+
+
 @njit(cache=True)
 def rk4_body(q, w, h, inertia, inertia_inv, tau_c, tau_e, dt, substeps):
     """RK4 over one held interval for every episode; returns new (q, w, h) arrays.
@@ -69,23 +79,11 @@ def rk4_body(q, w, h, inertia, inertia_inv, tau_c, tau_e, dt, substeps):
         ii, iv, tc, te = inertia[p], inertia_inv[p], tau_c[p], tau_e[p]
         for _ in range(substeps):
             _deriv(cq, cw, ch, ii, iv, tc, te, k1q, k1w, k1h)
-            for i in range(4):
-                tq[i] = cq[i] + half * k1q[i]
-            for i in range(3):
-                tw[i] = cw[i] + half * k1w[i]
-                th[i] = ch[i] + half * k1h[i]
+            _stage(cq, cw, ch, k1q, k1w, k1h, half, tq, tw, th)
             _deriv(tq, tw, th, ii, iv, tc, te, k2q, k2w, k2h)
-            for i in range(4):
-                tq[i] = cq[i] + half * k2q[i]
-            for i in range(3):
-                tw[i] = cw[i] + half * k2w[i]
-                th[i] = ch[i] + half * k2h[i]
+            _stage(cq, cw, ch, k2q, k2w, k2h, half, tq, tw, th)
             _deriv(tq, tw, th, ii, iv, tc, te, k3q, k3w, k3h)
-            for i in range(4):
-                tq[i] = cq[i] + step * k3q[i]
-            for i in range(3):
-                tw[i] = cw[i] + step * k3w[i]
-                th[i] = ch[i] + step * k3h[i]
+            _stage(cq, cw, ch, k3q, k3w, k3h, step, tq, tw, th)
             _deriv(tq, tw, th, ii, iv, tc, te, k4q, k4w, k4h)
             for i in range(4):
                 cq[i] = cq[i] + sixth * (k1q[i] + 2.0 * (k2q[i] + k3q[i]) + k4q[i])
