@@ -31,6 +31,7 @@ from typing import Any
 import numpy as np
 import yaml
 
+from attitude_sil.core.engine import simulate
 from attitude_sil.core.metrics import metrics_from_trajectory
 from attitude_sil.core.params import spec_for
 from attitude_sil.core.scenario import GRAPH_NODES, Scenario
@@ -228,6 +229,9 @@ def run_graph(
         executor.add_node(recorder)
         plant = None
         if processes:
+            # compile the numba kernels here once, so the node processes load them
+            # from the cache instead of all compiling at once mid-episode
+            simulate(scn, 1, duration=scn.dt)
             tmpdir = tempfile.TemporaryDirectory(prefix="attitude_sil_")
             children = _start_processes(scn, extra, Path(tmpdir.name))
         else:
