@@ -1,7 +1,7 @@
 """The ``attitude-sil`` command.
 
-Subcommands (DESIGN.md section 5): ``run`` is implemented here; ``tune``,
-``replay``, ``bag``, ``plot`` and ``param`` arrive with their issues and say
+Subcommands (DESIGN.md section 5): ``run`` and ``param`` are implemented;
+``tune``, ``replay``, ``bag`` and ``plot`` arrive with their issues and say
 so. User errors print one line on stderr and exit 2; Ctrl-C exits 130 after
 the bag is closed.
 """
@@ -55,6 +55,19 @@ def _cmd_run(args: argparse.Namespace) -> int:
     scn = load_scenario(args.scenario)
     if args.duration is not None and args.duration <= 0:
         raise ValueError(f"--duration must be > 0, got {args.duration}")
+    if args.swap:
+        times = list(scn.param("scenario", "schedule.times"))
+        kinds = list(scn.param("scenario", "schedule.controller_types"))
+        for item in args.swap:
+            t, _, kind = item.partition(":")
+            try:
+                times.append(float(t))
+            except ValueError:
+                raise ValueError(f"--swap takes TIME:TYPE, e.g. 2.0:fuzzy_pid; got {item!r}") from None
+            kinds.append(kind)
+        order = sorted(range(len(times)), key=times.__getitem__)
+        scn = scn.with_values("scenario", **{"schedule.times": [times[i] for i in order],
+                                             "schedule.controller_types": [kinds[i] for i in order]})
     record = None
     if not args.no_record:
         record = Path(args.record) if args.record else Path("bags") / (
@@ -62,8 +75,34 @@ def _cmd_run(args: argparse.Namespace) -> int:
     result = run_graph(scn, duration=args.duration, controller=args.controller, record_dir=record,
                        processes=args.processes, real_time=args.real_time, progress=not args.quiet)
     print(_format_table(result.metrics))
+    if result.metrics.get("segments"):
+        print(_format_segments(result.metrics["segments"]))
     if args.json:
         print(json.dumps(result.metrics))
+    return 0
+
+
+def _format_segments(segments: list[dict]) -> str:
+    rows = [("controller", "controller_type", "{}"), ("from", "t_start_s", "{:.2f} s"), ("to", "t_end_s", "{:.2f} s"),
+            ("IAE", "iae", "{:.4g} rad s"), ("ISE", "ise", "{:.4g} rad^2 s"),
+            ("max |error|", "max_abs_error_rad", "{:.4g} rad"), ("RMS error", "rms_error_rad", "{:.4g} rad"),
+            ("control effort Ce", "control_effort_Nms", "{:.4g} N m s"), ("max |command|", "max_abs_command", "{:.4g}")]
+    width = 22
+    lines = ["per controller (scheduled swaps):"]
+    for label, key, fmt in rows:
+        cells = [fmt.format(seg[key]) if seg.get(key) is not None else "n/a" for seg in segments]
+        lines.append(f"  {label:<20}" + "".join(f"{c:>{width}}" for c in cells))
+    return "\n".join(lines)
+
+
+def _cmd_param(args: argparse.Namespace) -> int:
+    from attitude_sil.paramclient import param_command
+
+    if args.action in ("get", "set") and not args.name:
+        raise ValueError(f"param {args.action} needs a parameter NAME")
+    if args.action == "set" and args.value is None:
+        raise ValueError("param set needs a VALUE")
+    print(param_command(args.action, args.node, args.name, args.value, timeout=args.timeout))
     return 0
 
 
@@ -87,8 +126,17 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--processes", action="store_true", help="one process per node (over DDS)")
     run.add_argument("--real-time", action="store_true", help="pace the plant at real time")
     run.add_argument("--quiet", action="store_true", help="no progress line")
+    run.add_argument("--swap", action="append", metavar="TIME:TYPE",
+                     help="swap controller_type at a sim time (repeatable), e.g. --swap 2.0:fuzzy_pid")
     run.set_defaults(func=_cmd_run)
-    for name in ("tune", "replay", "bag", "plot", "param"):
+    param = sub.add_parser("param", help="list, get or set parameters of a running node")
+    param.add_argument("action", choices=("list", "get", "set"))
+    param.add_argument("node", help="node name, e.g. controller")
+    param.add_argument("name", nargs="?", help="parameter name")
+    param.add_argument("value", nargs="?", help="new value, parsed as YAML (e.g. '[1.0, 2.0, 3.0]')")
+    param.add_argument("--timeout", type=float, default=10.0, help="seconds to wait for the node")
+    param.set_defaults(func=_cmd_param)
+    for name in ("tune", "replay", "bag", "plot"):
         p = sub.add_parser(name, help="(not implemented yet)")
         p.add_argument("rest", nargs=argparse.REMAINDER)
         p.set_defaults(func=_not_yet(name))
@@ -98,6 +146,7 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv: list[str] | None = None) -> int:
     """Entry point of ``attitude-sil``."""
     from attitude_sil.core.scenario import ScenarioError
+    from attitude_sil.paramclient import ParamClientError
     from attitude_sil.runner import RunError
 
     args = build_parser().parse_args(argv)
@@ -106,7 +155,7 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:
         print("interrupted; everything recorded so far is kept", file=sys.stderr)
         return 130
-    except (ScenarioError, RunError, ValueError, FileNotFoundError) as exc:
+    except (ScenarioError, RunError, ParamClientError, ValueError, FileNotFoundError) as exc:
         print(f"attitude-sil: error: {exc}", file=sys.stderr)
         return 2
 

@@ -32,10 +32,10 @@ import numpy as np
 import yaml
 
 from attitude_sil.core.engine import simulate
-from attitude_sil.core.metrics import metrics_from_trajectory
+from attitude_sil.core.metrics import metrics_from_trajectory, segment_metrics
 from attitude_sil.core.params import spec_for
 from attitude_sil.core.scenario import GRAPH_NODES, Scenario
-from attitude_sil.topics import STEP_TOPICS
+from attitude_sil.topics import COMMAND_TOPICS, STEP_TOPICS
 
 __all__ = ["RunError", "RunResult", "run_graph", "localhost_environment"]
 
@@ -43,7 +43,7 @@ _DISCOVERY_VARS = ("ROS_DOMAIN_ID", "ROS_AUTOMATIC_DISCOVERY_RANGE", "ROS_STATIC
 
 #: who subscribes to what in the graph (the recorder comes on top)
 _SUBSCRIBERS = {
-    "attitude": 2, "body_rate": 1, "attitude_setpoint": 1, "rate_setpoint": 1, "voltage_cmd": 1,
+    "attitude": 2, "body_rate": 1, "attitude_setpoint": 1, "rate_setpoint": 1, "voltage_cmd": 1, "torque_cmd": 1,
     "wheel_torque": 1, "wheel_momentum": 1, "disturbance_torque": 1, "/clock": 1,
 }
 
@@ -117,8 +117,19 @@ def _names(node: str) -> set[str]:
     return {s.name for s in NODE_PARAMS[node]}
 
 
+def _schedule(scn: Scenario, duration: float) -> list[tuple[float, int, str]]:
+    """Scheduled swaps inside the episode as (time s, step index, controller_type)."""
+    from attitude_sil.core.engine import schedule_from_scenario
+
+    k_end = scn.steps(duration)
+    return [(k * scn.dt, k, kind) for k, kind in schedule_from_scenario(scn) if k <= k_end]
+
+
 def _extra_params(scn: Scenario, duration: float | None, controller: str | None, real_time: bool) -> dict:
     extra: dict[str, Any] = {"autostart": False}
+    sched = _schedule(scn, scn.duration if duration is None else duration)
+    if sched:
+        extra["hold_at"] = sched[0][0]
     if duration is not None:
         extra["duration"] = float(duration)
     if controller is not None:
@@ -223,8 +234,8 @@ def run_graph(
     tmpdir = None
     prog = _Progress(progress, dur)
     try:
-        recorder = Recorder(writer, keep=("attitude", "attitude_setpoint", "wheel_torque", "body_rate"),
-                            context=context)
+        recorder = Recorder(writer, keep=("attitude", "attitude_setpoint", "wheel_torque", "body_rate",
+                                          "voltage_cmd", "torque_cmd"), context=context)
         executor = EventsExecutor(context=context)
         executor.add_node(recorder)
         plant = None
@@ -244,7 +255,7 @@ def run_graph(
         _call_reset(recorder, spin, connect_timeout)
         wall0 = time.monotonic()
         prog.t0 = wall0
-        _spin_episode(recorder, spin, plant, children, k_steps, scn, extra, prog)
+        _spin_episode(recorder, spin, plant, children, k_steps, scn, prog, _schedule(scn, dur))
         wall = time.monotonic() - wall0
         prog.update(dur, force=True)
     finally:
@@ -263,7 +274,7 @@ def run_graph(
         interrupt.__exit__()
     traj = _trajectory(recorder.kept)
     ctrl_type = controller or scn.param("controller", "controller_type")
-    metrics = _metrics(scn, traj, ctrl_type, dur, wall, writer)
+    metrics = _metrics(scn, traj, ctrl_type, dur, wall, writer, _schedule(scn, dur))
     return RunResult(metrics=metrics, bag=None if writer is None else writer.run_dir,
                      counts=dict(recorder.counts), trajectory=traj)
 
@@ -383,17 +394,50 @@ def _call_reset(recorder, spin, timeout: float) -> None:
     recorder.destroy_client(client)
 
 
-def _spin_episode(recorder, spin, plant, children, k_steps, scn, extra, prog) -> None:
+def set_remote_parameters(node, spin, target: str, params: dict[str, Any], timeout: float = 10.0) -> None:
+    """Set parameters of node ``target`` through its parameter service; raise RunError on refusal."""
+    from rclpy.parameter import Parameter
+    from rclpy.parameter_client import AsyncParameterClient
+
+    client = AsyncParameterClient(node, target)
+    deadline = time.monotonic() + timeout
+    while not client.services_are_ready():
+        if time.monotonic() > deadline:
+            raise RunError(f"parameter service of {target} did not appear")
+        spin(0.02)
+    future = client.set_parameters([Parameter(k, value=v) for k, v in params.items()])
+    while not future.done():
+        if time.monotonic() > deadline:
+            raise RunError(f"{target} did not answer a parameter set")
+        spin(0.02)
+    for name, result in zip(params, future.result().results, strict=True):
+        if not result.successful:
+            raise RunError(f"{target} refused {name}: {result.reason}")
+
+
+def _spin_episode(recorder, spin, plant, children, k_steps, scn, prog, schedule) -> None:
+    """Spin until every step topic has all K+1 messages; apply scheduled swaps at their holds."""
     counts = recorder.counts
     needed = k_steps + 1
     dt = scn.dt
     timeout = scn.param("plant", "input_timeout") + 2.0
     last_count, last_change = -1, time.monotonic()
-    step_topics = list(STEP_TOPICS)
+    step_topics = [t for t in STEP_TOPICS if t not in COMMAND_TOPICS]
+    pending = list(schedule)
+
+    def commands() -> int:
+        return sum(counts[t] for t in COMMAND_TOPICS)
+
     while True:
         spin(0.1)
         n = counts["wheel_torque"]
-        if n >= needed and all(counts[t] >= needed for t in step_topics):
+        if pending and counts["attitude"] == pending[0][1] and n == pending[0][1] and commands() == n:
+            # the plant holds before step k: swap, then release to the next hold
+            _, _, kind = pending.pop(0)
+            set_remote_parameters(recorder, spin, "controller", {"controller_type": kind})
+            set_remote_parameters(recorder, spin, "plant", {"hold_at": pending[0][0] if pending else -1.0})
+            last_change = time.monotonic()
+        if n >= needed and commands() >= needed and all(counts[t] >= needed for t in step_topics):
             return
         if plant is not None and plant.error:
             raise RunError(plant.error)
@@ -431,8 +475,17 @@ def _trajectory(kept: dict[str, list[tuple[int, bytes]]]) -> dict[str, np.ndarra
             else:
                 v = m.vector
                 rows.append((v.x, v.y, v.z))
-        out[name] = np.array(rows, dtype=float).reshape(len(rows), -1)
+        if not rows:
+            continue
+        out[name] = np.array(rows, dtype=float)
         out[name + "_t"] = np.array(times, dtype=np.int64)
+    # the command of each step, whichever topic carried it
+    cmd = {}
+    for name in ("voltage_cmd", "torque_cmd"):
+        if name in out:
+            cmd.update(zip(out[name + "_t"].tolist(), out[name], strict=True))
+    if cmd:
+        out["command"] = np.array([cmd[t] for t in sorted(cmd)])
     return out
 
 
@@ -440,7 +493,7 @@ def _nan_to_none(x: float) -> float | None:
     return None if x is None or not math.isfinite(x) else float(x)
 
 
-def _metrics(scn, traj, ctrl_type, dur, wall, writer) -> dict[str, Any]:
+def _metrics(scn, traj, ctrl_type, dur, wall, writer, schedule) -> dict[str, Any]:
     n = min(len(traj["attitude"]), len(traj["attitude_setpoint"]), len(traj["wheel_torque"]))
     t = traj["attitude_t"][:n] * 1e-9
     s = scn.values["scenario"]
@@ -460,4 +513,13 @@ def _metrics(scn, traj, ctrl_type, dur, wall, writer) -> dict[str, Any]:
                 "control_effort_Nms", "cost_J", "iae", "ise", "itae"):
         out[key] = _nan_to_none(float(m[key][0]))
     out["bag"] = None if writer is None else str(writer.run_dir)
+    if schedule and "command" in traj:
+        bounds = [0] + [k for _, k, _ in schedule] + [n]
+        kinds = [ctrl_type] + [kind for _, _, kind in schedule]
+        out["segments"] = [
+            {"controller_type": kind, **segment_metrics(t, traj["attitude"][:n], traj["attitude_setpoint"][:n],
+                                                        traj["wheel_torque"][:n], traj["command"][:n], k0, k1,
+                                                        axis=s["metrics.axis"])}
+            for kind, k0, k1 in zip(kinds, bounds[:-1], bounds[1:], strict=True) if k1 > k0
+        ]
     return out

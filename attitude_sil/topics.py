@@ -7,9 +7,10 @@ from __future__ import annotations
 
 import importlib
 
-__all__ = ["STEP_TOPICS", "RECORDED_TOPICS", "message_class"]
+__all__ = ["STEP_TOPICS", "COMMAND_TOPICS", "RECORDED_TOPICS", "message_class"]
 
-#: topics published once per lockstep step (relative names, except /clock)
+#: topics of the lockstep (relative names, except /clock); one message per step each,
+#: except the command topics, of which exactly one carries each step
 STEP_TOPICS: dict[str, str] = {
     "/clock": "rosgraph_msgs/msg/Clock",
     "attitude": "geometry_msgs/msg/QuaternionStamped",
@@ -17,12 +18,16 @@ STEP_TOPICS: dict[str, str] = {
     "attitude_setpoint": "geometry_msgs/msg/QuaternionStamped",
     "rate_setpoint": "geometry_msgs/msg/Vector3Stamped",
     "voltage_cmd": "geometry_msgs/msg/Vector3Stamped",
+    "torque_cmd": "geometry_msgs/msg/Vector3Stamped",
     "wheel_torque": "geometry_msgs/msg/Vector3Stamped",
     "wheel_momentum": "geometry_msgs/msg/Vector3Stamped",
     "wheel_state": "sensor_msgs/msg/JointState",
     "disturbance_torque": "geometry_msgs/msg/Vector3Stamped",
     "attitude_error": "geometry_msgs/msg/Vector3Stamped",
 }
+
+#: the controller publishes one of these per step, depending on its law
+COMMAND_TOPICS = ("voltage_cmd", "torque_cmd")
 
 #: everything a run records
 RECORDED_TOPICS: dict[str, str] = {**STEP_TOPICS, "/parameter_events": "rcl_interfaces/msg/ParameterEvent"}

@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from attitude_sil.core.controllers import PID
+from attitude_sil.core.controllers import PID, StepInput
 from attitude_sil.core.engine import simulate
 from attitude_sil.core.metrics import metrics_from_trajectory, step_metrics
 from attitude_sil.core.quaternion import quat_from_euler
@@ -17,7 +17,7 @@ def _pid_on_error(pid, errors):
     q_RN = np.array([[0.0, 0.0, 0.0, 1.0]])
     for e in errors:
         q_BN = np.array([[-e, 0.0, 0.0, np.sqrt(1 - e * e)]])  # error vector = +e on roll
-        out.append(pid.compute(q_BN, np.zeros((1, 3)), q_RN, np.zeros((1, 3)))[0, 0])
+        out.append(pid.compute(StepInput(q_BN, np.zeros((1, 3)), q_RN, np.zeros((1, 3))))[0, 0])
     return np.array(out)
 
 
@@ -77,9 +77,9 @@ def test_cost_j_uses_time_constant_and_overshoot():
 def test_hst_gains_meet_the_papers_intent():
     """GA gains: time constant near 1.5 s, overshoot under 2 %; root-locus gains: no overshoot (both batch)."""
     scn = load_scenario(CONFIG / "hst_roll_step.yaml")
-    gains = {"kp": [[48.894] * 3, [113.554] * 3], "ki": [[0.071] * 3, [0.006] * 3],
-             "kd": [[106.046] * 3, [260.942] * 3], "n": [[1.427] * 3, [14.626] * 3]}
-    tr = simulate(scn, 2, gains=gains)
+    gains = {"pid.kp": [[48.894] * 3, [113.554] * 3], "pid.ki": [[0.071] * 3, [0.006] * 3],
+             "pid.kd": [[106.046] * 3, [260.942] * 3], "pid.n": [[1.427] * 3, [14.626] * 3]}
+    tr = simulate(scn, 2, controller_params=gains)
     m = metrics_from_trajectory(tr.t, tr.q_BN, tr.q_RN, tr.tau_c_B)
     assert 1.2 < m["time_constant_s"][0] < 1.8
     assert m["overshoot_pct"][0] < 2.0 and m["overshoot_pct"][1] < 2.0

@@ -1,57 +1,141 @@
-"""Attitude controllers, batch over episodes.
+"""Attitude controllers, batch over episodes, and the bank that swaps them.
 
 Every controller maps the state at t_k (attitude, body rate) and the setpoint
 (reference attitude and rate) to a body-axis command held over
 ``[t_k, t_k + dt]``. ``compute`` advances the controller's own state by one
-step, so it must be called exactly once per control step.
+step, so it is called exactly once per control step.
+
+Types (``controller_type``, DESIGN.md section 3):
+
+* ``pid`` — per-axis PID on the quaternion error vector (paper 000), volts;
+* ``fuzzy_pid`` — hybrid fuzzy PID (paper 003 section 5), volts;
+* ``ga_flc`` — GA-designed fuzzy logic controller (paper 004), volts;
+* ``geometric`` — almost-global tracking law on SO(3) (paper 001 eq. 7), N m.
+
+:class:`ControllerBank` holds one of each and switches at a step boundary,
+bumplessly where the new controller has state (see its docstring).
 """
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
-from .kernels import pid_step
+from .fuzzy import FUZZY_PID_DEFAULT_RULES, UNIFORM_VERTICES, vertices_from_ratios
+from .kernels import fuzzy_infer, pid_step
+from .quaternion import cross, error_vector, quat_error, quat_to_dcm
 
-__all__ = ["PID", "CONTROLLER_TYPES"]
+__all__ = [
+    "CONTROLLER_TYPES",
+    "OUTPUT_KIND",
+    "StepInput",
+    "PID",
+    "FuzzyPID",
+    "GAFLC",
+    "Geometric",
+    "ControllerBank",
+    "FUZZY_PID_DEFAULT_RULES",
+    "skew_vee",
+]
 
-#: controller types the controller node accepts; later issues add the others.
-CONTROLLER_TYPES = ("pid",)
+#: the controller types and the command each publishes
+OUTPUT_KIND = {"pid": "voltage", "fuzzy_pid": "voltage", "ga_flc": "voltage", "geometric": "torque"}
+CONTROLLER_TYPES = tuple(OUTPUT_KIND)
+
+
+
+@dataclass
+class StepInput:
+    """Everything a controller may use at step k, computed once.
+
+    Attributes
+    ----------
+    q_BN, q_RN : (P, 4) attitude and reference attitude
+    omega_BN_B : (P, 3) rad/s
+    omega_RN_R : (P, 3) rad/s, reference rate in R
+    e : (P, 3) quaternion error vector (:func:`~attitude_sil.core.quaternion.error_vector`)
+    """
+
+    q_BN: np.ndarray
+    omega_BN_B: np.ndarray
+    q_RN: np.ndarray
+    omega_RN_R: np.ndarray
+
+    def __post_init__(self) -> None:
+        self.e = error_vector(self.q_BN, self.q_RN)
+        self._Q = None
+
+    @property
+    def Q(self) -> np.ndarray:
+        """Attitude error matrix Q = R_d^T R (paper 001 eq. 5), (P, 3, 3)."""
+        if self._Q is None:
+            self._Q = np.swapaxes(quat_to_dcm(self.q_RN), -1, -2) @ quat_to_dcm(self.q_BN)
+        return self._Q
+
+    def reference_rate_B(self) -> np.ndarray:
+        """Q^T omega_d: the reference rate in B, (P, 3) rad/s."""
+        return np.einsum("pji,pj->pi", self.Q, self.omega_RN_R)
+
+    def error_rate(self) -> np.ndarray:
+        """de/dt of the error vector, (P, 3) 1/s.
+
+        With ``q_BR`` the error quaternion and ``ω_e = ω - Q^T ω_d``,
+        ``d q_BR/dt = ½ q_BR ⊗ (ω_e, 0)``, so ``de/dt = -½ (w ω_e + v × ω_e)``.
+        """
+        q = quat_error(self.q_BN, self.q_RN)
+        w_e = self.omega_BN_B - self.reference_rate_B()
+        return -0.5 * (q[:, 3:4] * w_e + cross(q[:, :3], w_e))
+
+
+def _pe(value, n: int, width: int) -> np.ndarray:
+    """Broadcast to a contiguous (P, width) array."""
+    return np.ascontiguousarray(np.broadcast_to(np.asarray(value, dtype=float), (n, width)))
+
+
+def skew_vee(m: np.ndarray) -> np.ndarray:
+    """vee of the skew part's generator: (M_32, M_13, M_21) of (P, 3, 3) M."""
+    return np.stack((m[..., 2, 1], m[..., 0, 2], m[..., 1, 0]), axis=-1)
 
 
 class PID:
     """Per-axis PID on the quaternion error vector (paper 000 eq. 19, 2nd).
 
-    ``u = Kp e + Ki ∫e dt + Kd N s / (s + N) e`` per body axis, with ``e`` the
-    quaternion error vector of :func:`~attitude_sil.core.quaternion.error_vector`.
+    ``u = Kp e + Ki ∫e dt + Kd N s / (s + N) e`` per body axis.
 
     Discretisation at the control period ``dt`` (state held between steps):
 
+    * the error vector is :func:`~attitude_sil.core.quaternion.error_vector`;
     * derivative filter: low-pass state ``x_f`` of ``N / (s + N)`` discretised
       exactly for a held error, ``x_f[k+1] = a x_f[k] + (1 - a) e[k]`` with
       ``a = exp(-N dt)``; derivative term ``N (e[k] - x_f[k])``. ``x_f`` starts
       at 0, so a step at t = 0 gives the derivative kick a continuous PID has.
     * integrator: forward Euler, ``I[k+1] = I[k] + e[k] dt``;
-    * the error vector is :func:`~attitude_sil.core.quaternion.error_vector`;
     * output saturation at ``±u_max`` with anti-windup by conditional
       integration: the integrator holds while the output is saturated and the
       error pushes further into the limit.
 
+    Bumpless entry (:meth:`bumpless`): the filter state is set so the
+    derivative term starts at the measured error rate (``x_f = e - ė / N``,
+    ``ė`` from :meth:`StepInput.error_rate`), and the integrator takes the rest,
+    ``I = (u_last - Kp e - Kd ė) / Ki``; the first command then equals
+    ``u_last`` exactly when ``Ki > 0``, and the integrator holds only the real
+    difference between the two laws (not the derivative action, which with a
+    small Ki would decay for minutes).
+
     Parameters
     ----------
     kp, ki, kd, n : array_like, shape (P, 3) or (3,)
-        Gains per episode and body axis; ``n`` in rad/s.
-    dt : float
-        Control period, s.
-    u_max : float
-        Output limit (V for voltage-driven wheels).
+    dt : float, s
+    u_max : float, output limit
     """
 
     def __init__(self, kp, ki, kd, n, dt: float, u_max: float) -> None:
         self.dt = float(dt)
         self.u_max = float(u_max)
-        self.set_gains(kp, ki, kd, n)
         self.integral: np.ndarray | None = None
         self.filter_state: np.ndarray | None = None
+        self.set_gains(kp, ki, kd, n)
 
     def set_gains(self, kp, ki, kd, n) -> None:
         """Replace the gains (arrays broadcastable to (P, 3)); state is kept."""
@@ -67,27 +151,362 @@ class PID:
         self.integral = np.zeros((n_episodes, 3))
         self.filter_state = np.zeros((n_episodes, 3))
 
-    def compute(
-        self,
-        q_BN: np.ndarray,
-        omega_BN_B: np.ndarray,
-        q_RN: np.ndarray,
-        omega_RN_R: np.ndarray,
-    ) -> np.ndarray:
-        """Command for step k, shape (P, 3); advances the controller state.
-
-        Parameters
-        ----------
-        q_BN, q_RN : (P, 4) attitude and reference attitude
-        omega_BN_B, omega_RN_R : (P, 3) rad/s (unused by the PID, which
-            differentiates the attitude error through its filter)
-        """
-        if self.integral is None:
-            self.reset(q_BN.shape[0])
+    def _kernel_gains(self) -> list[np.ndarray]:
         if self._gains is None or self._gains[0].shape != self.integral.shape:
             shape = self.integral.shape
             self._gains = [np.ascontiguousarray(np.broadcast_to(g, shape))
                            for g in (self.kp, self.ki, self.kd, self.n, self.a)]
-        gains = self._gains
-        return pid_step(np.ascontiguousarray(q_BN, dtype=float), np.ascontiguousarray(q_RN, dtype=float),
-                        *gains, self.integral, self.filter_state, self.dt, self.u_max)
+        return self._gains
+
+    def compute(self, inp: StepInput) -> np.ndarray:
+        """Command for step k, shape (P, 3); advances the controller state."""
+        if self.integral is None:
+            self.reset(inp.q_BN.shape[0])
+        return pid_step(np.ascontiguousarray(inp.q_BN, dtype=float), np.ascontiguousarray(inp.q_RN, dtype=float),
+                        *self._kernel_gains(), self.integral, self.filter_state, self.dt, self.u_max)
+
+    def bumpless(self, inp: StepInput, u_last: np.ndarray) -> None:
+        """Set the state so the next :meth:`compute` with ``inp`` returns ``u_last`` (needs Ki > 0)."""
+        if self.integral is None:
+            self.reset(inp.q_BN.shape[0])
+        e = inp.e
+        e_dot = inp.error_rate()
+        ki = np.broadcast_to(self.ki, e.shape)
+        target = np.clip(u_last, -self.u_max, self.u_max)
+        self.filter_state = e - e_dot / self.n
+        rest = target - self.kp * e - self.kd * e_dot
+        self.integral = np.where(ki > 0.0, rest / np.where(ki > 0.0, ki, 1.0), 0.0)
+
+
+class _Stateless:
+    """Bumpless entry for a controller without state: a decaying offset.
+
+    At the switch the offset is ``u_last - u_new``; it decays as
+    ``exp(-dt / tau_b)`` per step (``bumpless_time_constant`` tau_b), so the
+    first command equals the old controller's last and the new law takes over
+    smoothly. With tau_b = 0 there is no offset and the jump is at most
+    ``|u_last| + u_max``.
+    """
+
+    offset: np.ndarray | None = None
+    decay: float = 0.0
+
+    def set_transfer(self, tau_b: float, dt: float) -> None:
+        self.decay = float(np.exp(-dt / tau_b)) if tau_b > 0.0 else 0.0
+
+    def _apply_offset(self, u: np.ndarray) -> np.ndarray:
+        if self.offset is None:
+            return u
+        out = u + self.offset
+        self.offset = self.offset * self.decay
+        if np.all(np.abs(self.offset) < 1e-15):
+            self.offset = None
+        return out
+
+    def bumpless(self, inp: StepInput, u_last: np.ndarray) -> None:
+        self.offset = None
+        if self.decay > 0.0:
+            self.offset = np.asarray(u_last, dtype=float) - self._law(inp)
+
+
+class FuzzyPID(_Stateless):
+    """Hybrid fuzzy PID of paper 003, section 5, per body axis.
+
+    * Fuzzy part: inputs the error ``e`` (the quaternion error vector) and its
+      change ``de = (e[k] - e[k-1]) / dt`` (0 at the first step), normalised by
+      ``e_scale`` and ``de_scale`` to [-1, 1]; seven evenly spaced triangular
+      sets each; rule table indexed ``rules[Δe, e]`` (paper 003 Table 3
+      layout); product inference and weighted-average defuzzification;
+      output scaled by ``u_scale`` (V).
+    * PID part: :class:`PID` with its own gains.
+    * Mixing (paper 003): ``f(e) = e_n^2`` with ``e_n = clip(e / e_scale, -1, 1)``.
+      The paper leaves "which response is faster" open; here, per axis and
+      causally, **the faster response is the one whose command at this step is
+      larger in magnitude** (it would accelerate the body harder now).
+      Case 1, fuzzy faster (``|u_f| > |u_pid|``): ``u = f u_pid + (1 - f) u_f``;
+      case 2, PID faster: ``u = (1 - f) u_pid + f u_f``; case 3, equal (within
+      1e-12 V): ``u = u_pid``. Then ``u`` is saturated at ``u_max``.
+
+    Bumpless entry: the change-of-error memory is set from the measured error
+    rate (``e[k-1] = e - ė dt``), then the PID's state is set so the mixed
+    command equals the old controller's last whenever some PID output achieves
+    that (solved per case). When none does (for small errors the mix follows
+    whichever command is larger, so e.g. a small braking command cannot come
+    out while the fuzzy part pushes), the PID gets the target and the rest is a
+    decaying offset as for the stateless laws (``bumpless_time_constant``).
+    """
+
+    def __init__(self, pid: PID, e_scale, de_scale, u_scale, rules, dt: float, u_max: float) -> None:
+        self.pid = pid
+        self.dt = float(dt)
+        self.u_max = float(u_max)
+        self.set_params(e_scale, de_scale, u_scale, rules)
+        self.e_prev: np.ndarray | None = None
+
+    def set_params(self, e_scale, de_scale, u_scale, rules) -> None:
+        self.e_scale = np.atleast_2d(np.asarray(e_scale, dtype=float))
+        self.de_scale = np.atleast_2d(np.asarray(de_scale, dtype=float))
+        self.u_scale = np.atleast_2d(np.asarray(u_scale, dtype=float))
+        r = np.asarray(rules, dtype=np.int64)
+        self.rules = r.reshape((-1, 7, 7)) if r.ndim != 3 else r
+
+    def _fuzzy(self, inp: StepInput) -> tuple[np.ndarray, np.ndarray]:
+        n = inp.e.shape[0]
+        e = inp.e
+        de = np.zeros_like(e) if self.e_prev is None else (e - self.e_prev) / self.dt
+        v = np.ascontiguousarray(np.broadcast_to(UNIFORM_VERTICES, (n, 3, 7)))
+        rules = np.ascontiguousarray(np.broadcast_to(self.rules, (n, 7, 7)))
+        x_e = e / self.e_scale
+        x_de = de / self.de_scale
+        u_f = self.u_scale * fuzzy_infer(_pe(x_de, n, 3), _pe(x_e, n, 3), v, v, rules, v)
+        f = np.clip(x_e, -1.0, 1.0) ** 2
+        return u_f, f
+
+    @staticmethod
+    def mix(u_pid: np.ndarray, u_f: np.ndarray, f: np.ndarray) -> np.ndarray:
+        """Paper 003's mixing block with the magnitude rule (see the class docstring)."""
+        a_p, a_f = np.abs(u_pid), np.abs(u_f)
+        fuzzy_faster = a_f > a_p + 1e-12
+        pid_faster = a_p > a_f + 1e-12
+        return np.where(fuzzy_faster, f * u_pid + (1.0 - f) * u_f,
+                        np.where(pid_faster, (1.0 - f) * u_pid + f * u_f, u_pid))
+
+    def compute(self, inp: StepInput) -> np.ndarray:
+        u_f, f = self._fuzzy(inp)
+        u_pid = self.pid.compute(inp)
+        self.e_prev = inp.e.copy()
+        return np.clip(self._apply_offset(self.mix(u_pid, u_f, f)), -self.u_max, self.u_max)
+
+    def reset(self, n_episodes: int) -> None:
+        self.pid.reset(n_episodes)
+        self.e_prev = None
+        self.offset = None
+
+    def bumpless(self, inp: StepInput, u_last: np.ndarray) -> None:
+        self.offset = None
+        self.e_prev = inp.e - inp.error_rate() * self.dt  # de starts at the measured rate
+        u_f, f = self._fuzzy(inp)
+        target = np.clip(u_last, -self.u_max, self.u_max)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            p2 = (target - f * u_f) / (1.0 - f)  # case 2: PID faster
+            p1 = (target - (1.0 - f) * u_f) / f  # case 1: fuzzy faster
+        ok2 = np.isfinite(p2) & (np.abs(p2) > np.abs(u_f) + 1e-12)
+        ok1 = np.isfinite(p1) & (np.abs(p1) < np.abs(u_f) - 1e-12)
+        u_pid = np.where(ok2, p2, np.where(ok1, p1, target))
+        self.pid.bumpless(inp, u_pid)
+        rest = target - self.mix(u_pid, u_f, f)
+        if self.decay > 0.0 and np.any(np.abs(rest) > 1e-12):
+            self.offset = rest
+
+
+class GAFLC(_Stateless):
+    """GA-designed fuzzy logic controller of paper 004, one per body axis.
+
+    Inputs: the attitude deviation ``θ = 2 asin(vec(q_BR))`` per axis (rad;
+    exact for a rotation about one axis) and the rate deviation ``q = ω - Q^T ω_d``
+    (rad/s), scaled by ``K_θ`` and ``K_q`` (eq. 6) to [-1, 1]. Seven
+    triangular sets per variable with vertices from positive ratios (eq. 5);
+    49 integer rules (1..7 = NB..PB, Table 1), table indexed ``rules[θ, q]`` as
+    paper 004 Table 2; product inference, weighted average over the output
+    vertices (the δe sets' centres); output ``K_e × δe_n`` in volts.
+
+    Genome layout (the tuner searches exactly these parameters):
+    ``ga_flc.rules`` 49 integers, row-major over θ (NB..PB) then q (NB..PB);
+    ``ga_flc.mf_ratios`` 18 positive numbers: a1..a6 for θ, then for q, then
+    for δe; ``ga_flc.scales`` ``[K_θ (1/rad), K_q (s/rad), K_e (V)]``.
+    """
+
+    def __init__(self, rules, mf_ratios, scales, u_max: float) -> None:
+        self.u_max = float(u_max)
+        self.set_params(rules, mf_ratios, scales)
+
+    def set_params(self, rules, mf_ratios, scales) -> None:
+        r = np.asarray(rules, dtype=np.int64)
+        self.rules = r.reshape((-1, 7, 7))
+        ratios = np.asarray(mf_ratios, dtype=float).reshape((-1, 3, 6))
+        self.vertices = vertices_from_ratios(ratios)  # (P or 1, 3 variables, 7)
+        self.scales = np.atleast_2d(np.asarray(scales, dtype=float))
+
+    def reset(self, n_episodes: int) -> None:
+        self.offset = None
+
+    def _law(self, inp: StepInput) -> np.ndarray:
+        n = inp.e.shape[0]
+        theta = -2.0 * np.arcsin(np.clip(inp.e, -1.0, 1.0))
+        rate = inp.omega_BN_B - inp.reference_rate_B()
+        s = np.broadcast_to(self.scales, (n, 3))
+        v = np.broadcast_to(self.vertices, (n, 3, 7))
+        per_axis = lambda var: np.ascontiguousarray(np.broadcast_to(v[:, var, None, :], (n, 3, 7)))  # noqa: E731
+        rules = np.ascontiguousarray(np.broadcast_to(self.rules, (n, 7, 7)))
+        du = fuzzy_infer(_pe(theta * s[:, 0:1], n, 3), _pe(rate * s[:, 1:2], n, 3),
+                         per_axis(0), per_axis(1), rules, per_axis(2))
+        return np.clip(s[:, 2:3] * du, -self.u_max, self.u_max)
+
+    def compute(self, inp: StepInput) -> np.ndarray:
+        return np.clip(self._apply_offset(self._law(inp)), -self.u_max, self.u_max)
+
+
+class Geometric(_Stateless):
+    """Almost-global attitude tracking law on SO(3) (paper 001 eq. 7), torque out.
+
+    With ``R = R_NB`` (body to inertial), ``R_d = R_NR`` and the errors
+    ``Q = R_d^T R`` (eq. 5), ``ω_e = ω - Q^T ω_d`` (eq. 6), ``ν = Q^T ω_d``::
+
+        τ = -L ω_e - S_K(Q) + J Q^T ω̇_d + ν × (J ν) - M_env,
+        S_K(Q) = vee(K Q - Q^T K) = Σ_i k_i (Q^T e_i) × e_i
+
+    (eq. 7 writes ``+Σ k_i e_i^× Q^T e_i``, the same term). Lyapunov check: with
+    ``Q̇ = Q ω_e^×`` and ``J ω̇ = -ω × J ω + τ + M_env``, the function
+    ``V = ½ ω_e^T J ω_e + tr(K - K Q)`` has ``dV/dt = -ω_e^T L ω_e`` exactly:
+    ``d tr(K - KQ)/dt = ω_e · S_K`` cancels the ``-S_K`` term, and the
+    feed-forward ``ν × Jν`` leaves ``-ω_e·(ν × Jω_e) - ω_e·J(ν × ω_e) = 0``.
+    K must be diagonal with distinct positive entries, L positive definite.
+    ``ω̇_d`` is the backward difference of the reference rate (0 at the first
+    step); ``M_env`` is the modelled environmental moment fed forward (zero
+    unless the caller supplies it). Output saturated at ``±torque_limit`` per axis.
+    """
+
+    def __init__(self, k, l, inertia, dt: float, torque_limit: float) -> None:  # noqa: E741 - the paper's L
+        self.dt = float(dt)
+        self.u_max = float(torque_limit)
+        self.set_params(k, l, inertia)
+        self.w_d_prev: np.ndarray | None = None
+
+    def set_params(self, k, l, inertia) -> None:  # noqa: E741 - L is the paper's name
+        self.k = np.atleast_2d(np.asarray(k, dtype=float))
+        self.l = np.atleast_2d(np.asarray(l, dtype=float))
+        self.inertia = np.asarray(inertia, dtype=float)
+
+    def reset(self, n_episodes: int) -> None:
+        self.offset = None
+        self.w_d_prev = None
+
+    def torque_terms(self, inp: StepInput, tau_env_B: np.ndarray | None = None) -> np.ndarray:
+        """The unsaturated law (P, 3) N m; does not advance any state."""
+        Q = inp.Q
+        nu = inp.reference_rate_B()
+        w_e = inp.omega_BN_B - nu
+        w_d = inp.omega_RN_R
+        w_d_dot = np.zeros_like(w_d) if self.w_d_prev is None else (w_d - self.w_d_prev) / self.dt
+        K = self.k[..., :, None] * np.eye(3)
+        s_k = skew_vee(K @ Q - np.swapaxes(Q, -1, -2) @ K)
+        J = np.broadcast_to(self.inertia, Q.shape)
+        jv = np.einsum("pij,pj->pi", J, nu)
+        ff = np.einsum("pij,pj->pi", J, np.einsum("pji,pj->pi", Q, w_d_dot)) + cross(nu, jv)
+        tau = -self.l * w_e - s_k + ff
+        if tau_env_B is not None:
+            tau = tau - tau_env_B
+        return tau
+
+    def _law(self, inp: StepInput) -> np.ndarray:
+        return np.clip(self.torque_terms(inp), -self.u_max, self.u_max)
+
+    def compute(self, inp: StepInput) -> np.ndarray:
+        u = np.clip(self._apply_offset(self._law(inp)), -self.u_max, self.u_max)
+        self.w_d_prev = inp.omega_RN_R.copy()
+        return u
+
+
+class ControllerBank:
+    """One controller of each type for P episodes; the active one computes.
+
+    :meth:`request` schedules a swap that takes effect at the next
+    :meth:`compute` (a step boundary). Bumpless transfer:
+
+    * to ``pid`` or ``fuzzy_pid`` from a controller with the same command
+      kind (volts): states initialised so the first command equals the old
+      controller's last (:meth:`PID.bumpless`, :meth:`FuzzyPID.bumpless`,
+      which falls back to a decaying offset where no state achieves it);
+    * to ``ga_flc`` or ``geometric`` (no state): a decaying offset
+      (``bumpless_time_constant``) makes the first command equal the last;
+    * between command kinds (volts <-> N m) there is nothing to match: the new
+      controller starts from its own command; the jump is bounded by
+      ``|u_last| + u_max`` of the new controller.
+
+    Parameters
+    ----------
+    values : dict
+        The controller node's parameters (``pid.kp``, ``fuzzy_pid.rules``, ...).
+    dt : float
+    n_episodes : int
+    per_episode : dict, optional
+        Per-episode overrides ``{"pid.kp": (P, 3), ...}``.
+    """
+
+    def __init__(self, values: dict, dt: float, n_episodes: int, per_episode: dict | None = None) -> None:
+        self.dt = float(dt)
+        self.n = n_episodes
+        v = dict(values)
+        v.update(per_episode or {})
+        lim = v["output_limit"]
+        self.controllers = {
+            "pid": PID(v["pid.kp"], v["pid.ki"], v["pid.kd"], v["pid.n"], dt, lim),
+            "fuzzy_pid": FuzzyPID(
+                PID(v["fuzzy_pid.kp"], v["fuzzy_pid.ki"], v["fuzzy_pid.kd"], v["fuzzy_pid.n"], dt, lim),
+                v["fuzzy_pid.e_scale"], v["fuzzy_pid.de_scale"], v["fuzzy_pid.u_scale"], v["fuzzy_pid.rules"],
+                dt, lim),
+            "ga_flc": GAFLC(v["ga_flc.rules"], v["ga_flc.mf_ratios"], v["ga_flc.scales"], lim),
+            "geometric": Geometric(v["geometric.k"], v["geometric.l"], _inertia(v["geometric.inertia"]), dt,
+                                   v["geometric.torque_limit"]),
+        }
+        self.configure(v)
+        self.active = v["controller_type"]
+        self.pending: str | None = None
+        self.u_last: np.ndarray | None = None
+        self.reset()
+
+    def configure(self, v: dict) -> None:
+        """Apply (possibly changed) gains to every controller; states are kept."""
+        c = self.controllers
+        lim = v["output_limit"]
+        c["pid"].set_gains(v["pid.kp"], v["pid.ki"], v["pid.kd"], v["pid.n"])
+        c["fuzzy_pid"].pid.set_gains(v["fuzzy_pid.kp"], v["fuzzy_pid.ki"], v["fuzzy_pid.kd"], v["fuzzy_pid.n"])
+        c["fuzzy_pid"].set_params(v["fuzzy_pid.e_scale"], v["fuzzy_pid.de_scale"], v["fuzzy_pid.u_scale"],
+                                  v["fuzzy_pid.rules"])
+        c["ga_flc"].set_params(v["ga_flc.rules"], v["ga_flc.mf_ratios"], v["ga_flc.scales"])
+        c["geometric"].set_params(v["geometric.k"], v["geometric.l"], _inertia(v["geometric.inertia"]))
+        for name in ("pid", "fuzzy_pid", "ga_flc"):
+            c[name].u_max = lim
+        c["fuzzy_pid"].pid.u_max = lim
+        c["geometric"].u_max = v["geometric.torque_limit"]
+        for name in ("fuzzy_pid", "ga_flc", "geometric"):
+            c[name].set_transfer(v["bumpless_time_constant"], self.dt)
+
+    def reset(self) -> None:
+        """New episode: every controller's state cleared, no swap pending."""
+        for ctrl in self.controllers.values():
+            ctrl.reset(self.n)
+        self.pending = None
+        self.u_last = None
+
+    def request(self, controller_type: str) -> None:
+        """Swap to ``controller_type`` at the next step."""
+        if controller_type not in self.controllers:
+            raise ValueError(f"unknown controller_type {controller_type!r}")
+        self.pending = None if controller_type == self.active else controller_type
+
+    @property
+    def kind(self) -> str:
+        """``voltage`` or ``torque``: what the active controller commands."""
+        return OUTPUT_KIND[self.active]
+
+    def compute(self, q_BN: np.ndarray, omega_BN_B: np.ndarray, q_RN: np.ndarray,
+                omega_RN_R: np.ndarray) -> np.ndarray:
+        """Command (P, 3) of the active controller for this step (V or N m, see :attr:`kind`)."""
+        inp = StepInput(np.asarray(q_BN, dtype=float), np.asarray(omega_BN_B, dtype=float),
+                        np.asarray(q_RN, dtype=float), np.asarray(omega_RN_R, dtype=float))
+        if self.pending is not None:
+            old_kind = self.kind
+            self.active, self.pending = self.pending, None
+            new = self.controllers[self.active]
+            new.reset(self.n)
+            if self.u_last is not None and OUTPUT_KIND[self.active] == old_kind:
+                new.bumpless(inp, self.u_last)
+        u = self.controllers[self.active].compute(inp)
+        self.u_last = u
+        return u
+
+
+def _inertia(values) -> np.ndarray:
+    v = np.asarray(values, dtype=float)
+    return np.diag(v) if v.shape[-1] == 3 else v.reshape(v.shape[:-1] + (3, 3))

@@ -20,7 +20,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .controllers import PID
+from .controllers import ControllerBank
 from .disturbance import DisturbanceModel
 from .quaternion import quat_from_euler
 from .rigid_body import BodyState, rk4_step
@@ -123,10 +123,14 @@ class Wheels:
     def names(self) -> list[str]:
         return [f"wheel_{i + 1}" for i in range(self.assembly.n_wheels)]
 
-    def advance(self, v_cmd_B: np.ndarray) -> WheelStep:
-        """Hold ``v_cmd_B`` (P, 3) V over one step; return the step's outputs."""
+    def advance(self, cmd_B: np.ndarray, torque_mode: bool = False) -> WheelStep:
+        """Hold a body-axis command (P, 3) over one step; return the step's outputs.
+
+        The command is a voltage (V), or with ``torque_mode`` a body torque (N m)
+        that the inverse motor model turns into voltages.
+        """
         x = self.x
-        self.x, tau_c, h = self.assembly.advance(x, np.ascontiguousarray(v_cmd_B, dtype=float))
+        self.x, tau_c, h = self.assembly.advance(x, np.ascontiguousarray(cmd_B, dtype=float), torque_mode)
         return WheelStep(h, tau_c, x[:, :, 0], x[:, :, 2], self.assembly.motor_torque(x))
 
 
@@ -203,17 +207,14 @@ def build_guidance(scn: Scenario, n_episodes: int = 1) -> Guidance:
     return Guidance(g["initial_setpoint_rpy_deg"], g["setpoint_rpy_deg"], g["step_time"], n_episodes)
 
 
-def build_controller(scn: Scenario, n_episodes: int = 1, gains: dict | None = None) -> PID:
-    """Controller of the scenario's ``controller_type`` (per-episode gain arrays optional).
+def build_controller(scn: Scenario, n_episodes: int = 1, params: dict | None = None) -> ControllerBank:
+    """The controller bank of the scenario's ``controller`` parameters.
 
-    ``gains`` maps ``kp``/``ki``/``kd``/``n`` to (P, 3) arrays.
+    ``params`` maps controller parameter names (``"pid.kp"``, ``"ga_flc.rules"``,
+    ...) to per-episode arrays with a leading P axis.
     """
     c = scn.values["controller"]
-    g = {k: _per_episode(c[f"pid.{k}"], n_episodes, 3) for k in ("kp", "ki", "kd", "n")}
-    if gains:
-        for k, v in gains.items():
-            g[k] = _per_episode(v, n_episodes, 3)
-    return PID(g["kp"], g["ki"], g["kd"], g["n"], c["control_period"], c["output_limit"])
+    return ControllerBank(c, c["control_period"], n_episodes, per_episode=params)
 
 
 @dataclass
@@ -227,7 +228,8 @@ class Trajectory:
     omega_BN_B : (P, K+1, 3) rad/s
     q_RN : (P, K+1, 4) setpoint
     h_wheels_B : (P, K+1, 3) N m s
-    u_cmd : (P, K+1, 3) controller command (V)
+    u_cmd : (P, K+1, 3) controller command (V, or N m for a torque law)
+    kind : list of str, per step: ``voltage`` or ``torque``
     tau_c_B : (P, K+1, 3) mean wheel torque on the body over [t_k, t_k+1], N m
     tau_ext_B : (P, K+1, 3) disturbance torque, N m
     wheel_speed : (P, K+1, n) rad/s
@@ -242,15 +244,26 @@ class Trajectory:
     tau_c_B: np.ndarray
     tau_ext_B: np.ndarray
     wheel_speed: np.ndarray
+    kind: list
+
+
+def schedule_from_scenario(scn: Scenario) -> list[tuple[int, str]]:
+    """The scenario's controller swaps as (step index, controller_type), sorted."""
+    s = scn.values["scenario"]
+    dt_ns = int(round(scn.dt * 1e9))
+    return sorted((int(round(t * 1e9)) // dt_ns + (int(round(t * 1e9)) % dt_ns > 0), kind)
+                  for t, kind in zip(s["schedule.times"], s["schedule.controller_types"], strict=True))
 
 
 def simulate(
     scn: Scenario,
     n_episodes: int = 1,
     duration: float | None = None,
-    gains: dict | None = None,
+    controller_params: dict | None = None,
     inertia=None,
     seeds=None,
+    controller: str | None = None,
+    schedule: list[tuple[int, str]] | None = None,
 ) -> Trajectory:
     """Run P episodes of the scenario in lockstep, vectorised over episodes.
 
@@ -261,12 +274,17 @@ def simulate(
         P.
     duration : float, optional
         Overrides ``plant.duration``, s.
-    gains : dict, optional
-        Per-episode PID gains ``{'kp': (P, 3), ...}``.
+    controller_params : dict, optional
+        Per-episode controller parameters ``{"pid.kp": (P, 3), ...}``.
     inertia : array_like, optional
         Per-episode inertia, (P, 3) principal values or (P, 3, 3).
     seeds : sequence of int, optional
         Per-episode noise seeds.
+    controller : str, optional
+        ``controller_type`` to start with (default: the scenario's).
+    schedule : list of (step, controller_type), optional
+        Swaps applied before the command of that step (default: the
+        scenario's ``schedule.*``).
 
     Returns
     -------
@@ -279,8 +297,10 @@ def simulate(
     wheels = build_wheels(scn, P)
     dist = build_disturbance(scn, P, seeds=seeds, inertia=inertia)
     guide = build_guidance(scn, P)
-    ctrl = build_controller(scn, P, gains=gains)
-    ctrl.reset(P)
+    ctrl = build_controller(scn, P, params=controller_params)
+    if controller is not None:
+        ctrl.active = controller
+    swaps = dict(schedule_from_scenario(scn) if schedule is None else schedule)
     nw = wheels.assembly.n_wheels
     tr = Trajectory(
         t=np.arange(K + 1) * dt,
@@ -292,6 +312,7 @@ def simulate(
         tau_c_B=np.empty((P, K + 1, 3)),
         tau_ext_B=np.empty((P, K + 1, 3)),
         wheel_speed=np.empty((P, K + 1, nw)),
+        kind=[],
     )
     dt_ns = int(round(dt * 1e9))
     for k in range(K + 1):
@@ -299,8 +320,11 @@ def simulate(
         s = plant.state
         q_RN, w_RN = guide.setpoint(t)
         tau_ext = dist.torque(s.q_BN)
+        if k in swaps:
+            ctrl.request(swaps[k])
         u = ctrl.compute(s.q_BN, s.omega_BN_B, q_RN, w_RN)
-        ws = wheels.advance(u)
+        tr.kind.append(ctrl.kind)
+        ws = wheels.advance(u, ctrl.kind == "torque")
         tr.q_BN[:, k] = s.q_BN
         tr.omega_BN_B[:, k] = s.omega_BN_B
         tr.q_RN[:, k] = q_RN

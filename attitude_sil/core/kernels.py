@@ -128,13 +128,15 @@ def pid_step(q_BN, q_RN, kp, ki, kd, n, a, integral, filt, dt, u_max):
 
 
 @njit(cache=True)
-def wheel_step(x, v_cmd, allocation, axes, phi_T, gamma, j_m, k_b, headroom, speed_max, v_max, dt):
+def wheel_step(x, v_cmd, allocation, axes, phi_T, gamma, j_m, k_b, headroom, speed_max, v_max, dt,
+               torque_mode, k_i, r_a, b_m):
     """Drive limits, exact motor step and mean body torque for every episode.
 
     Shapes: x (P, n, 3) wheel state (angle, current, speed) at t_k, v_cmd (P, 3)
-    body-axis voltage, allocation (n, 3) pseudo-inverse, axes (3, n), phi_T (3, 3)
-    and gamma (3,) the exact one-step transition. Returns (x_next, tau_c (P, 3),
-    h_start (P, 3)); see ``wheels.WheelAssembly`` for the rules.
+    body-axis voltage (or, with ``torque_mode``, body torque in N m), allocation
+    (n, 3) pseudo-inverse, axes (3, n), phi_T (3, 3) and gamma (3,) the exact
+    one-step transition. Returns (x_next, tau_c (P, 3), h_start (P, 3)); see
+    ``wheels.WheelAssembly`` for the rules.
     """
     m, nw = x.shape[0], x.shape[1]
     x_next = np.empty_like(x)
@@ -145,6 +147,9 @@ def wheel_step(x, v_cmd, allocation, axes, phi_T, gamma, j_m, k_b, headroom, spe
             speed = x[p, j, 2]
             e = -(allocation[j, 0] * v_cmd[p, 0] + allocation[j, 1] * v_cmd[p, 1] + allocation[j, 2] * v_cmd[p, 2])
             emf = k_b * speed
+            if torque_mode:
+                # inverse motor model: wheel torque -> steady current -> voltage
+                e = r_a * (e + b_m * speed) / k_i + emf
             e = min(max(e, emf - headroom), emf + headroom)
             if abs(speed) >= speed_max and (e - emf) * speed > 0.0:
                 e = emf
@@ -158,3 +163,39 @@ def wheel_step(x, v_cmd, allocation, axes, phi_T, gamma, j_m, k_b, headroom, spe
         for i in range(3):
             tau_c[p, i] = -(tau_c[p, i] - h0[p, i]) / dt
     return x_next, tau_c, h0
+
+
+@njit(cache=True, inline="always")
+def _segment(x, v):
+    # clip to [-1, 1], find the segment [v_j, v_j+1] holding x; returns (j, t)
+    if x <= v[0]:
+        return 0, 0.0
+    if x >= v[6]:
+        return 5, 1.0
+    j = 0
+    while j < 5 and x > v[j + 1]:
+        j += 1
+    return j, (x - v[j]) / (v[j + 1] - v[j])
+
+
+@njit(cache=True)
+def fuzzy_infer(x_row, x_col, v_row, v_col, rules, centres):
+    """Two-input, 7-set fuzzy inference for every episode and axis (see ``fuzzy.infer``).
+
+    Shapes: x_row, x_col (P, 3) normalised inputs; v_row, v_col (P, 3, 7)
+    vertices; rules (P, 7, 7) int, 1..7, rows indexed by x_row; centres
+    (P, 3, 7) output-set centres. Returns (P, 3) in [-1, 1].
+    """
+    m = x_row.shape[0]
+    out = np.empty((m, 3))
+    for p in range(m):
+        for a in range(3):
+            i, ti = _segment(x_row[p, a], v_row[p, a])
+            j, tj = _segment(x_col[p, a], v_col[p, a])
+            mi0, mi1 = 1.0 - ti, ti
+            mj0, mj1 = 1.0 - tj, tj
+            c = centres[p, a]
+            r = rules[p]
+            out[p, a] = (mi0 * (mj0 * c[r[i, j] - 1] + mj1 * c[r[i, j + 1] - 1])
+                         + mi1 * (mj0 * c[r[i + 1, j] - 1] + mj1 * c[r[i + 1, j + 1] - 1]))
+    return out

@@ -12,7 +12,7 @@ import numpy as np
 
 from .quaternion import euler_from_quat
 
-__all__ = ["step_metrics", "metrics_from_trajectory"]
+__all__ = ["step_metrics", "metrics_from_trajectory", "segment_metrics"]
 
 
 def _first_crossing(t: np.ndarray, y: np.ndarray, level: float | np.ndarray) -> np.ndarray:
@@ -139,3 +139,46 @@ def metrics_from_trajectory(
     m["control_effort_Nms"] = np.sum(np.linalg.norm(tau_c_B[:, :-1], axis=-1) * dt, axis=1)
     m["cost_J"] = np.abs(m["time_constant_s"] - tau_d) + w_os * m["overshoot_pct"]
     return m
+
+
+def segment_metrics(
+    t: np.ndarray,
+    q_BN: np.ndarray,
+    q_RN: np.ndarray,
+    tau_c_B: np.ndarray,
+    u_cmd: np.ndarray,
+    k0: int,
+    k1: int,
+    axis: int = 0,
+) -> dict[str, float]:
+    """Error and effort figures of one episode over steps ``k0 <= k < k1``.
+
+    For comparing controllers that ran one after the other (scheduled swaps).
+
+    Parameters
+    ----------
+    t : (K+1,) s
+    q_BN, q_RN : (K+1, 4)
+    tau_c_B, u_cmd : (K+1, 3) torque on the body (N m) and command
+    k0, k1 : int, step range
+    axis : int, body axis of the error figures
+
+    Returns
+    -------
+    dict: ``t_start_s``, ``t_end_s``, ``iae``, ``ise`` (rectangle rule over the
+    steps), ``max_abs_error_rad``, ``rms_error_rad``, ``control_effort_Nms``,
+    ``max_abs_command``.
+    """
+    err = (euler_from_quat(q_RN[k0:k1]) - euler_from_quat(q_BN[k0:k1]))[:, axis]
+    dt = np.diff(t[k0:k1 + 1]) if k1 < t.size else np.append(np.diff(t[k0:k1]), t[1] - t[0])
+    dt = dt[: err.size]
+    return {
+        "t_start_s": float(t[k0]),
+        "t_end_s": float(t[min(k1, t.size - 1)]),
+        "iae": float(np.sum(np.abs(err) * dt)),
+        "ise": float(np.sum(err**2 * dt)),
+        "max_abs_error_rad": float(np.max(np.abs(err))),
+        "rms_error_rad": float(np.sqrt(np.mean(err**2))),
+        "control_effort_Nms": float(np.sum(np.linalg.norm(tau_c_B[k0:k1], axis=-1) * dt)),
+        "max_abs_command": float(np.max(np.abs(u_cmd[k0:k1]))),
+    }

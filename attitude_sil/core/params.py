@@ -12,8 +12,11 @@ description, with the reason.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
+
+from .fuzzy import FUZZY_PID_DEFAULT_RULES, PAPER_004_TABLE_2
 
 __all__ = ["ParamSpec", "NODE_PARAMS", "GLOBAL_NODE", "SCENARIO_NODE", "spec_for", "HST_MOTOR"]
 
@@ -57,6 +60,7 @@ class ParamSpec:
     lengths: tuple[int, ...] | None = None
     choices: tuple[str, ...] | None = None
     runtime: bool = field(default=False)
+    rule: Callable[[Any], str] | None = field(default=None, compare=False)
 
     def __post_init__(self) -> None:
         assert self.kind in _KINDS, self.kind
@@ -111,8 +115,14 @@ class ParamSpec:
             allowed = " or ".join(str(n) for n in self.lengths)
             raise ValueError(f"{where} must have {allowed} elements, got {len(items)}")
         if self.kind == "string_array":
-            return [self._check_string(v, f"{where}[{i}]") for i, v in enumerate(items)]
-        return [self._check_number(v, f"{where}[{i}]") for i, v in enumerate(items)]
+            out = [self._check_string(v, f"{where}[{i}]") for i, v in enumerate(items)]
+        else:
+            out = [self._check_number(v, f"{where}[{i}]") for i, v in enumerate(items)]
+        if self.rule is not None:
+            broken = self.rule(out)
+            if broken:
+                raise ValueError(f"{where} {broken}")
+        return out
 
 
 def _d(name, default, description, **kw) -> ParamSpec:
@@ -150,6 +160,11 @@ HST_MOTOR = {
 
 _HST_INERTIA = [31.046, 77.217, 78.754]
 
+
+def _distinct(values: list) -> str:
+    """Rule of paper 001: the entries of K must differ."""
+    return "entries must be distinct (paper 001: k1 != k2 != k3)" if len(set(values)) < len(values) else ""
+
 NODE_PARAMS: dict[str, list[ParamSpec]] = {
     GLOBAL_NODE: [],  # filled below: names any node declares may be set for all
     "plant": [
@@ -168,6 +183,8 @@ NODE_PARAMS: dict[str, list[ParamSpec]] = {
            min=0.0, min_exclusive=True, runtime=True),
         ParamSpec("autostart", "bool", True,
                   "start the episode once every input and output topic is matched"),
+        _d("hold_at", -1.0, "hold the lockstep before publishing the first step at or after this sim time, s "
+           "(negative: never); setting it past the current time releases the hold", runtime=True),
     ],
     "wheels": [
         _d("control_period", 0.01, "control step dt, s (shared by every node)", min=0.0, min_exclusive=True, max=1.0),
@@ -217,7 +234,11 @@ NODE_PARAMS: dict[str, list[ParamSpec]] = {
     ],
     "controller": [
         _d("control_period", 0.01, "control step dt, s (shared by every node)", min=0.0, min_exclusive=True, max=1.0),
-        ParamSpec("controller_type", "string", "pid", "active control law", choices=("pid",), runtime=True),
+        ParamSpec("controller_type", "string", "pid", "active control law (switches at the next step, bumpless)",
+                  choices=("pid", "fuzzy_pid", "ga_flc", "geometric"), runtime=True),
+        _d("bumpless_time_constant", 1.0,
+           "decay time of the transfer offset when switching to a stateless law (ga_flc, geometric), s",
+           min=0.0, runtime=True),
         _da("pid.kp", [48.894] * 3, "proportional gain per body axis, V per unit quaternion error",
             lengths=(3,), min=0.0, runtime=True),
         _da("pid.ki", [0.071] * 3, "integral gain per body axis, V/s per unit error", lengths=(3,), min=0.0,
@@ -226,8 +247,45 @@ NODE_PARAMS: dict[str, list[ParamSpec]] = {
             runtime=True),
         _da("pid.n", [1.427] * 3, "derivative filter coefficient N per body axis, rad/s", lengths=(3,),
             min=0.0, min_exclusive=True, runtime=True),
-        _d("output_limit", HST_MOTOR["motor.v_max"], "command saturation, V (voltage presets)",
+        _d("output_limit", HST_MOTOR["motor.v_max"], "command saturation of the voltage laws, V",
            min=0.0, min_exclusive=True, runtime=True),
+        # hybrid fuzzy PID, paper 003
+        _da("fuzzy_pid.kp", [48.894] * 3, "PID part: proportional gain per axis, V per unit error",
+            lengths=(3,), min=0.0, runtime=True),
+        _da("fuzzy_pid.ki", [0.071] * 3, "PID part: integral gain per axis", lengths=(3,), min=0.0, runtime=True),
+        _da("fuzzy_pid.kd", [106.046] * 3, "PID part: derivative gain per axis", lengths=(3,), min=0.0,
+            runtime=True),
+        _da("fuzzy_pid.n", [1.427] * 3, "PID part: derivative filter N per axis, rad/s", lengths=(3,),
+            min=0.0, min_exclusive=True, runtime=True),
+        _da("fuzzy_pid.e_scale", [0.0175] * 3, "error universe: |e| at which e is 'large', unit quaternion error",
+            lengths=(3,), min=0.0, min_exclusive=True, runtime=True),
+        _da("fuzzy_pid.de_scale", [0.01] * 3, "change-of-error universe, 1/s", lengths=(3,), min=0.0,
+            min_exclusive=True, runtime=True),
+        _da("fuzzy_pid.u_scale", [2.0] * 3, "fuzzy output universe, V", lengths=(3,), min=0.0, runtime=True),
+        ParamSpec("fuzzy_pid.rules", "integer_array", FUZZY_PID_DEFAULT_RULES.ravel().tolist(),
+                  "49 rule outputs 1..7 (NL..PL), row-major: rows change of error NL..PL, columns error NL..PL "
+                  "(assumed: paper 003 Table 3 with its misprinted row restored, README)",
+                  lengths=(49,), min=1, max=7, runtime=True),
+        # GA-designed FLC, paper 004
+        ParamSpec("ga_flc.rules", "integer_array", PAPER_004_TABLE_2.ravel().tolist(),
+                  "49 rule outputs 1..7 (NB..PB), row-major: rows angle NB..PB, columns rate NB..PB "
+                  "(paper 004 Table 2)", lengths=(49,), min=1, max=7, runtime=True),
+        _da("ga_flc.mf_ratios", [1.0] * 18,
+            "MF vertex ratios a1..a6 (eq. 5) for angle, then rate, then output; all > 0 "
+            "(assumed: evenly spaced, the paper prints only a figure)",
+            lengths=(18,), min=0.0, min_exclusive=True, runtime=True),
+        _da("ga_flc.scales", [1.0 / math.radians(30.0), 1.0, 1.3],
+            "scaling factors K_theta 1/rad, K_q s/rad, K_e V (eq. 6; paper: 30 deg, 1.0, 1.3)",
+            lengths=(3,), min=0.0, min_exclusive=True, runtime=True),
+        # geometric tracking law, paper 001
+        _da("geometric.k", [62.5, 16.5, 14.5], "diagonal of K, N m (distinct, > 0)", lengths=(3,), min=0.0,
+            min_exclusive=True, runtime=True, rule=_distinct),
+        _da("geometric.l", [56.0, 139.0, 142.0], "diagonal of L, N m s", lengths=(3,), min=0.0,
+            min_exclusive=True, runtime=True),
+        _da("geometric.inertia", _HST_INERTIA, "the law's model of the inertia J, kg m^2 (3 or 9 values)",
+            lengths=(3, 9), runtime=True),
+        _d("geometric.torque_limit", 0.7, "torque saturation per body axis, N m", min=0.0, min_exclusive=True,
+           runtime=True),
     ],
     SCENARIO_NODE: [
         ParamSpec("name", "string", "", "scenario name (read by the runner, not a node)"),
@@ -238,6 +296,10 @@ NODE_PARAMS: dict[str, list[ParamSpec]] = {
            max=1.0),
         _d("metrics.tau_d", 1.5, "desired time constant tau_d of the cost J (paper 000 eq. 19), s", min=0.0),
         _d("metrics.w_os", 1.0, "overshoot weight w_os of the cost J (paper 000 eq. 19), per %", min=0.0),
+        _da("schedule.times", [], "sim times of scheduled controller swaps, s (runner applies them as "
+            "parameter sets)", min=0.0),
+        ParamSpec("schedule.controller_types", "string_array", [], "controller_type to swap to at each time",
+                  choices=("pid", "fuzzy_pid", "ga_flc", "geometric")),
     ],
 }
 

@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import copy
 import difflib
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -57,7 +57,6 @@ class Scenario:
     values: dict[str, dict[str, Any]]
     explicit: dict[str, dict[str, Any]]
     source: str = "<scenario>"
-    schedule: list = field(default_factory=list)
 
     def param(self, node: str, name: str) -> Any:
         """Value of ``node``'s parameter ``name``."""
@@ -115,6 +114,13 @@ def _check_consistency(scn: Scenario) -> None:
     k = scn.duration / dt
     if abs(k - round(k)) > 1e-6:
         raise ScenarioError(f"{scn.source}: plant.duration {scn.duration} s is not a whole number of control periods")
+    sched = scn.values[SCENARIO_NODE]
+    times, kinds = sched["schedule.times"], sched["schedule.controller_types"]
+    if len(times) != len(kinds):
+        raise ScenarioError(f"{scn.source}: scenario.schedule.times has {len(times)} entries but "
+                            f"schedule.controller_types has {len(kinds)}")
+    if any(b <= a for a, b in zip(times[:-1], times[1:], strict=True)):
+        raise ScenarioError(f"{scn.source}: scenario.schedule.times must increase, got {times}")
     dt_ns = dt * 1e9
     if abs(dt_ns - round(dt_ns)) > 1e-3:
         raise ScenarioError(f"{scn.source}: control_period {dt} s is not a whole number of nanoseconds")

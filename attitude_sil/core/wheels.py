@@ -203,8 +203,14 @@ class WheelAssembly:
         tau_c_B = -(self.momentum_B(x_next) - h_start) / self.dt
         return x_next, tau_c_B
 
-    def advance(self, x: np.ndarray, v_cmd_B: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def advance(self, x: np.ndarray, v_cmd_B: np.ndarray,
+                torque_mode: bool = False) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """:meth:`wheel_voltages` then :meth:`step`, compiled in one loop.
+
+        With ``torque_mode`` the command is a body torque (N m): each wheel's
+        share ``-A_dagger tau`` becomes a voltage through the inverse motor
+        model ``e = R_a (T + B_m omega) / K_i + K_b omega`` (steady state, the
+        1 ms electrical lag neglected), then the same drive limits apply.
 
         Returns
         -------
@@ -214,4 +220,5 @@ class WheelAssembly:
         """
         m = self.motor
         return wheel_step(x, v_cmd_B, self.allocation, self.axes_B, self.phi_T, self.gamma, m.rotor_inertia,
-                          m.back_emf_constant, m.resistance * m.current_max, m.speed_max, m.v_max, self.dt)
+                          m.back_emf_constant, m.resistance * m.current_max, m.speed_max, m.v_max, self.dt,
+                          torque_mode, m.torque_constant, m.resistance, m.viscous_friction)

@@ -1,13 +1,17 @@
-"""``controller`` node: the attitude control law.
+"""``controller`` node: the attitude control laws, swappable at runtime.
 
 Once it holds ``attitude``, ``body_rate``, ``attitude_setpoint`` and
-``rate_setpoint`` all stamped t_k, it computes the command for the step and
-publishes ``voltage_cmd`` (V, body axes) and ``attitude_error`` (roll, pitch,
-yaw of the rotation still to go, setpoint minus attitude, rad), stamped t_k.
+``rate_setpoint`` all stamped t_k, it computes the command of the active law
+(:class:`attitude_sil.core.controllers.ControllerBank`) and publishes, stamped
+t_k, ``voltage_cmd`` (V, body axes: ``pid``, ``fuzzy_pid``, ``ga_flc``) or
+``torque_cmd`` (N m: ``geometric``), and ``attitude_error`` (roll, pitch, yaw of
+the rotation still to go, setpoint minus attitude, rad).
 
-``controller_type`` and the gains (``pid.kp``, ``pid.ki``, ``pid.kd``,
-``pid.n``, ``output_limit``) may change while the graph runs; new gains apply
-from the next step and keep the integrator and filter states.
+``controller_type`` and every gain may change while the graph runs (``ros2
+param set`` or ``attitude-sil param set``). A new type takes over at the next
+step, bumplessly as the bank documents; new gains apply from the next step and
+keep the controllers' states. Invalid values are refused with a reason naming
+the parameter and the rule; the controller keeps running on its old values.
 """
 
 from __future__ import annotations
@@ -39,7 +43,10 @@ class ControllerNode(SchemaNode):
 
     def __init__(self, **kwargs) -> None:
         super().__init__(**kwargs)
-        self.pub_cmd = self.create_publisher(Vector3Stamped, "voltage_cmd", LOCKSTEP_QOS)
+        self.pub_cmd = {
+            "voltage": self.create_publisher(Vector3Stamped, "voltage_cmd", LOCKSTEP_QOS),
+            "torque": self.create_publisher(Vector3Stamped, "torque_cmd", LOCKSTEP_QOS),
+        }
         self.pub_err = self.create_publisher(Vector3Stamped, "attitude_error", LOCKSTEP_QOS)
         for name, mtype, conv in (
             ("attitude", QuaternionStamped, _quat),
@@ -56,13 +63,14 @@ class ControllerNode(SchemaNode):
     def _rebuild(self) -> None:
         scn = self.scenario()
         self.core = build_controller(scn, 1)
-        self.core.reset(1)
         self.dt_ns = int(round(scn.dt * 1e9))
 
     def on_parameters_set(self, names: list[str]) -> None:
         v = self.values()
-        self.core.set_gains(v["pid.kp"], v["pid.ki"], v["pid.kd"], v["pid.n"])
-        self.core.u_max = v["output_limit"]
+        self.core.configure(v)
+        if "controller_type" in names:
+            self.core.request(v["controller_type"])
+            self.get_logger().info(f"controller_type -> {v['controller_type']} at the next step")
 
     def _on_input(self, name: str, value: np.ndarray, msg) -> None:
         t = stamp_to_ns(msg.header.stamp)
@@ -85,7 +93,7 @@ class ControllerNode(SchemaNode):
             return
         u = self.core.compute(slot["attitude"], slot["body_rate"], slot["attitude_setpoint"], slot["rate_setpoint"])
         err = euler_from_quat(quat_conjugate(quat_error(slot["attitude"], slot["attitude_setpoint"])))
-        for pub, vec, frame in ((self.pub_cmd, u[0], "body"), (self.pub_err, err[0], "body")):
+        for pub, vec, frame in ((self.pub_cmd[self.core.kind], u[0], "body"), (self.pub_err, err[0], "body")):
             m = Vector3Stamped()
             m.header.stamp = msg.header.stamp
             m.header.frame_id = frame

@@ -10,6 +10,12 @@ integrates with a stale input.
 
 Service ``~/reset`` (std_srvs/Trigger) re-initialises the episode from the
 current parameters and starts it.
+
+Parameter ``hold_at`` pauses the lockstep at a step boundary: the plant stops
+before publishing the first step at or after that sim time, so a tool can
+change parameters of other nodes deterministically (the runner applies
+scheduled controller swaps this way); setting ``hold_at`` to a later time (or
+-1) releases it.
 """
 
 from __future__ import annotations
@@ -52,6 +58,7 @@ class PlantNode(SchemaNode):
         self._wall = steady_clock()
         self.running = False
         self.done = False
+        self.holding = False
         self.error = ""
         self.k = 0
         self.t_ns = 0
@@ -71,9 +78,10 @@ class PlantNode(SchemaNode):
         self._inputs.clear()
         self.running = True
         self.done = False
+        self.holding = False
         self.error = ""
         self._episode_wall0 = time.monotonic()
-        self._publish_state()
+        self._finish_step()
 
     def _on_reset(self, request, response):
         try:
@@ -150,10 +158,23 @@ class PlantNode(SchemaNode):
             self._finish_step()
 
     def _finish_step(self) -> None:
+        hold_at = self.param("hold_at")
+        if hold_at >= 0.0 and self.t_ns >= round(hold_at * 1e9):
+            self.holding = True
+            self.get_logger().info(f"holding before step t={self.t_ns * 1e-9:.6f} s")
+            return
         self._publish_state()
         if self.k >= self.n_steps > 0:
             self.running = False
             self.done = True
+
+    def on_parameters_set(self, names: list[str]) -> None:
+        if "hold_at" in names and self.holding and self.running:
+            hold_at = self.param("hold_at")
+            if hold_at < 0.0 or self.t_ns < round(hold_at * 1e9):
+                self.holding = False
+                self._step_wall0 = time.monotonic()
+                self._finish_step()
 
     # -- watchdog and autostart -----------------------------------------------
     def wired(self) -> bool:
@@ -167,7 +188,7 @@ class PlantNode(SchemaNode):
             self.get_logger().info("graph wired; starting episode")
             self.reset_episode()
             return
-        if self.running and self._pace_timer is None:
+        if self.running and self._pace_timer is None and not self.holding:
             waited = time.monotonic() - self._step_wall0
             if waited > self.param("input_timeout"):
                 missing = [n for n in INPUTS if n not in self._inputs]

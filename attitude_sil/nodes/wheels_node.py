@@ -1,6 +1,7 @@
 """``wheels`` node: the reaction-wheel DC motors.
 
-On ``voltage_cmd`` stamped t_k it integrates the motors exactly over
+On ``voltage_cmd`` (or ``torque_cmd``, turned into voltages by the inverse
+motor model) stamped t_k it integrates the motors exactly over
 ``[t_k, t_k+1]`` with the voltage held (:class:`attitude_sil.core.engine.Wheels`)
 and publishes, stamped t_k: ``wheel_torque`` (mean torque on the body over the
 step, so momentum is exchanged exactly), ``wheel_momentum`` (h_w at t_k, in B)
@@ -27,7 +28,8 @@ class WheelsNode(SchemaNode):
         self.pub_torque = self.create_publisher(Vector3Stamped, "wheel_torque", LOCKSTEP_QOS)
         self.pub_momentum = self.create_publisher(Vector3Stamped, "wheel_momentum", LOCKSTEP_QOS)
         self.pub_state = self.create_publisher(JointState, "wheel_state", LOCKSTEP_QOS)
-        self.create_subscription(Vector3Stamped, "voltage_cmd", self._on_command, LOCKSTEP_QOS)
+        self.create_subscription(Vector3Stamped, "voltage_cmd", lambda m: self._on_command(m, False), LOCKSTEP_QOS)
+        self.create_subscription(Vector3Stamped, "torque_cmd", lambda m: self._on_command(m, True), LOCKSTEP_QOS)
         self.seq = StepSequencer()
         self._rebuild()
 
@@ -36,7 +38,7 @@ class WheelsNode(SchemaNode):
         self.core = build_wheels(scn, 1)
         self.dt_ns = int(round(scn.dt * 1e9))
 
-    def _on_command(self, msg: Vector3Stamped) -> None:
+    def _on_command(self, msg: Vector3Stamped, torque_mode: bool) -> None:
         t = stamp_to_ns(msg.header.stamp)
         kind = self.seq.classify(t, self.dt_ns)
         if kind == StepSequencer.NEW:
@@ -45,13 +47,13 @@ class WheelsNode(SchemaNode):
             return
         elif kind == StepSequencer.MISMATCH:
             self.get_logger().error(
-                f"voltage_cmd stamped {t * 1e-9:.6f} s does not follow {self.seq.last_ns * 1e-9:.6f} s; ignored")
+                f"command stamped {t * 1e-9:.6f} s does not follow {self.seq.last_ns * 1e-9:.6f} s; ignored")
             return
         v = np.array([[msg.vector.x, msg.vector.y, msg.vector.z]])
         if not self.finite(v):
-            self.get_logger().error(f"voltage_cmd at t={t * 1e-9:.6f} s is not finite: {v[0].tolist()}; ignored")
+            self.get_logger().error(f"command at t={t * 1e-9:.6f} s is not finite: {v[0].tolist()}; ignored")
             return
-        out = self.core.advance(v)
+        out = self.core.advance(v, torque_mode)
         stamp = msg.header.stamp
         for pub, vec in ((self.pub_torque, out.tau_c_B[0]), (self.pub_momentum, out.h_wheels_B[0])):
             m = Vector3Stamped()
