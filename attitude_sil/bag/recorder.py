@@ -16,7 +16,7 @@ from collections import defaultdict
 from rclpy.node import Node
 from rclpy.qos import qos_profile_parameter_events
 
-from attitude_sil.bag.writer import BagWriter
+from attitude_sil.bag.writer import BagWriter, qos_profiles_yaml
 from attitude_sil.nodes.common import LOCKSTEP_QOS
 from attitude_sil.topics import RECORDED_TOPICS, message_class
 
@@ -62,7 +62,9 @@ class Recorder(Node):
             )
             self.subs[name] = sub
             if writer is not None:
-                writer.add_topic(sub.topic_name, type_name)
+                offered = qos_profiles_yaml(depth=1000) if name == "/parameter_events" else \
+                    qos_profiles_yaml(durability="transient_local", depth=LOCKSTEP_QOS.depth)
+                writer.add_topic(sub.topic_name, type_name, offered)
         self.resolved = {name: sub.topic_name for name, sub in self.subs.items()}
 
     def _on_message(self, name: str, data: bytes) -> None:

@@ -40,10 +40,13 @@ __all__ = [
     "typed_parameter",
 ]
 
-#: Lockstep topics: reliable, and deep enough that a slow recorder never loses a step.
+#: Lockstep topics: reliable, deep enough that a slow recorder never loses a
+#: step, and transient-local so a reader whose match completes after the first
+#: samples (discovery across processes is not symmetric in time) still gets
+#: them; stale samples are refused by their stamps.
 LOCKSTEP_QOS = QoSProfile(
     reliability=ReliabilityPolicy.RELIABLE,
-    durability=DurabilityPolicy.VOLATILE,
+    durability=DurabilityPolicy.TRANSIENT_LOCAL,
     history=HistoryPolicy.KEEP_LAST,
     depth=1000,
 )
