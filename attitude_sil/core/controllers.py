@@ -23,7 +23,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .fuzzy import FUZZY_PID_DEFAULT_RULES, UNIFORM_VERTICES, vertices_from_ratios
-from .kernels import fuzzy_infer, pid_step
+from .kernels import fuzzy_infer, fuzzy_pid_step, ga_flc_step, pid_step
 from .quaternion import cross, error_vector, quat_error, quat_to_dcm
 
 __all__ = [
@@ -63,8 +63,15 @@ class StepInput:
     omega_RN_R: np.ndarray
 
     def __post_init__(self) -> None:
-        self.e = error_vector(self.q_BN, self.q_RN)
+        self._e = None
         self._Q = None
+
+    @property
+    def e(self) -> np.ndarray:
+        """Quaternion error vector, (P, 3); computed on first use."""
+        if self._e is None:
+            self._e = error_vector(self.q_BN, self.q_RN)
+        return self._e
 
     @property
     def Q(self) -> np.ndarray:
@@ -249,6 +256,7 @@ class FuzzyPID(_Stateless):
         self.u_scale = np.atleast_2d(np.asarray(u_scale, dtype=float))
         r = np.asarray(rules, dtype=np.int64)
         self.rules = r.reshape((-1, 7, 7)) if r.ndim != 3 else r
+        self._cache = None
 
     def _fuzzy(self, inp: StepInput) -> tuple[np.ndarray, np.ndarray]:
         n = inp.e.shape[0]
@@ -272,10 +280,23 @@ class FuzzyPID(_Stateless):
                         np.where(pid_faster, (1.0 - f) * u_pid + f * u_f, u_pid))
 
     def compute(self, inp: StepInput) -> np.ndarray:
-        u_f, f = self._fuzzy(inp)
-        u_pid = self.pid.compute(inp)
-        self.e_prev = inp.e.copy()
-        return np.clip(self._apply_offset(self.mix(u_pid, u_f, f)), -self.u_max, self.u_max)
+        """One step of the compiled loop (:func:`attitude_sil.core.kernels.fuzzy_pid_step`)."""
+        n = inp.q_BN.shape[0]
+        pid = self.pid
+        if pid.integral is None:
+            pid.reset(n)
+        has_prev = self.e_prev is not None
+        if not has_prev:
+            self.e_prev = np.zeros((n, 3))
+        if self._cache is None or self._cache[0].shape[0] != n:
+            self._cache = (np.ascontiguousarray(np.broadcast_to(self.rules, (n, 7, 7))),
+                           _pe(self.e_scale, n, 3), _pe(self.de_scale, n, 3), _pe(self.u_scale, n, 3))
+        rules, e_scale, de_scale, u_scale = self._cache
+        mixed = fuzzy_pid_step(np.ascontiguousarray(inp.q_BN, dtype=float),
+                               np.ascontiguousarray(inp.q_RN, dtype=float), self.e_prev, has_prev,
+                               *pid._kernel_gains(), pid.integral, pid.filter_state, e_scale, de_scale, u_scale,
+                               rules, UNIFORM_VERTICES, self.dt, pid.u_max)
+        return np.clip(self._apply_offset(mixed), -self.u_max, self.u_max)
 
     def reset(self, n_episodes: int) -> None:
         self.pid.reset(n_episodes)
@@ -326,21 +347,21 @@ class GAFLC(_Stateless):
         ratios = np.asarray(mf_ratios, dtype=float).reshape((-1, 3, 6))
         self.vertices = vertices_from_ratios(ratios)  # (P or 1, 3 variables, 7)
         self.scales = np.atleast_2d(np.asarray(scales, dtype=float))
+        self._cache = None
 
     def reset(self, n_episodes: int) -> None:
         self.offset = None
 
     def _law(self, inp: StepInput) -> np.ndarray:
-        n = inp.e.shape[0]
-        theta = -2.0 * np.arcsin(np.clip(inp.e, -1.0, 1.0))
-        rate = inp.omega_BN_B - inp.reference_rate_B()
-        s = np.broadcast_to(self.scales, (n, 3))
-        v = np.broadcast_to(self.vertices, (n, 3, 7))
-        per_axis = lambda var: np.ascontiguousarray(np.broadcast_to(v[:, var, None, :], (n, 3, 7)))  # noqa: E731
-        rules = np.ascontiguousarray(np.broadcast_to(self.rules, (n, 7, 7)))
-        du = fuzzy_infer(_pe(theta * s[:, 0:1], n, 3), _pe(rate * s[:, 1:2], n, 3),
-                         per_axis(0), per_axis(1), rules, per_axis(2))
-        return np.clip(s[:, 2:3] * du, -self.u_max, self.u_max)
+        """The compiled law (:func:`attitude_sil.core.kernels.ga_flc_step`), saturated."""
+        n = inp.q_BN.shape[0]
+        if self._cache is None or self._cache[0].shape[0] != n:
+            self._cache = (np.ascontiguousarray(np.broadcast_to(self.rules, (n, 7, 7))),
+                           np.ascontiguousarray(np.broadcast_to(self.vertices, (n, 3, 7))), _pe(self.scales, n, 3))
+        rules, vertices, scales = self._cache
+        c = np.ascontiguousarray
+        return ga_flc_step(c(inp.q_BN, dtype=float), c(inp.omega_BN_B, dtype=float), c(inp.q_RN, dtype=float),
+                           c(inp.omega_RN_R, dtype=float), rules, vertices, scales, self.u_max)
 
     def compute(self, inp: StepInput) -> np.ndarray:
         return np.clip(self._apply_offset(self._law(inp)), -self.u_max, self.u_max)

@@ -199,3 +199,93 @@ def fuzzy_infer(x_row, x_col, v_row, v_col, rules, centres):
             out[p, a] = (mi0 * (mj0 * c[r[i, j] - 1] + mj1 * c[r[i, j + 1] - 1])
                          + mi1 * (mj0 * c[r[i + 1, j] - 1] + mj1 * c[r[i + 1, j + 1] - 1]))
     return out
+
+
+@njit(cache=True, inline="always")
+def _error_quat(q_BN, q_RN, p):
+    # q_BR = q_RN* ⊗ q_BN with a non-negative scalar part
+    bx, by, bz, bw = q_BN[p, 0], q_BN[p, 1], q_BN[p, 2], q_BN[p, 3]
+    rx, ry, rz, rw = -q_RN[p, 0], -q_RN[p, 1], -q_RN[p, 2], q_RN[p, 3]
+    ex = rw * bx + bw * rx + ry * bz - rz * by
+    ey = rw * by + bw * ry + rz * bx - rx * bz
+    ez = rw * bz + bw * rz + rx * by - ry * bx
+    ew = rw * bw - rx * bx - ry * by - rz * bz
+    if ew < 0.0:
+        return -ex, -ey, -ez, -ew
+    return ex, ey, ez, ew
+
+
+@njit(cache=True, inline="always")
+def _infer1(xr, xc, vr, vc, r, c):
+    i, ti = _segment(xr, vr)
+    j, tj = _segment(xc, vc)
+    return ((1.0 - ti) * ((1.0 - tj) * c[r[i, j] - 1] + tj * c[r[i, j + 1] - 1])
+            + ti * ((1.0 - tj) * c[r[i + 1, j] - 1] + tj * c[r[i + 1, j + 1] - 1]))
+
+
+@njit(cache=True)
+def fuzzy_pid_step(q_BN, q_RN, e_prev, has_prev, kp, ki, kd, n, a, integral, filt, e_scale, de_scale, u_scale,
+                   rules, v, dt, u_max):
+    """Hybrid fuzzy PID (see ``controllers.FuzzyPID``) for every episode and axis, in one loop.
+
+    Updates ``e_prev``, ``integral`` and ``filt`` in place; returns the mixed
+    command (P, 3) before the final saturation. ``v`` (7,) holds the evenly
+    spaced vertices used for both inputs and the output.
+    """
+    m = q_BN.shape[0]
+    out = np.empty((m, 3))
+    for p in range(m):
+        ex, ey, ez, _ = _error_quat(q_BN, q_RN, p)
+        e3 = (-ex, -ey, -ez)
+        r = rules[p]
+        for i in range(3):
+            e = e3[i]
+            de = (e - e_prev[p, i]) / dt if has_prev else 0.0
+            xe = e / e_scale[p, i]
+            u_f = u_scale[p, i] * _infer1(de / de_scale[p, i], xe, v, v, r, v)
+            # PID part, as pid_step
+            deriv = n[p, i] * (e - filt[p, i])
+            raw = kp[p, i] * e + ki[p, i] * integral[p, i] + kd[p, i] * deriv
+            u_p = min(max(raw, -u_max), u_max)
+            if not (u_p != raw and e * raw > 0.0):
+                integral[p, i] += e * dt
+            filt[p, i] = a[p, i] * filt[p, i] + (1.0 - a[p, i]) * e
+            # mixing block, f(e) = e_n^2
+            en = min(max(xe, -1.0), 1.0)
+            f = en * en
+            if abs(u_f) > abs(u_p) + 1e-12:
+                out[p, i] = f * u_p + (1.0 - f) * u_f
+            elif abs(u_p) > abs(u_f) + 1e-12:
+                out[p, i] = (1.0 - f) * u_p + f * u_f
+            else:
+                out[p, i] = u_p
+            e_prev[p, i] = e
+    return out
+
+
+@njit(cache=True)
+def ga_flc_step(q_BN, omega, q_RN, omega_RN_R, rules, vertices, scales, u_max):
+    """GA-FLC law (see ``controllers.GAFLC``) for every episode and axis; returns (P, 3) saturated.
+
+    ``vertices`` (P, 3, 7): angle, rate and output vertices; ``scales`` (P, 3):
+    K_theta, K_q, K_e.
+    """
+    m = q_BN.shape[0]
+    out = np.empty((m, 3))
+    for p in range(m):
+        x, y, z, w = _error_quat(q_BN, q_RN, p)
+        # Q^T w_d = R(conj(q_BR)) w_d: v + 2 w (r x v) + 2 r x (r x v) with r = -vec(q_BR)
+        rx, ry, rz = -x, -y, -z
+        vx, vy, vz = omega_RN_R[p, 0], omega_RN_R[p, 1], omega_RN_R[p, 2]
+        cx, cy, cz = ry * vz - rz * vy, rz * vx - rx * vz, rx * vy - ry * vx
+        ccx, ccy, ccz = ry * cz - rz * cy, rz * cx - rx * cz, rx * cy - ry * cx
+        nu = (vx + 2.0 * (w * cx + ccx), vy + 2.0 * (w * cy + ccy), vz + 2.0 * (w * cz + ccz))
+        vec = (x, y, z)
+        r = rules[p]
+        for i in range(3):
+            theta = 2.0 * np.arcsin(min(max(vec[i], -1.0), 1.0))
+            rate = omega[p, i] - nu[i]
+            u = scales[p, 2] * _infer1(scales[p, 0] * theta, scales[p, 1] * rate, vertices[p, 0], vertices[p, 1],
+                                       r, vertices[p, 2])
+            out[p, i] = min(max(u, -u_max), u_max)
+    return out

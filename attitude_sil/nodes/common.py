@@ -202,6 +202,7 @@ def run_node(factory: Callable[[], Node], args: list[str] | None = None) -> int:
 
     rclpy.init(args=args)
     node = None
+    executor = None
     try:
         node = factory()
         executor = EventsExecutor()
@@ -209,13 +210,20 @@ def run_node(factory: Callable[[], Node], args: list[str] | None = None) -> int:
         # spin_once in a loop: EventsExecutor.spin() of rclpy 7.1 left service
         # requests unanswered in a separate process (measured here)
         while rclpy.ok():
-            executor.spin_once(timeout_sec=0.5)
+            try:
+                executor.spin_once(timeout_sec=0.5)
+            except RuntimeError:
+                if rclpy.ok():
+                    raise
+                break  # Ctrl-C shut the context down inside spin_once
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     except ValueError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
     finally:
+        if executor is not None:
+            executor.shutdown()
         if node is not None:
             node.destroy_node()
         rclpy.try_shutdown()

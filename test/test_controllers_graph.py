@@ -1,0 +1,131 @@
+"""Every controller through the graph, swaps (scheduled and live), bumpless bounds, refusals."""
+
+import signal
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+import yaml
+from mcap.reader import make_reader
+from mcap_ros2.decoder import DecoderFactory
+
+from attitude_sil.core.controllers import CONTROLLER_TYPES, OUTPUT_KIND
+from attitude_sil.core.engine import simulate
+from attitude_sil.core.scenario import load_scenario
+from attitude_sil.runner import run_graph
+from conftest import CONFIG, ROOT
+
+ONE_DEG = np.radians(1.0)
+
+
+@pytest.mark.parametrize("controller", CONTROLLER_TYPES)
+def test_each_controller_settles_the_hst_step_in_graph_and_batch(controller):
+    scn = load_scenario(CONFIG / "hst_roll_step.yaml")
+    result = run_graph(scn, controller=controller, progress=False)
+    m = result.metrics
+    assert m["controller_type"] == controller
+    assert m["settling_time_s"] is not None and m["settling_time_s"] < 15.0
+    assert m["steady_state_error_rad"] < 0.02 * ONE_DEG
+    assert m["overshoot_pct"] < 2.0
+    tr = simulate(scn, 1, controller=controller)
+    assert np.max(np.abs(result.trajectory["attitude"] - tr.q_BN[0])) <= 1e-9
+    assert np.max(np.abs(result.trajectory["body_rate"] - tr.omega_BN_B[0])) <= 1e-9
+    kind_topic = "torque_cmd" if controller == "geometric" else "voltage_cmd"
+    assert result.counts[kind_topic] == 2001
+
+
+def _jump(tr, k):
+    return np.max(np.abs(tr.u_cmd[0, k] - tr.u_cmd[0, k - 1]))
+
+
+@pytest.mark.parametrize("old,new", [("pid", "fuzzy_pid"), ("fuzzy_pid", "pid"), ("pid", "ga_flc"),
+                                     ("ga_flc", "fuzzy_pid"), ("ga_flc", "pid")])
+def test_swap_mid_transient_is_bumpless_within_a_command_kind(old, new):
+    scn = load_scenario(CONFIG / "hst_roll_step.yaml")
+    assert OUTPUT_KIND[old] == OUTPUT_KIND[new] == "voltage"
+    tr = simulate(scn, 1, duration=4.0, controller=old, schedule=[(150, new)])
+    assert max(_jump(tr, k) for k in range(140, 150)) > 1e-4  # mid-transient: the command is moving
+    assert _jump(tr, 150) <= 1e-9  # the new law's first command is the old law's last
+    # and the new law really took over: without a swap the commands differ
+    tr_old = simulate(scn, 1, duration=4.0, controller=old, schedule=[])
+    assert np.max(np.abs(tr.u_cmd[0, 200:] - tr_old.u_cmd[0, 200:])) > 1e-3
+
+
+def test_swap_between_command_kinds_is_bounded():
+    scn = load_scenario(CONFIG / "hst_roll_step.yaml")
+    tr = simulate(scn, 1, duration=4.0, controller="pid", schedule=[(150, "geometric")])
+    assert tr.kind[149] == "voltage" and tr.kind[150] == "torque"
+    limit = scn.param("controller", "geometric.torque_limit")
+    # documented bound: the new law starts from its own command, |u| <= its limit
+    assert np.max(np.abs(tr.u_cmd[0, 150:])) <= limit
+    # the body torque the wheels deliver does not jump by more than the limit either
+    assert np.max(np.abs(tr.tau_c_B[0, 150] - tr.tau_c_B[0, 149])) <= 2 * limit
+
+
+def test_scheduled_swap_in_yaml_runs_through_the_parameter_service(tmp_path):
+    data = yaml.safe_load((CONFIG / "hst_roll_step.yaml").read_text())
+    data["scenario"]["ros__parameters"]["schedule.times"] = [1.5, 3.0]
+    data["scenario"]["ros__parameters"]["schedule.controller_types"] = ["fuzzy_pid", "geometric"]
+    path = tmp_path / "swap.yaml"
+    path.write_text(yaml.safe_dump(data))
+    scn = load_scenario(path)
+    result = run_graph(scn, duration=5.0, record_dir=tmp_path / "bag", progress=False)
+    tr = simulate(scn, 1, duration=5.0)
+    assert np.max(np.abs(result.trajectory["attitude"] - tr.q_BN[0])) <= 1e-9
+    assert np.max(np.abs(result.trajectory["body_rate"] - tr.omega_BN_B[0])) <= 1e-9
+    assert [s["controller_type"] for s in result.metrics["segments"]] == ["pid", "fuzzy_pid", "geometric"]
+    # the bag shows the swaps as parameter events, and the command topic follows the law
+    changes, cmds = [], {"/voltage_cmd": [], "/torque_cmd": []}
+    with open(result.bag / "bag_0.mcap", "rb") as f:
+        for _s, channel, _m, msg in make_reader(f, decoder_factories=[DecoderFactory()]).iter_decoded_messages():
+            if channel.topic == "/parameter_events" and msg.node == "/controller":
+                changes += [(p.name, p.value.string_value) for p in msg.changed_parameters]
+            if channel.topic in cmds:
+                cmds[channel.topic].append(msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9)
+    assert ("controller_type", "fuzzy_pid") in changes and ("controller_type", "geometric") in changes
+    assert max(cmds["/voltage_cmd"]) == pytest.approx(2.99) and min(cmds["/torque_cmd"]) == pytest.approx(3.0)
+    # the hold is released: no lingering hold_at
+    assert len(cmds["/voltage_cmd"]) + len(cmds["/torque_cmd"]) == 501
+
+
+def _param(*args):
+    return subprocess.run([sys.executable, "-m", "attitude_sil.cli", "param", *args], cwd=ROOT,
+                          capture_output=True, text=True, timeout=60, stdin=subprocess.DEVNULL)
+
+
+def test_live_param_set_from_a_second_process(tmp_path):
+    bag = tmp_path / "live"
+    run = subprocess.Popen(
+        [sys.executable, "-m", "attitude_sil.cli", "run", "config/hst_roll_step.yaml", "--real-time",
+         "--duration", "30", "--record", str(bag)],
+        cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, stdin=subprocess.DEVNULL,
+        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
+    try:
+        assert "real time" in run.stderr.readline()  # running
+        listing = _param("list", "controller")
+        assert listing.returncode == 0 and "pid.kp" in listing.stdout.split()
+        # refusals name the parameter and the rule; the node keeps its values
+        for name, value, needle in (("geometric.k", "[1.0, 1.0, 2.0]", "distinct"),
+                                    ("pid.kp", "[1.0, 2.0]", "3 elements"),
+                                    ("controller_type", "bangbang", "one of"),
+                                    ("pid.ki", "[-1, 0, 0]", ">= 0.0")):
+            bad = _param("set", "controller", name, value)
+            assert bad.returncode == 2, bad.stdout
+            assert needle in bad.stderr and name in bad.stderr and "Traceback" not in bad.stderr
+        assert _param("get", "controller", "pid.kp").stdout.strip() == "[48.894, 48.894, 48.894]"
+        ok = _param("set", "controller", "controller_type", "ga_flc")
+        assert ok.returncode == 0, ok.stderr
+        assert _param("get", "controller", "controller_type").stdout.strip() == "ga_flc"
+        missing = _param("get", "nosuchnode", "x", "--timeout", "1")
+        assert missing.returncode == 2 and "not found" in missing.stderr
+    finally:
+        run.send_signal(signal.SIGINT)
+        _, err = run.communicate(timeout=30)
+    assert run.returncode == 130, err
+    changed = []
+    with open(bag / "live_0.mcap", "rb") as f:
+        for _s, channel, _m, msg in make_reader(f, decoder_factories=[DecoderFactory()]).iter_decoded_messages():
+            if channel.topic == "/parameter_events" and msg.node == "/controller":
+                changed += [(p.name, p.value.string_value) for p in msg.changed_parameters]
+    assert ("controller_type", "ga_flc") in changed
