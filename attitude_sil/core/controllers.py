@@ -364,7 +364,10 @@ class GAFLC(_Stateless):
                            c(inp.omega_RN_R, dtype=float), rules, vertices, scales, self.u_max)
 
     def compute(self, inp: StepInput) -> np.ndarray:
-        return np.clip(self._apply_offset(self._law(inp)), -self.u_max, self.u_max)
+        u = self._law(inp)  # saturated already
+        if self.offset is None:
+            return u
+        return np.clip(self._apply_offset(u), -self.u_max, self.u_max)
 
 
 class Geometric(_Stateless):
