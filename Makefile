@@ -1,4 +1,5 @@
-# make run  - set up .venv from nothing and run the HST roll step through the ROS 2 graph
+# make run  - set up .venv from nothing and run the HST roll step through the ROS 2 graph,
+#             starting on PID and swapping to the hybrid fuzzy PID at 5 s
 # make test - set up .venv from nothing, lint, and run the test suite
 PYTHON ?= python3
 VENV := .venv
@@ -15,7 +16,7 @@ $(STAMP): setup.py package.xml
 	touch $(STAMP)
 
 run: $(STAMP)
-	$(BIN)/attitude-sil run config/hst_roll_step.yaml
+	$(BIN)/attitude-sil run config/hst_roll_step.yaml --swap 5:fuzzy_pid
 
 lint: $(STAMP)
 	$(BIN)/ruff check attitude_sil test bench

@@ -19,7 +19,7 @@ __all__ = ["main"]
 
 def _format_table(metrics: dict) -> str:
     rows = [
-        ("controller", metrics["controller_type"], ""),
+        ("controller" + (" (at start)" if metrics.get("segments") else ""), metrics["controller_type"], ""),
         ("sim time", metrics["sim_time_s"], "s"),
         ("wall time", metrics["wall_time_s"], "s"),
         ("real-time factor", metrics["real_time_factor"], "x"),

@@ -31,6 +31,7 @@ from typing import Any
 import numpy as np
 import yaml
 
+from attitude_sil.core.controllers import OUTPUT_KIND
 from attitude_sil.core.engine import simulate
 from attitude_sil.core.metrics import metrics_from_trajectory, segment_metrics
 from attitude_sil.core.params import spec_for
@@ -226,6 +227,10 @@ def run_graph(
             writer = BagWriter(record_dir)
         except (FileExistsError, ValueError, OSError) as exc:
             raise RunError(str(exc)) from None
+    # compile (or load from numba's cache) every law's kernels before the clock
+    # starts, so no node compiles mid-episode and node processes find the cache
+    for kind in OUTPUT_KIND:
+        simulate(scn, 1, duration=scn.dt, controller=kind, schedule=[])
     context = rclpy.Context()
     interrupt = _Interrupt().__enter__()
     rclpy.init(args=[], context=context, signal_handler_options=SignalHandlerOptions.NO)
@@ -240,9 +245,6 @@ def run_graph(
         executor.add_node(recorder)
         plant = None
         if processes:
-            # compile the numba kernels here once, so the node processes load them
-            # from the cache instead of all compiling at once mid-episode
-            simulate(scn, 1, duration=scn.dt)
             tmpdir = tempfile.TemporaryDirectory(prefix="attitude_sil_")
             children = _start_processes(scn, extra, Path(tmpdir.name))
         else:
