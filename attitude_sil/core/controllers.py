@@ -23,6 +23,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .fuzzy import FUZZY_PID_DEFAULT_RULES, UNIFORM_VERTICES, vertices_from_ratios
+from .disturbance import aerodynamic_torque, gravity_gradient_torque, orbit_rate
 from .kernels import fuzzy_infer, fuzzy_pid_step, ga_flc_step, pid_step
 from .quaternion import cross, error_vector, quat_error, quat_to_dcm
 
@@ -84,6 +85,15 @@ class StepInput:
         """Q^T omega_d: the reference rate in B, (P, 3) rad/s."""
         return np.einsum("pji,pj->pi", self.Q, self.omega_RN_R)
 
+    def error(self, angle_mode: bool) -> np.ndarray:
+        """The error the PID family acts on: e, or 2 asin(e) per axis in angle mode."""
+        return 2.0 * np.arcsin(np.clip(self.e, -1.0, 1.0)) if angle_mode else self.e
+
+    def error_rate_of(self, angle_mode: bool) -> np.ndarray:
+        """Time derivative of :meth:`error`, (P, 3)."""
+        rate = self.error_rate()
+        return 2.0 * rate / np.sqrt(np.maximum(1.0 - self.e**2, 1e-12)) if angle_mode else rate
+
     def error_rate(self) -> np.ndarray:
         """de/dt of the error vector, (P, 3) 1/s.
 
@@ -137,9 +147,10 @@ class PID:
     u_max : float, output limit
     """
 
-    def __init__(self, kp, ki, kd, n, dt: float, u_max: float) -> None:
+    def __init__(self, kp, ki, kd, n, dt: float, u_max: float, angle_mode: bool = False) -> None:
         self.dt = float(dt)
         self.u_max = float(u_max)
+        self.angle_mode = bool(angle_mode)
         self.integral: np.ndarray | None = None
         self.filter_state: np.ndarray | None = None
         self.set_gains(kp, ki, kd, n)
@@ -170,14 +181,15 @@ class PID:
         if self.integral is None:
             self.reset(inp.q_BN.shape[0])
         return pid_step(np.ascontiguousarray(inp.q_BN, dtype=float), np.ascontiguousarray(inp.q_RN, dtype=float),
-                        *self._kernel_gains(), self.integral, self.filter_state, self.dt, self.u_max)
+                        *self._kernel_gains(), self.integral, self.filter_state, self.dt, self.u_max,
+                        self.angle_mode)
 
     def bumpless(self, inp: StepInput, u_last: np.ndarray) -> None:
         """Set the state so the next :meth:`compute` with ``inp`` returns ``u_last`` (needs Ki > 0)."""
         if self.integral is None:
             self.reset(inp.q_BN.shape[0])
-        e = inp.e
-        e_dot = inp.error_rate()
+        e = inp.error(self.angle_mode)
+        e_dot = inp.error_rate_of(self.angle_mode)
         ki = np.broadcast_to(self.ki, e.shape)
         target = np.clip(u_last, -self.u_max, self.u_max)
         self.filter_state = e - e_dot / self.n
@@ -260,7 +272,7 @@ class FuzzyPID(_Stateless):
 
     def _fuzzy(self, inp: StepInput) -> tuple[np.ndarray, np.ndarray]:
         n = inp.e.shape[0]
-        e = inp.e
+        e = inp.error(self.pid.angle_mode)
         de = np.zeros_like(e) if self.e_prev is None else (e - self.e_prev) / self.dt
         v = np.ascontiguousarray(np.broadcast_to(UNIFORM_VERTICES, (n, 3, 7)))
         rules = np.ascontiguousarray(np.broadcast_to(self.rules, (n, 7, 7)))
@@ -295,7 +307,7 @@ class FuzzyPID(_Stateless):
         mixed = fuzzy_pid_step(np.ascontiguousarray(inp.q_BN, dtype=float),
                                np.ascontiguousarray(inp.q_RN, dtype=float), self.e_prev, has_prev,
                                *pid._kernel_gains(), pid.integral, pid.filter_state, e_scale, de_scale, u_scale,
-                               rules, UNIFORM_VERTICES, self.dt, pid.u_max)
+                               rules, UNIFORM_VERTICES, self.dt, pid.u_max, pid.angle_mode)
         return np.clip(self._apply_offset(mixed), -self.u_max, self.u_max)
 
     def reset(self, n_episodes: int) -> None:
@@ -305,7 +317,8 @@ class FuzzyPID(_Stateless):
 
     def bumpless(self, inp: StepInput, u_last: np.ndarray) -> None:
         self.offset = None
-        self.e_prev = inp.e - inp.error_rate() * self.dt  # de starts at the measured rate
+        angle = self.pid.angle_mode
+        self.e_prev = inp.error(angle) - inp.error_rate_of(angle) * self.dt  # de starts at the measured rate
         u_f, f = self._fuzzy(inp)
         target = np.clip(u_last, -self.u_max, self.u_max)
         with np.errstate(divide="ignore", invalid="ignore"):
@@ -390,16 +403,38 @@ class Geometric(_Stateless):
     unless the caller supplies it). Output saturated at ``±torque_limit`` per axis.
     """
 
-    def __init__(self, k, l, inertia, dt: float, torque_limit: float) -> None:  # noqa: E741 - the paper's L
+    def __init__(self, k, l, inertia, dt: float, torque_limit: float,  # noqa: E741 - the paper's L
+                 environment=None) -> None:
         self.dt = float(dt)
         self.u_max = float(torque_limit)
-        self.set_params(k, l, inertia)
+        self.set_params(k, l, inertia, environment)
         self.w_d_prev: np.ndarray | None = None
 
-    def set_params(self, k, l, inertia) -> None:  # noqa: E741 - L is the paper's name
+    def set_params(self, k, l, inertia, environment=None) -> None:  # noqa: E741 - L is the paper's name
+        """Gains, the model inertia and the feed-forward environment.
+
+        ``environment`` is None or a dict with ``models`` (names among
+        ``gravity_gradient``, ``aerodynamic``), ``rate`` (orbit rate, rad/s),
+        ``speed`` (m/s) and the ``aero.*`` values.
+        """
         self.k = np.atleast_2d(np.asarray(k, dtype=float))
         self.l = np.atleast_2d(np.asarray(l, dtype=float))
         self.inertia = np.asarray(inertia, dtype=float)
+        self.environment = environment
+
+    def environment_torque(self, inp: StepInput) -> np.ndarray | None:
+        """Modelled environmental moment, (P, 3) N m, with the reference taken as LVLH (R_BL = Q^T)."""
+        env = self.environment
+        if not env or not env["models"]:
+            return None
+        R_BL = np.swapaxes(inp.Q, -1, -2)
+        tau = np.zeros(R_BL.shape[:-1])
+        if "gravity_gradient" in env["models"]:
+            tau += gravity_gradient_torque(R_BL, np.broadcast_to(self.inertia, R_BL.shape), env["rate"])
+        if "aerodynamic" in env["models"]:
+            tau += aerodynamic_torque(R_BL, env["aero.density"], env["aero.drag_coefficient"], env["aero.area"],
+                                      env["speed"], np.asarray(env["aero.cp_offset"]))
+        return tau
 
     def reset(self, n_episodes: int) -> None:
         self.offset = None
@@ -423,7 +458,7 @@ class Geometric(_Stateless):
         return tau
 
     def _law(self, inp: StepInput) -> np.ndarray:
-        return np.clip(self.torque_terms(inp), -self.u_max, self.u_max)
+        return np.clip(self.torque_terms(inp, self.environment_torque(inp)), -self.u_max, self.u_max)
 
     def compute(self, inp: StepInput) -> np.ndarray:
         u = np.clip(self._apply_offset(self._law(inp)), -self.u_max, self.u_max)
@@ -463,15 +498,16 @@ class ControllerBank:
         v = dict(values)
         v.update(per_episode or {})
         lim = v["output_limit"]
+        angle = v["error_mode"] == "angle"
         self.controllers = {
-            "pid": PID(v["pid.kp"], v["pid.ki"], v["pid.kd"], v["pid.n"], dt, lim),
+            "pid": PID(v["pid.kp"], v["pid.ki"], v["pid.kd"], v["pid.n"], dt, lim, angle),
             "fuzzy_pid": FuzzyPID(
-                PID(v["fuzzy_pid.kp"], v["fuzzy_pid.ki"], v["fuzzy_pid.kd"], v["fuzzy_pid.n"], dt, lim),
+                PID(v["fuzzy_pid.kp"], v["fuzzy_pid.ki"], v["fuzzy_pid.kd"], v["fuzzy_pid.n"], dt, lim, angle),
                 v["fuzzy_pid.e_scale"], v["fuzzy_pid.de_scale"], v["fuzzy_pid.u_scale"], v["fuzzy_pid.rules"],
                 dt, lim),
             "ga_flc": GAFLC(v["ga_flc.rules"], v["ga_flc.mf_ratios"], v["ga_flc.scales"], lim),
             "geometric": Geometric(v["geometric.k"], v["geometric.l"], _inertia(v["geometric.inertia"]), dt,
-                                   v["geometric.torque_limit"]),
+                                   v["geometric.torque_limit"], _environment(v)),
         }
         self.configure(v)
         self.active = v["controller_type"]
@@ -488,7 +524,11 @@ class ControllerBank:
         c["fuzzy_pid"].set_params(v["fuzzy_pid.e_scale"], v["fuzzy_pid.de_scale"], v["fuzzy_pid.u_scale"],
                                   v["fuzzy_pid.rules"])
         c["ga_flc"].set_params(v["ga_flc.rules"], v["ga_flc.mf_ratios"], v["ga_flc.scales"])
-        c["geometric"].set_params(v["geometric.k"], v["geometric.l"], _inertia(v["geometric.inertia"]))
+        c["geometric"].set_params(v["geometric.k"], v["geometric.l"], _inertia(v["geometric.inertia"]),
+                                  _environment(v))
+        self.command = v["command"]
+        angle = v["error_mode"] == "angle"
+        c["pid"].angle_mode = c["fuzzy_pid"].pid.angle_mode = angle
         for name in ("pid", "fuzzy_pid", "ga_flc"):
             c[name].u_max = lim
         c["fuzzy_pid"].pid.u_max = lim
@@ -511,8 +551,15 @@ class ControllerBank:
 
     @property
     def kind(self) -> str:
-        """``voltage`` or ``torque``: what the active controller commands."""
-        return OUTPUT_KIND[self.active]
+        """``voltage`` or ``torque``: what the active controller commands.
+
+        The PID family commands what ``command`` says (volts for wheel presets,
+        torque for torque presets); the geometric law always commands torque.
+        """
+        return self.kind_of(self.active)
+
+    def kind_of(self, controller_type: str) -> str:
+        return "torque" if controller_type == "geometric" else self.command
 
     def compute(self, q_BN: np.ndarray, omega_BN_B: np.ndarray, q_RN: np.ndarray,
                 omega_RN_R: np.ndarray) -> np.ndarray:
@@ -524,11 +571,20 @@ class ControllerBank:
             self.active, self.pending = self.pending, None
             new = self.controllers[self.active]
             new.reset(self.n)
-            if self.u_last is not None and OUTPUT_KIND[self.active] == old_kind:
+            if self.u_last is not None and self.kind == old_kind:
                 new.bumpless(inp, self.u_last)
         u = self.controllers[self.active].compute(inp)
         self.u_last = u
         return u
+
+
+def _environment(v: dict) -> dict:
+    """The geometric law's feed-forward settings from the controller's parameters."""
+    env = {k: v[k] for k in ("aero.density", "aero.drag_coefficient", "aero.area", "aero.cp_offset")}
+    env["models"] = list(v["geometric.feedforward"])
+    env["rate"] = orbit_rate(v["orbit.mu"], v["orbit.radius"])
+    env["speed"] = float(np.sqrt(v["orbit.mu"] / v["orbit.radius"]))
+    return env
 
 
 def _inertia(values) -> np.ndarray:

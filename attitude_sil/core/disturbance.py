@@ -1,30 +1,86 @@
-"""External disturbance torques of paper 000, section 2.A, batch over episodes.
+"""External disturbance torques, batch over episodes: any sum of the models below.
 
-Models (any sum of them, chosen by name):
+Each model is a name in the ``disturbance`` node's ``models`` list; its
+parameters are ``<model>.*`` parameters of that node. The torque of control
+step k is held over ``[t_k, t_k + dt]``; a model that varies faster than dt
+delivers its mean over the step, so the impulse it gives the body is exact.
 
-* ``noise`` — band-limited white noise as in the paper's Simulink block: a
-  zero-order-held Gaussian sequence at ``sample_time`` T_s with variance
-  ``power / T_s`` per body axis (paper: power 5e-6, T_s = 1 ms, giving about
-  0-0.25 N m). The torque published for control step k is the mean of the
-  held samples inside ``[t_k, t_k + dt]``, so the impulse it delivers equals
-  the 1 ms signal's. Seeded per episode (numpy PCG64).
-* ``gravity_gradient_linear`` — eq. 18:
-  ``G_x = 3 mu / R^3 (I_zz - I_yy) phi``, ``G_y = 3 mu / R^3 (I_zz - I_xx) theta``,
-  ``G_z = 0``, with roll and pitch from the attitude at t_k (eq. 9). The paper
-  measures the angles from the orbit frame; with no orbit model here they are
-  taken from the inertial frame, which is what eq. 18 does for a body that
-  starts aligned with it.
+* ``constant`` — ``constant.torque`` (N m, body axes).
+* ``step`` — ``step.torque`` from ``step.time`` on.
+* ``impulse`` — ``impulse.magnitude`` (N m s, or the normalised unit of a
+  normalised plant) about body axis ``impulse.axis`` at ``impulse.time``,
+  delivered within one control step (torque magnitude/dt); with
+  ``impulse.period`` > 0 a pulse train of ``impulse.count`` pulses (0: no end).
+  Paper 004: an impulsive torque sets the pitch rate, ``q(0) = T_d``.
+* ``noise`` — band-limited white noise (paper 000 section 2.A): a
+  zero-order-held Gaussian sequence at ``noise.sample_time`` with variance
+  ``power / T_s`` per axis, averaged over the step; seeded per episode
+  (``noise.seed`` + episode index), numpy PCG64.
+* ``gravity_gradient_linear`` — paper 000 eq. 18, ``G_x = 3 mu / R^3 (I_zz - I_yy) phi``,
+  ``G_y = 3 mu / R^3 (I_zz - I_xx) theta``, ``G_z = 0``, angles from the inertial frame.
+* ``gravity_gradient`` — paper 001 eq. 3 (with the orbit rate squared, as the
+  physics requires: the print shows ``3 Omega_0``): ``M_g = 3 Omega_0^2 n x (J n)``,
+  n the nadir unit vector in B.
+* ``aerodynamic`` — paper 001 eq. 2: ``M_ad = 0.5 rho C_d A V^2 (v x s_cp)``,
+  v the velocity direction in B, ``s_cp`` the centre of pressure from the
+  centre of mass in B.
+
+The last two need the orbit frame (LVLH: x along the velocity, y the orbit
+normal, z zenith, paper 001). Orbits here are circular: LVLH turns about its
+y axis at ``Omega_0 = sqrt(mu / r^3)``, and ``q_LN(t) = q_LN(0) ⊗ R_y(Omega_0 t)``
+(:func:`lvlh_attitude`), the same frame the guidance node's ``lvlh`` mode tracks.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from .quaternion import euler_from_quat
+from .quaternion import cross, euler_from_quat, quat_conjugate, quat_from_euler, quat_multiply, quat_to_dcm
 
-__all__ = ["DISTURBANCE_MODELS", "DisturbanceModel"]
+__all__ = [
+    "DISTURBANCE_MODELS",
+    "DisturbanceModel",
+    "lvlh_attitude",
+    "orbit_rate",
+    "gravity_gradient_torque",
+    "aerodynamic_torque",
+]
 
-DISTURBANCE_MODELS = ("noise", "gravity_gradient_linear")
+DISTURBANCE_MODELS = ("constant", "step", "impulse", "noise", "gravity_gradient_linear", "gravity_gradient",
+                      "aerodynamic")
+
+
+def orbit_rate(mu: float, radius: float) -> float:
+    """Mean motion of a circular orbit, rad/s."""
+    return float(np.sqrt(mu / radius**3))
+
+
+def lvlh_attitude(t: float, q_LN0: np.ndarray, rate: float) -> np.ndarray:
+    """LVLH orientation at time t: ``q_LN(0) ⊗ R_y(rate t)``, shape like ``q_LN0``."""
+    half = 0.5 * rate * t
+    turn = np.array([0.0, np.sin(half), 0.0, np.cos(half)])
+    return quat_multiply(q_LN0, np.broadcast_to(turn, np.shape(q_LN0)))
+
+
+def gravity_gradient_torque(R_BL: np.ndarray, inertia: np.ndarray, rate: float) -> np.ndarray:
+    """Full gravity-gradient moment (paper 001 eq. 3), (P, 3) N m.
+
+    Parameters
+    ----------
+    R_BL : (P, 3, 3) rotation from LVLH to B
+    inertia : (P, 3, 3) kg m^2
+    rate : orbit rate Omega_0, rad/s
+    """
+    nadir = -R_BL[..., :, 2]  # -l3 in B
+    jn = np.einsum("pij,pj->pi", inertia, nadir)
+    return 3.0 * rate**2 * cross(nadir, jn)
+
+
+def aerodynamic_torque(R_BL: np.ndarray, density: float, drag_coefficient: float, area: float, speed: float,
+                       cp_offset_B: np.ndarray) -> np.ndarray:
+    """Aerodynamic drag moment (paper 001 eq. 2), (P, 3) N m; v is l1 (the velocity) in B."""
+    v_hat = R_BL[..., :, 0]
+    return 0.5 * density * drag_coefficient * area * speed**2 * cross(v_hat, np.broadcast_to(cp_offset_B, v_hat.shape))
 
 
 class DisturbanceModel:
@@ -32,77 +88,91 @@ class DisturbanceModel:
 
     Parameters
     ----------
-    models : sequence of str
-        Names from :data:`DISTURBANCE_MODELS`; empty means no disturbance.
-    dt : float
-        Control period, s.
-    inertia_diag : ndarray, shape (P, 3) or (3,)
-        Principal inertias (for the gravity gradient), kg m^2.
-    noise_power : ndarray, shape (3,)
-        Noise power per body axis (N m)^2 s.
-    noise_sample_time : float
-        T_s, s; ``dt / T_s`` must be a whole number.
+    values : dict
+        The ``disturbance`` node's parameters (``models``, ``noise.power``, ...).
+    inertia : ndarray, shape (P, 3, 3)
+        Body inertia for the gravity-gradient models, kg m^2.
     seeds : sequence of int, length P
-        One seed per episode.
-    mu : float
-        Gravitational parameter, m^3/s^2.
-    orbit_radius : float
-        Circular orbit radius, m.
+        Noise seed of each episode.
     """
 
-    def __init__(
-        self,
-        models,
-        dt: float,
-        inertia_diag: np.ndarray,
-        noise_power: np.ndarray,
-        noise_sample_time: float,
-        seeds,
-        mu: float,
-        orbit_radius: float,
-    ) -> None:
+    def __init__(self, values: dict, inertia: np.ndarray, seeds) -> None:
+        models = list(values["models"])
         unknown = [m for m in models if m not in DISTURBANCE_MODELS]
         if unknown:
-            raise ValueError(
-                f"unknown disturbance model {unknown[0]!r}; known: {', '.join(DISTURBANCE_MODELS)}"
-            )
+            raise ValueError(f"unknown disturbance model {unknown[0]!r}; known: {', '.join(DISTURBANCE_MODELS)}")
         self.models = tuple(models)
-        self.dt = float(dt)
+        self.v = dict(values)
+        self.dt = float(values["control_period"])
+        self.dt_ns = int(round(self.dt * 1e9))
         self.seeds = [int(s) for s in seeds]
         self.n_episodes = len(self.seeds)
-        inertia_diag = np.broadcast_to(np.asarray(inertia_diag, dtype=float), (self.n_episodes, 3))
-        n2 = 3.0 * mu / orbit_radius**3
-        self.gg_gain = np.stack(
-            (n2 * (inertia_diag[:, 2] - inertia_diag[:, 1]), n2 * (inertia_diag[:, 2] - inertia_diag[:, 0])),
-            axis=-1,
-        )
-        ratio = self.dt / noise_sample_time
+        self.inertia = np.broadcast_to(np.asarray(inertia, dtype=float), (self.n_episodes, 3, 3))
+        diag = np.diagonal(self.inertia, axis1=-2, axis2=-1)
+        mu, radius = values["orbit.mu"], values["orbit.radius"]
+        n2 = 3.0 * mu / radius**3
+        self.gg_gain = np.stack((n2 * (diag[:, 2] - diag[:, 1]), n2 * (diag[:, 2] - diag[:, 0])), axis=-1)
+        self.rate = orbit_rate(mu, radius)
+        self.speed = float(np.sqrt(mu / radius))
+        self.q_LN0 = quat_from_euler(np.radians(values["orbit.lvlh_initial_rpy_deg"]))
+        ratio = self.dt / values["noise.sample_time"]
         self.samples_per_step = int(round(ratio))
         if "noise" in self.models and (self.samples_per_step < 1 or abs(ratio - self.samples_per_step) > 1e-9):
-            raise ValueError(
-                f"noise.sample_time {noise_sample_time} s must divide the control period {self.dt} s"
-            )
-        self.noise_std = np.sqrt(np.asarray(noise_power, dtype=float) / noise_sample_time)
+            raise ValueError(f"noise.sample_time {values['noise.sample_time']} s must divide the control "
+                             f"period {self.dt} s")
+        self.noise_std = np.sqrt(np.asarray(values["noise.power"], dtype=float) / values["noise.sample_time"])
         self.reset()
 
     def reset(self) -> None:
         """Restart every episode's noise stream from its seed."""
         self.rngs = [np.random.Generator(np.random.PCG64(s)) for s in self.seeds]
 
-    def torque(self, q_BN: np.ndarray) -> np.ndarray:
-        """Disturbance torque held over the current step, (P, 3) N m.
+    def _lvlh_to_body(self, q_BN: np.ndarray, t_ns: int) -> np.ndarray:
+        q_LN = lvlh_attitude(t_ns * 1e-9, self.q_LN0, self.rate)
+        q_BL = quat_multiply(quat_conjugate(np.broadcast_to(q_LN, q_BN.shape)), q_BN)
+        return np.swapaxes(quat_to_dcm(q_BL), -1, -2)  # R_BL = R_LB^T
+
+    def torque(self, q_BN: np.ndarray, t_ns: int = 0) -> np.ndarray:
+        """Disturbance torque held over the step that starts at ``t_ns``, (P, 3) N m.
 
         Parameters
         ----------
         q_BN : (P, 4) attitude at t_k
+        t_ns : int, t_k in nanoseconds
         """
+        v = self.v
         tau = np.zeros((q_BN.shape[0], 3))
+        k = t_ns // self.dt_ns if self.dt_ns else 0
+        if "constant" in self.models:
+            tau += np.asarray(v["constant.torque"])
+        if "step" in self.models and t_ns >= round(v["step.time"] * 1e9):
+            tau += np.asarray(v["step.torque"])
+        if "impulse" in self.models:
+            tau[:, v["impulse.axis"]] += self._impulse(k) * v["impulse.magnitude"] / self.dt
         if "noise" in self.models:
-            draws = np.stack(
-                [rng.standard_normal((self.samples_per_step, 3)).mean(axis=0) for rng in self.rngs]
-            )
+            draws = np.stack([rng.standard_normal((self.samples_per_step, 3)).mean(axis=0) for rng in self.rngs])
             tau += draws * self.noise_std
         if "gravity_gradient_linear" in self.models:
             rpy = euler_from_quat(q_BN)
             tau[:, :2] += self.gg_gain * rpy[:, :2]
+        if "gravity_gradient" in self.models or "aerodynamic" in self.models:
+            R_BL = self._lvlh_to_body(q_BN, t_ns)
+            if "gravity_gradient" in self.models:
+                tau += gravity_gradient_torque(R_BL, self.inertia, self.rate)
+            if "aerodynamic" in self.models:
+                tau += aerodynamic_torque(R_BL, v["aero.density"], v["aero.drag_coefficient"], v["aero.area"],
+                                          self.speed, np.asarray(v["aero.cp_offset"]))
         return tau
+
+    def _impulse(self, k: int) -> float:
+        """1.0 if a pulse falls in step k, else 0.0."""
+        v = self.v
+        k0 = int(round(v["impulse.time"] * 1e9)) // self.dt_ns
+        if k < k0:
+            return 0.0
+        if v["impulse.period"] <= 0.0:
+            return 1.0 if k == k0 else 0.0
+        period = int(round(v["impulse.period"] * 1e9)) // self.dt_ns
+        n = (k - k0) // period
+        count = v["impulse.count"]
+        return 1.0 if (k - k0) % period == 0 and (count == 0 or n < count) else 0.0

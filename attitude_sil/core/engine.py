@@ -21,8 +21,10 @@ from dataclasses import dataclass
 import numpy as np
 
 from .controllers import ControllerBank
-from .disturbance import DisturbanceModel
-from .quaternion import quat_from_euler
+from .actuators import SpeedLoopWheels, TorqueActuator
+from .disturbance import DisturbanceModel, lvlh_attitude, orbit_rate
+from .plants import FLEXIBLE_CASES, FlexibleAxisPlant, PitchNormalizedPlant
+from .quaternion import quat_from_euler, quat_multiply
 from .rigid_body import BodyState, rk4_step
 from .scenario import Scenario
 from .wheels import GEOMETRIES, MotorParams, WheelAssembly
@@ -135,29 +137,71 @@ class Wheels:
 
 
 class Guidance:
-    """Step setpoint: ``initial`` attitude until ``step_time``, then ``final``; zero rate."""
+    """Setpoints of the ``guidance`` node.
 
-    def __init__(self, initial_rpy_deg, final_rpy_deg, step_time: float, n_episodes: int) -> None:
+    * ``step``: ``initial`` attitude until ``step_time``, then ``final``; zero rate.
+    * ``lvlh``: the orbit frame, ``q_RN(t) = q_LN(0) ⊗ R_y(Omega_0 t)`` with
+      ``omega_RN_R = [0, Omega_0, 0]`` (paper 001: the body tracks LVLH).
+    """
+
+    def __init__(self, initial_rpy_deg, final_rpy_deg, step_time: float, n_episodes: int, mode: str = "step",
+                 lvlh_rpy_deg=(0.0, 0.0, 0.0), orbit_rate_rad_s: float = 0.0) -> None:
+        self.mode = mode
+        self.n = n_episodes
         self.q_initial = _per_episode(quat_from_euler(np.radians(initial_rpy_deg)), n_episodes, 4)
         self.q_final = _per_episode(quat_from_euler(np.radians(final_rpy_deg)), n_episodes, 4)
         self.step_time = float(step_time)
+        self.q_LN0 = quat_from_euler(np.radians(np.asarray(lvlh_rpy_deg, dtype=float)))
+        self.rate = float(orbit_rate_rad_s)
         self.omega = np.zeros((n_episodes, 3))
+        if mode == "lvlh":
+            self.omega[:, 1] = self.rate
 
     def setpoint(self, t: float) -> tuple[np.ndarray, np.ndarray]:
         """Reference (q_RN (P, 4), omega_RN_R (P, 3) rad/s) at sim time t."""
+        if self.mode == "lvlh":
+            return _per_episode(lvlh_attitude(t, self.q_LN0, self.rate), self.n, 4), self.omega
         # compare in integer-safe form: t is k*dt computed from integer ns
         q = self.q_final if t >= self.step_time - 1e-12 else self.q_initial
         return q, self.omega
 
 
-def build_plant(scn: Scenario, n_episodes: int = 1, inertia=None, rpy0_deg=None, omega0=None) -> Plant:
-    """Plant from the scenario's ``plant`` parameters (per-episode overrides optional)."""
+def initial_attitude(values: dict, rpy0_deg=None) -> np.ndarray:
+    """q_BN(0) from ``initial_attitude_rpy_deg`` then the extra ``initial_error_*`` rotation (in B)."""
+    rpy = np.asarray(values["initial_attitude_rpy_deg"] if rpy0_deg is None else rpy0_deg, dtype=float)
+    q = quat_from_euler(np.radians(rpy))
+    angle = np.radians(values["initial_error_deg"])
+    if angle != 0.0:
+        axis = np.asarray(values["initial_error_axis"], dtype=float)
+        norm = np.linalg.norm(axis)
+        if norm == 0.0:
+            raise ValueError("plant.initial_error_axis must not be zero")
+        turn = np.append(np.sin(angle / 2) * axis / norm, np.cos(angle / 2))
+        q = quat_multiply(q, np.broadcast_to(turn, q.shape))
+    return q
+
+
+def build_plant(scn: Scenario, n_episodes: int = 1, inertia=None, rpy0_deg=None, omega0=None):
+    """The body model of the scenario's ``plant`` parameters (per-episode overrides optional).
+
+    ``rigid_body`` gives a :class:`Plant`; ``flexible_axis`` and
+    ``pitch_normalized`` the single-axis models of :mod:`attitude_sil.core.plants`.
+    """
     p = scn.values["plant"]
-    m = inertia_matrix(p["inertia"] if inertia is None else inertia)
-    m = np.array(np.broadcast_to(m, (n_episodes, 3, 3)))
+    dt = p["control_period"]
     rpy = _per_episode(p["initial_attitude_rpy_deg"] if rpy0_deg is None else rpy0_deg, n_episodes, 3)
     w0 = _per_episode(p["initial_body_rate"] if omega0 is None else omega0, n_episodes, 3)
-    return Plant(m, p["control_period"], p["substeps"], quat_from_euler(np.radians(rpy)), w0)
+    if p["model"] == "flexible_axis":
+        a = p["flex.axis"]
+        k1, k2, w2 = (p["flex.k1"], p["flex.k2"], p["flex.omega_sq"]) if p["flex.case"] == "custom" \
+            else FLEXIBLE_CASES[p["flex.case"]]
+        return FlexibleAxisPlant(p["flex.b"], k1, k2, w2, a, dt, np.radians(rpy[:, a]), w0[:, a], p["flex.alpha0"])
+    if p["model"] == "pitch_normalized":
+        return PitchNormalizedPlant(p["pitch.epsilon"], dt, np.radians(rpy[:, 1]), w0[:, 1], p["pitch.h0"])
+    m = inertia_matrix(p["inertia"] if inertia is None else inertia)
+    m = np.array(np.broadcast_to(m, (n_episodes, 3, 3)))
+    q0 = np.stack([initial_attitude(p, rpy[i]) for i in range(n_episodes)])
+    return Plant(m, dt, p["substeps"], q0, w0)
 
 
 def motor_params(values: dict) -> MotorParams:
@@ -175,9 +219,16 @@ def motor_params(values: dict) -> MotorParams:
     )
 
 
-def build_wheels(scn: Scenario, n_episodes: int = 1) -> Wheels:
-    """Wheels from the scenario's ``wheels`` parameters."""
+def build_wheels(scn: Scenario, n_episodes: int = 1):
+    """The actuator of the scenario's ``wheels`` parameters (``actuator``)."""
     w = scn.values["wheels"]
+    if w["actuator"] == "torque":
+        return TorqueActuator(w["torque_limit"], n_episodes)
+    if w["actuator"] == "speed_loop":
+        return SpeedLoopWheels(w["speed_loop.motor_gain"], w["speed_loop.motor_a2"], w["speed_loop.motor_a1"],
+                               w["speed_loop.kp"], w["speed_loop.ki"], w["speed_loop.kd"], w["speed_loop.n"],
+                               w["motor.rotor_inertia"], w["motor.speed_max_rpm"], w["speed_loop.rpm_per_volt"],
+                               w["control_period"], n_episodes)
     axes = GEOMETRIES[w["geometry"]]()
     assembly = WheelAssembly(axes, motor_params(w), w["control_period"])
     speed0 = None
@@ -194,17 +245,16 @@ def build_disturbance(scn: Scenario, n_episodes: int = 1, seeds=None, inertia=No
     """Disturbance model from the ``disturbance`` parameters; seeds default to seed + p."""
     d = scn.values["disturbance"]
     m = inertia_matrix(d["inertia"] if inertia is None else inertia)
-    diag = np.diagonal(m, axis1=-2, axis2=-1)
     if seeds is None:
         seeds = [d["noise.seed"] + p for p in range(n_episodes)]
-    return DisturbanceModel(d["models"], d["control_period"], diag, np.asarray(d["noise.power"]),
-                            d["noise.sample_time"], seeds, d["gravity_gradient.mu"],
-                            d["gravity_gradient.orbit_radius"])
+    return DisturbanceModel(d, np.broadcast_to(m, (n_episodes, 3, 3)), seeds)
 
 
 def build_guidance(scn: Scenario, n_episodes: int = 1) -> Guidance:
     g = scn.values["guidance"]
-    return Guidance(g["initial_setpoint_rpy_deg"], g["setpoint_rpy_deg"], g["step_time"], n_episodes)
+    return Guidance(g["initial_setpoint_rpy_deg"], g["setpoint_rpy_deg"], g["step_time"], n_episodes,
+                    mode=g["mode"], lvlh_rpy_deg=g["orbit.lvlh_initial_rpy_deg"],
+                    orbit_rate_rad_s=orbit_rate(g["orbit.mu"], g["orbit.radius"]))
 
 
 def build_controller(scn: Scenario, n_episodes: int = 1, params: dict | None = None) -> ControllerBank:
@@ -301,7 +351,7 @@ def simulate(
     if controller is not None:
         ctrl.active = controller
     swaps = dict(schedule_from_scenario(scn) if schedule is None else schedule)
-    nw = wheels.assembly.n_wheels
+    nw = len(wheels.names)
     tr = Trajectory(
         t=np.arange(K + 1) * dt,
         q_BN=np.empty((P, K + 1, 4)),
@@ -319,7 +369,7 @@ def simulate(
         t = k * dt_ns * 1e-9
         s = plant.state
         q_RN, w_RN = guide.setpoint(t)
-        tau_ext = dist.torque(s.q_BN)
+        tau_ext = dist.torque(s.q_BN, k * dt_ns)
         if k in swaps:
             ctrl.request(swaps[k])
         u = ctrl.compute(s.q_BN, s.omega_BN_B, q_RN, w_RN)

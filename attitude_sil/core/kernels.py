@@ -99,11 +99,12 @@ def rk4_body(q, w, h, inertia, inertia_inv, tau_c, tau_e, dt, substeps):
 
 
 @njit(cache=True)
-def pid_step(q_BN, q_RN, kp, ki, kd, n, a, integral, filt, dt, u_max):
+def pid_step(q_BN, q_RN, kp, ki, kd, n, a, integral, filt, dt, u_max, angle_mode):
     """One PID step for every episode and axis; updates ``integral`` and ``filt`` in place.
 
     Error vector e = -vec(q_RN* ⊗ q_BN), sign chosen so the scalar part is
-    non-negative. Returns the saturated command (P, 3).
+    non-negative; with ``angle_mode`` each component becomes ``2 asin(e_i)``,
+    the rotation angle about that axis. Returns the saturated command (P, 3).
     """
     m = q_BN.shape[0]
     u = np.empty((m, 3))
@@ -116,6 +117,8 @@ def pid_step(q_BN, q_RN, kp, ki, kd, n, a, integral, filt, dt, u_max):
         ew = rw * bw - rx * bx - ry * by - rz * bz
         sign = -1.0 if ew < 0.0 else 1.0
         e = (-sign * ex, -sign * ey, -sign * ez)
+        if angle_mode:
+            e = (2.0 * np.arcsin(e[0]), 2.0 * np.arcsin(e[1]), 2.0 * np.arcsin(e[2]))
         for i in range(3):
             deriv = n[p, i] * (e[i] - filt[p, i])
             raw = kp[p, i] * e[i] + ki[p, i] * integral[p, i] + kd[p, i] * deriv
@@ -247,7 +250,7 @@ def _infer1(xr, xc, vr, vc, r, c):
 
 @njit(cache=True)
 def fuzzy_pid_step(q_BN, q_RN, e_prev, has_prev, kp, ki, kd, n, a, integral, filt, e_scale, de_scale, u_scale,
-                   rules, v, dt, u_max):
+                   rules, v, dt, u_max, angle_mode):
     """Hybrid fuzzy PID (see ``controllers.FuzzyPID``) for every episode and axis, in one loop.
 
     Updates ``e_prev``, ``integral`` and ``filt`` in place; returns the mixed
@@ -260,6 +263,8 @@ def fuzzy_pid_step(q_BN, q_RN, e_prev, has_prev, kp, ki, kd, n, a, integral, fil
     for p in range(m):
         ex, ey, ez, _ = _error_quat(q_BN, q_RN, p)
         e3 = (-ex, -ey, -ez)
+        if angle_mode:
+            e3 = (2.0 * np.arcsin(e3[0]), 2.0 * np.arcsin(e3[1]), 2.0 * np.arcsin(e3[2]))
         r = rules[p]
         for i in range(3):
             e = e3[i]

@@ -165,6 +165,23 @@ def _distinct(values: list) -> str:
     """Rule of paper 001: the entries of K must differ."""
     return "entries must be distinct (paper 001: k1 != k2 != k3)" if len(set(values)) < len(values) else ""
 
+_ORBIT = [
+    _d("orbit.mu", 3.986004418e14, "Earth gravitational parameter, m^3/s^2", min=0.0, min_exclusive=True),
+    _d("orbit.radius", 6.913e6, "circular orbit radius, m (default: HST, about 535 km altitude, assumed)",
+       min=6.378e6),
+    _da("orbit.lvlh_initial_rpy_deg", [0, 0, 0], "LVLH frame at t = 0 relative to N, roll/pitch/yaw deg",
+        lengths=(3,), min=-360.0, max=360.0),
+]
+_AERO = [
+    _d("aero.density", 1.0e-13, "atmospheric density, kg/m^3 (assumed: 600 km, moderate solar activity)",
+       min=0.0),
+    _d("aero.drag_coefficient", 2.2, "drag coefficient C_d (assumed: 2.2, free-molecular flow)", min=0.0),
+    _d("aero.area", 0.508, "area normal to the velocity, m^2 (assumed: Hawai'iSat side, 0.66 m x 0.77 m)",
+       min=0.0),
+    _da("aero.cp_offset", [0.0, 0.0, 0.05], "centre of pressure from the centre of mass in B, m (assumed)",
+        lengths=(3,)),
+]
+
 NODE_PARAMS: dict[str, list[ParamSpec]] = {
     GLOBAL_NODE: [],  # filled below: names any node declares may be set for all
     "plant": [
@@ -175,6 +192,28 @@ NODE_PARAMS: dict[str, list[ParamSpec]] = {
         _da("initial_attitude_rpy_deg", [0, 0, 0], "initial roll, pitch, yaw of B in N, deg",
             lengths=(3,), min=-360.0, max=360.0),
         _da("initial_body_rate", [0, 0, 0], "initial omega_BN in B, rad/s", lengths=(3,)),
+        _da("initial_error_axis", [1, 0, 0], "axis (in B) of an extra initial rotation after the rpy one",
+            lengths=(3,)),
+        _d("initial_error_deg", 0.0, "angle of that extra rotation, deg (paper 001: 1 deg about [-1,1,-1])",
+           min=-180.0, max=180.0),
+        ParamSpec("model", "string", "rigid_body",
+                  "body model: rigid_body (papers 000, 001, 003), flexible_axis (paper 002), "
+                  "pitch_normalized (paper 004)", choices=("rigid_body", "flexible_axis", "pitch_normalized")),
+        ParamSpec("flex.axis", "integer", 0, "body axis of the flexible single-axis model", min=0, max=2),
+        ParamSpec("flex.case", "string", "nominal",
+                  "paper 002 parameter set: nominal, case1 (w^2 1.7), case2 (k1 0.76), case3 (w^2 1.7, k2 0.114), "
+                  "case4 (w^2 1.7, k1 0.114, k2 0.2), or custom (flex.k1, flex.k2, flex.omega_sq)",
+                  choices=("nominal", "case1", "case2", "case3", "case4", "custom")),
+        _d("flex.b", 0.0064, "rigid-body gain of theta'' = b tau, 1/(kg m^2) (paper 002 eq. 1)", min=0.0,
+           min_exclusive=True),
+        _d("flex.k1", 0.076, "torque gain of the flexible mode (custom case)"),
+        _d("flex.k2", 0.076, "flexible contribution to the total attitude (custom case)"),
+        _d("flex.omega_sq", 4.509, "squared natural frequency of the appendage, rad^2/s^2 (custom case)",
+           min=0.0, min_exclusive=True),
+        _d("flex.alpha0", 0.0, "initial flexible deflection alpha, rad (paper 002: 0)"),
+        _d("pitch.epsilon", 0.1, "wheel-to-satellite inertia ratio epsilon (assumed; paper 004 gives none)",
+           min=0.0, min_exclusive=True),
+        _d("pitch.h0", 0.0, "initial normalised total momentum H"),
         ParamSpec("substeps", "integer", 1, "RK4 steps per control period", min=1, max=1000),
         _d("duration", 20.0, "episode length, s of sim time (0: run until stopped)", min=0.0),
         _d("real_time_factor", 0.0, "pace sim time to wall time: 1.0 real time, 0 as fast as possible",
@@ -208,21 +247,46 @@ NODE_PARAMS: dict[str, list[ParamSpec]] = {
         _d("motor.speed_max_rpm", HST_MOTOR["motor.speed_max_rpm"], "wheel speed limit, rpm",
            min=0.0, min_exclusive=True),
         _da("initial_speed_rpm", [], "initial wheel speeds, rpm (empty: all zero)"),
+        ParamSpec("actuator", "string", "reaction_wheels",
+                  "reaction_wheels (PMDC motors, paper 000), speed_loop (identified motor with a wheel-speed "
+                  "PID, paper 003), torque (ideal torquer saturated at torque_limit: torque rods, paper 001)",
+                  choices=("reaction_wheels", "speed_loop", "torque")),
+        _d("torque_limit", 1.2e-3, "saturation of the torque actuator per body axis, N m (paper 001: 1.2 mN m)",
+           min=0.0, min_exclusive=True),
+        _d("speed_loop.motor_gain", 1.0069, "identified motor gain K (paper 003)", min=0.0, min_exclusive=True),
+        _d("speed_loop.motor_a2", 3.16955, "s^2 coefficient of the motor denominator, s^2 (paper 003; see README)",
+           min=0.0, min_exclusive=True),
+        _d("speed_loop.motor_a1", 5.0289, "s coefficient of the motor denominator, s (paper 003)", min=0.0,
+           min_exclusive=True),
+        _d("speed_loop.kp", 20.402, "wheel-speed PID proportional gain (paper 003)", min=0.0),
+        _d("speed_loop.ki", 4.58, "wheel-speed PID integral gain, 1/s (paper 003)", min=0.0),
+        _d("speed_loop.kd", 9.12, "wheel-speed PID derivative gain, s (paper 003)", min=0.0),
+        _d("speed_loop.n", 1000.0, "derivative filter of the speed PID, rad/s (assumed)", min=0.0,
+           min_exclusive=True),
+        _d("speed_loop.rpm_per_volt", 1000.0, "speed reference per volt of the drive's analog input, rpm/V "
+           "(assumed)", min=0.0, min_exclusive=True),
     ],
     "disturbance": [
         _d("control_period", 0.01, "control step dt, s (shared by every node)", min=0.0, min_exclusive=True, max=1.0),
         _da("inertia", _HST_INERTIA, "body inertia for the gravity gradient, kg m^2 (3 or 9 values)",
             lengths=(3, 9)),
-        ParamSpec("models", "string_array", [], "disturbance models summed: noise, gravity_gradient_linear",
-                  choices=("noise", "gravity_gradient_linear")),
+        ParamSpec("models", "string_array", [], "disturbance models summed (empty: none)",
+                  choices=("constant", "step", "impulse", "noise", "gravity_gradient_linear", "gravity_gradient",
+                           "aerodynamic")),
+        _da("constant.torque", [0, 0, 0], "constant torque, N m (body axes)", lengths=(3,)),
+        _da("step.torque", [0, 0, 0], "step torque from step.time on, N m", lengths=(3,)),
+        _d("step.time", 0.0, "time of the torque step, s", min=0.0),
+        _d("impulse.magnitude", 1.0, "impulse, N m s (normalised unit on a normalised plant)"),
+        ParamSpec("impulse.axis", "integer", 1, "body axis of the impulse: 0, 1, 2", min=0, max=2),
+        _d("impulse.time", 0.0, "time of the (first) impulse, s", min=0.0),
+        _d("impulse.period", 0.0, "pulse-train period, s (0: a single impulse)", min=0.0),
+        ParamSpec("impulse.count", "integer", 0, "pulses in the train (0: no end)", min=0),
         _da("noise.power", [5e-6, 5e-6, 5e-6], "band-limited white noise power per body axis, N^2 m^2 s",
             lengths=(3,), min=0.0),
         _d("noise.sample_time", 0.001, "noise sample time T_s, s", min=0.0, min_exclusive=True),
-        ParamSpec("noise.seed", "integer", 0, "noise seed", min=0),
-        _d("gravity_gradient.mu", 3.986004418e14, "Earth gravitational parameter, m^3/s^2",
-           min=0.0, min_exclusive=True),
-        _d("gravity_gradient.orbit_radius", 6.913e6,
-           "circular orbit radius, m (assumed: HST at about 535 km altitude)", min=0.0, min_exclusive=True),
+        ParamSpec("noise.seed", "integer", 0, "noise seed (episode p of a batch uses seed + p)", min=0),
+        *_ORBIT,
+        *_AERO,
     ],
     "guidance": [
         _d("control_period", 0.01, "control step dt, s (shared by every node)", min=0.0, min_exclusive=True, max=1.0),
@@ -231,11 +295,20 @@ NODE_PARAMS: dict[str, list[ParamSpec]] = {
         _da("setpoint_rpy_deg", [0, 0, 0], "reference roll, pitch, yaw from step_time on, deg",
             lengths=(3,), min=-360.0, max=360.0, runtime=True),
         _d("step_time", 0.0, "sim time of the setpoint step, s", min=0.0, runtime=True),
+        ParamSpec("mode", "string", "step", "step (setpoints above) or lvlh (track the orbit frame, paper 001)",
+                  choices=("step", "lvlh")),
+        *_ORBIT,
     ],
     "controller": [
         _d("control_period", 0.01, "control step dt, s (shared by every node)", min=0.0, min_exclusive=True, max=1.0),
         ParamSpec("controller_type", "string", "pid", "active control law (switches at the next step, bumpless)",
                   choices=("pid", "fuzzy_pid", "ga_flc", "geometric"), runtime=True),
+        ParamSpec("error_mode", "string", "quaternion",
+                  "what the PID-family laws act on: quaternion (vector part, paper 000) or angle (2 asin of it, "
+                  "the rotation angle per axis, for single-axis papers 002 and 004)", choices=("quaternion", "angle")),
+        ParamSpec("command", "string", "voltage",
+                  "topic of the PID-family laws: voltage (voltage_cmd, wheel presets) or torque (torque_cmd, "
+                  "torque presets); geometric always commands torque", choices=("voltage", "torque")),
         _d("bumpless_time_constant", 1.0,
            "decay time of the transfer offset when switching to a stateless law (ga_flc, geometric), s",
            min=0.0, runtime=True),
@@ -286,6 +359,12 @@ NODE_PARAMS: dict[str, list[ParamSpec]] = {
             lengths=(3, 9), runtime=True),
         _d("geometric.torque_limit", 0.7, "torque saturation per body axis, N m", min=0.0, min_exclusive=True,
            runtime=True),
+        ParamSpec("geometric.feedforward", "string_array", [],
+                  "modelled environmental moments fed forward (paper 001 eq. 7): gravity_gradient, aerodynamic; "
+                  "computed from Q, so the reference must be LVLH", choices=("gravity_gradient", "aerodynamic"),
+                  runtime=True),
+        *_ORBIT,
+        *_AERO,
     ],
     SCENARIO_NODE: [
         ParamSpec("name", "string", "", "scenario name (read by the runner, not a node)"),
@@ -296,6 +375,14 @@ NODE_PARAMS: dict[str, list[ParamSpec]] = {
            max=1.0),
         _d("metrics.tau_d", 1.5, "desired time constant tau_d of the cost J (paper 000 eq. 19), s", min=0.0),
         _d("metrics.w_os", 1.0, "overshoot weight w_os of the cost J (paper 000 eq. 19), per %", min=0.0),
+        ParamSpec("metrics.mode", "string", "step",
+                  "step (a setpoint step on metrics.axis), tracking (principal error angle vs the reference, "
+                  "paper 001) or regulation (single-axis return to zero, MSE of paper 002)",
+                  choices=("step", "tracking", "regulation")),
+        _d("metrics.settling_angle_deg", -1.0,
+           "tracking: settled once the principal error angle stays below this, deg (negative: the angle of "
+           "R1(0.1 deg) R2(0.1 deg) R3(0.1 deg), paper 001)"),
+        _d("metrics.beta", 1.0, "weight beta of paper 001's fitness f = -(Ts + beta Ce)", min=0.0),
         _da("schedule.times", [], "sim times of scheduled controller swaps, s (runner applies them as "
             "parameter sets)", min=0.0),
         ParamSpec("schedule.controller_types", "string_array", [], "controller_type to swap to at each time",

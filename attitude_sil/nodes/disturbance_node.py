@@ -40,7 +40,7 @@ class DisturbanceNode(SchemaNode):
         elif kind != StepSequencer.NEXT:
             return
         q = msg.quaternion
-        tau = self.core.torque(np.array([[q.x, q.y, q.z, q.w]]))[0]
+        tau = self.core.torque(np.array([[q.x, q.y, q.z, q.w]]), t)[0]
         out = Vector3Stamped()
         out.header.stamp = msg.header.stamp
         out.header.frame_id = "body"
