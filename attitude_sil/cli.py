@@ -34,6 +34,10 @@ def _format_table(metrics: dict) -> str:
         ("ISE", metrics["ise"], "rad^2 s"),
         ("ITAE", metrics["itae"], "rad s^2"),
     ]
+    extra = [("MSE (paper 002 eq. 10)", "mse", "rad^2"), ("max |error|", "max_abs_error_rad", "rad"),
+             ("fitness f (paper 001 eq. 8)", "fitness_f", ""),
+             ("final error angle", "final_error_rad", "rad")]
+    rows += [(label, metrics[key], unit) for label, key, unit in extra if key in metrics]
     lines = [f"scenario {metrics['scenario']}"]
     for label, value, unit in rows:
         if value is None:

@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import importlib
 
-__all__ = ["STEP_TOPICS", "COMMAND_TOPICS", "RECORDED_TOPICS", "message_class"]
+__all__ = ["STEP_TOPICS", "COMMAND_TOPICS", "MODEL_TOPICS", "RECORDED_TOPICS", "message_class"]
 
 #: topics of the lockstep (relative names, except /clock); one message per step each,
 #: except the command topics, of which exactly one carries each step
@@ -29,8 +29,12 @@ STEP_TOPICS: dict[str, str] = {
 #: the controller publishes one of these per step, depending on its law
 COMMAND_TOPICS = ("voltage_cmd", "torque_cmd")
 
+#: published only by some plant models (paper 002's flexible mode: x = alpha rad, y = d alpha/dt rad/s)
+MODEL_TOPICS: dict[str, str] = {"flexible_mode": "geometry_msgs/msg/Vector3Stamped"}
+
 #: everything a run records
-RECORDED_TOPICS: dict[str, str] = {**STEP_TOPICS, "/parameter_events": "rcl_interfaces/msg/ParameterEvent"}
+RECORDED_TOPICS: dict[str, str] = {**STEP_TOPICS, **MODEL_TOPICS,
+                                   "/parameter_events": "rcl_interfaces/msg/ParameterEvent"}
 
 
 def message_class(type_name: str):

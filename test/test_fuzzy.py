@@ -148,8 +148,8 @@ def test_compiled_ga_flc_equals_its_documented_steps():
     for _ in range(10):
         inp = StepInput(*_random_states(rng, 5))
         q_BR = quat_error(inp.q_BN, inp.q_RN)
-        theta = 2 * np.arcsin(q_BR[:, :3])
-        rate = inp.omega_BN_B - inp.reference_rate_B()
+        theta = -2 * np.arcsin(q_BR[:, :3])  # error: reference minus attitude
+        rate = inp.reference_rate_B() - inp.omega_BN_B
         expected = np.clip(scales[2] * infer(memberships(scales[0] * theta, v[0]), memberships(scales[1] * rate, v[1]),
                                              PAPER_004_TABLE_2, v[2]), -1.2, 1.2)
         assert np.allclose(flc.compute(inp), expected, atol=1e-12)

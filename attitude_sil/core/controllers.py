@@ -22,8 +22,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .fuzzy import FUZZY_PID_DEFAULT_RULES, UNIFORM_VERTICES, vertices_from_ratios
 from .disturbance import aerodynamic_torque, gravity_gradient_torque, orbit_rate
+from .fuzzy import FUZZY_PID_DEFAULT_RULES, UNIFORM_VERTICES, vertices_from_ratios
 from .kernels import fuzzy_infer, fuzzy_pid_step, ga_flc_step, pid_step
 from .quaternion import cross, error_vector, quat_error, quat_to_dcm
 
@@ -336,9 +336,12 @@ class FuzzyPID(_Stateless):
 class GAFLC(_Stateless):
     """GA-designed fuzzy logic controller of paper 004, one per body axis.
 
-    Inputs: the attitude deviation ``θ = 2 asin(vec(q_BR))`` per axis (rad;
-    exact for a rotation about one axis) and the rate deviation ``q = ω - Q^T ω_d``
-    (rad/s), scaled by ``K_θ`` and ``K_q`` (eq. 6) to [-1, 1]. Seven
+    Inputs: the attitude error ``θ = -2 asin(vec(q_BR))`` per axis (rad, reference
+    minus attitude; exact for a rotation about one axis) and the rate error
+    ``q = Q^T ω_d - ω`` (rad/s), scaled by ``K_θ`` and ``K_q`` (eq. 6) to
+    [-1, 1]. Errors, not deviations, are what paper 004's Fig. 2 feeds the FLC,
+    and only with that sign does its Table 2 stabilise its own pitch model
+    (checked for the impulse and the 30 deg initial-angle cases). Seven
     triangular sets per variable with vertices from positive ratios (eq. 5);
     49 integer rules (1..7 = NB..PB, Table 1), table indexed ``rules[θ, q]`` as
     paper 004 Table 2; product inference, weighted average over the output

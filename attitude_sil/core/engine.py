@@ -20,8 +20,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .controllers import ControllerBank
 from .actuators import SpeedLoopWheels, TorqueActuator
+from .controllers import ControllerBank
 from .disturbance import DisturbanceModel, lvlh_attitude, orbit_rate
 from .plants import FLEXIBLE_CASES, FlexibleAxisPlant, PitchNormalizedPlant
 from .quaternion import quat_from_euler, quat_multiply

@@ -314,8 +314,9 @@ def ga_flc_step(q_BN, omega, q_RN, omega_RN_R, rules, vertices, scales, u_max):
         vec = (x, y, z)
         r = rules[p]
         for i in range(3):
-            theta = 2.0 * np.arcsin(min(max(vec[i], -1.0), 1.0))
-            rate = omega[p, i] - nu[i]
+            # errors, reference minus measurement (paper 004 Fig. 2 feeds the FLC the error)
+            theta = -2.0 * np.arcsin(min(max(vec[i], -1.0), 1.0))
+            rate = nu[i] - omega[p, i]
             u = scales[p, 2] * _infer1(scales[p, 0] * theta, scales[p, 1] * rate, vertices[p, 0], vertices[p, 1],
                                        r, vertices[p, 2])
             out[p, i] = min(max(u, -u_max), u_max)

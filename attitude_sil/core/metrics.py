@@ -10,9 +10,28 @@ from __future__ import annotations
 
 import numpy as np
 
-from .quaternion import euler_from_quat
+from .quaternion import euler_from_quat, quat_error, quat_multiply
 
-__all__ = ["step_metrics", "metrics_from_trajectory", "segment_metrics"]
+
+def principal_angle(q_BN: np.ndarray, q_RN: np.ndarray) -> np.ndarray:
+    """Angle of the attitude error rotation Q (Rodrigues), shape (...), rad."""
+    q = quat_error(q_BN, q_RN)
+    return 2.0 * np.arctan2(np.linalg.norm(q[..., :3], axis=-1), q[..., 3])
+
+
+def _axis_turn(axis: int, deg: float) -> np.ndarray:
+    v = np.zeros(4)
+    v[axis] = np.sin(np.radians(deg) / 2)
+    v[3] = np.cos(np.radians(deg) / 2)
+    return v
+
+
+#: paper 001: settled when the error angle stays below that of R1(0.1 deg) R2(0.1 deg) R3(0.1 deg)
+PAPER_001_SETTLING_ANGLE = float(2.0 * np.arccos(
+    quat_multiply(quat_multiply(_axis_turn(0, 0.1), _axis_turn(1, 0.1)), _axis_turn(2, 0.1))[3]))
+
+__all__ = ["step_metrics", "metrics_from_trajectory", "segment_metrics", "tracking_metrics", "scenario_metrics",
+           "principal_angle", "PAPER_001_SETTLING_ANGLE"]
 
 
 def _first_crossing(t: np.ndarray, y: np.ndarray, level: float | np.ndarray) -> np.ndarray:
@@ -138,6 +157,75 @@ def metrics_from_trajectory(
     dt = np.diff(t)
     m["control_effort_Nms"] = np.sum(np.linalg.norm(tau_c_B[:, :-1], axis=-1) * dt, axis=1)
     m["cost_J"] = np.abs(m["time_constant_s"] - tau_d) + w_os * m["overshoot_pct"]
+    return m
+
+
+def tracking_metrics(
+    t: np.ndarray,
+    q_BN: np.ndarray,
+    q_RN: np.ndarray,
+    tau_c_B: np.ndarray,
+    settling_angle: float = PAPER_001_SETTLING_ANGLE,
+    beta: float = 1.0,
+) -> dict[str, np.ndarray]:
+    """Paper 001's figures of a tracking manoeuvre.
+
+    ``settling_time_s``: first time after which the principal error angle
+    stays below ``settling_angle`` (NaN if it never settles);
+    ``control_effort_Nms``: Ce = sum ||tau|| dt (eq. 9); ``fitness_f``:
+    f = -(Ts + beta Ce) (eq. 8); ``final_error_rad``; ``iae`` and ``ise`` of
+    the error angle.
+    """
+    zeta = principal_angle(q_BN, q_RN)
+    outside = zeta > settling_angle
+    settle = np.full(zeta.shape[0], np.nan)
+    for p in range(zeta.shape[0]):
+        idx = np.nonzero(outside[p])[0]
+        if idx.size == 0:
+            settle[p] = t[0]
+        elif idx[-1] < t.size - 1:
+            settle[p] = t[idx[-1] + 1]
+    dt = np.diff(t)
+    ce = np.sum(np.linalg.norm(tau_c_B[:, :-1], axis=-1) * dt, axis=1)
+    return {
+        "settling_time_s": settle,
+        "control_effort_Nms": ce,
+        "fitness_f": -(settle + beta * ce),
+        "final_error_rad": zeta[:, -1],
+        "iae": np.sum(0.5 * (zeta[:, 1:] + zeta[:, :-1]) * dt, axis=1),
+        "ise": np.sum(0.5 * (zeta[:, 1:] ** 2 + zeta[:, :-1] ** 2) * dt, axis=1),
+    }
+
+
+def scenario_metrics(t: np.ndarray, q_BN: np.ndarray, q_RN: np.ndarray, tau_c_B: np.ndarray, scenario_values: dict,
+                     step_time: float = 0.0) -> dict[str, np.ndarray]:
+    """The metrics a scenario asks for (``scenario.metrics.mode``), batch (P, ...) arrays in and (P,) out.
+
+    * ``step``: :func:`metrics_from_trajectory` on ``metrics.axis``;
+    * ``regulation``: the same, from the initial angle to the setpoint, plus
+      ``mse`` (paper 002 eq. 10, the mean of the squared error in rad^2);
+    * ``tracking``: :func:`tracking_metrics`.
+    """
+    s = scenario_values
+    mode = s["metrics.mode"]
+    if mode == "tracking":
+        angle = s["metrics.settling_angle_deg"]
+        return tracking_metrics(t, q_BN, q_RN, tau_c_B,
+                                PAPER_001_SETTLING_ANGLE if angle < 0 else np.radians(angle), s["metrics.beta"])
+    m = metrics_from_trajectory(t, q_BN, q_RN, tau_c_B, axis=s["metrics.axis"], step_time=step_time,
+                                settling_band=s["metrics.settling_band"], tau_d=s["metrics.tau_d"],
+                                w_os=s["metrics.w_os"])
+    if mode == "regulation":
+        err = euler_from_quat(q_RN)[..., s["metrics.axis"]] - euler_from_quat(q_BN)[..., s["metrics.axis"]]
+        m["mse"] = np.mean(err**2, axis=1)
+        m["max_abs_error_rad"] = np.max(np.abs(err), axis=1)
+        # a disturbance with no step (paper 004's impulse): settled once |error| stays
+        # within the band of its peak
+        band = s["metrics.settling_band"] * m["max_abs_error_rad"]
+        for p in np.nonzero(np.isnan(m["settling_time_s"]))[0]:
+            idx = np.nonzero(np.abs(err[p]) > band[p])[0]
+            if idx.size and idx[-1] < t.size - 1:
+                m["settling_time_s"][p] = t[idx[-1] + 1]
     return m
 
 

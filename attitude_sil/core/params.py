@@ -12,6 +12,7 @@ description, with the reason.
 from __future__ import annotations
 
 import math
+import re
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
@@ -22,6 +23,8 @@ __all__ = ["ParamSpec", "NODE_PARAMS", "GLOBAL_NODE", "SCENARIO_NODE", "spec_for
 
 GLOBAL_NODE = "/**"
 SCENARIO_NODE = "scenario"
+
+_YAML12_FLOAT = re.compile(r"[-+]?(\.[0-9]+|[0-9]+(\.[0-9]*)?)([eE][-+]?[0-9]+)?")
 
 _KINDS = ("double", "integer", "bool", "string", "double_array", "integer_array", "string_array")
 
@@ -67,6 +70,8 @@ class ParamSpec:
 
     # -- validation ------------------------------------------------------------
     def _check_number(self, value: Any, where: str) -> float | int:
+        if isinstance(value, str) and _YAML12_FLOAT.fullmatch(value.strip()):
+            value = float(value)  # PyYAML (YAML 1.1) reads 1e-3 as a string; YAML 1.2 and ROS read a number
         if isinstance(value, bool) or not isinstance(value, (int, float)):
             raise ValueError(f"{where} must be a number, got {type(value).__name__} {value!r}")
         if self.kind.startswith("integer"):

@@ -80,7 +80,11 @@ class Scenario:
         return int(round(d / self.dt))
 
     def with_values(self, node: str, **updates: Any) -> Scenario:
-        """A copy with some of ``node``'s parameters replaced (validated)."""
+        """A copy with some of ``node``'s parameters replaced (validated).
+
+        ``node="/**"`` sets a name on every graph node that declares it.
+        Dotted names can be given with ``__`` (``pid__kp``) or through ``**{"pid.kp": ...}``.
+        """
         new = copy.deepcopy(self)
         specs = {s.name: s for s in NODE_PARAMS[node]}
         for key, value in updates.items():
@@ -91,8 +95,11 @@ class Scenario:
                 v = specs[name].validate(value, node)
             except ValueError as exc:
                 raise ScenarioError(str(exc)) from None
-            new.values[node][name] = v
-            new.explicit.setdefault(node, {})[name] = v
+            targets = [n for n in GRAPH_NODES if any(sp.name == name for sp in NODE_PARAMS[n])] \
+                if node == GLOBAL_NODE else [node]
+            for target in targets:
+                new.values[target][name] = copy.deepcopy(v)
+                new.explicit.setdefault(target, {})[name] = copy.deepcopy(v)
         _check_consistency(new)
         return new
 

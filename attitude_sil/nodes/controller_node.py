@@ -63,7 +63,7 @@ class ControllerNode(SchemaNode):
     def _rebuild(self) -> None:
         scn = self.scenario()
         self.core = build_controller(scn, 1)
-        self.dt_ns = int(round(scn.dt * 1e9))
+        self.dt_ns = int(round(self.param("control_period") * 1e9))
 
     def on_parameters_set(self, names: list[str]) -> None:
         v = self.values()

@@ -30,7 +30,7 @@ class DisturbanceNode(SchemaNode):
     def _rebuild(self) -> None:
         scn = self.scenario()
         self.core = build_disturbance(scn, 1)
-        self.dt_ns = int(round(scn.dt * 1e9))
+        self.dt_ns = int(round(self.param("control_period") * 1e9))
 
     def _on_attitude(self, msg: QuaternionStamped) -> None:
         t = stamp_to_ns(msg.header.stamp)

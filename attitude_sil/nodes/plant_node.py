@@ -1,6 +1,7 @@
 """``plant`` node: the spacecraft body, owner of simulation time.
 
-Publishes ``/clock``, ``attitude`` and ``body_rate`` for step k (stamp t_k),
+Publishes ``/clock``, ``attitude`` and ``body_rate`` for step k (stamp t_k)
+(and ``flexible_mode``, alpha and its rate, for paper 002's flexible model),
 waits for ``wheel_torque``, ``wheel_momentum`` and ``disturbance_torque``
 stamped t_k, integrates to t_k+1 with :class:`attitude_sil.core.engine.Plant`
 and publishes the next step (DESIGN.md section 3, lockstep). An input that
@@ -50,6 +51,9 @@ class PlantNode(SchemaNode):
         self.pub_clock = self.create_publisher(Clock, "/clock", LOCKSTEP_QOS)
         self.pub_attitude = self.create_publisher(QuaternionStamped, "attitude", LOCKSTEP_QOS)
         self.pub_rate = self.create_publisher(Vector3Stamped, "body_rate", LOCKSTEP_QOS)
+        self.pub_flex = None
+        if self.param("model") == "flexible_axis":
+            self.pub_flex = self.create_publisher(Vector3Stamped, "flexible_mode", LOCKSTEP_QOS)
         self.subs = [
             self.create_subscription(Vector3Stamped, name, lambda m, n=name: self._on_input(n, m), LOCKSTEP_QOS)
             for name in INPUTS
@@ -108,6 +112,12 @@ class PlantNode(SchemaNode):
         w.header.frame_id = "body"
         w.vector.x, w.vector.y, w.vector.z = (float(v) for v in s.omega_BN_B[0])
         self.pub_rate.publish(w)
+        if self.pub_flex is not None and hasattr(self.core, "alpha"):
+            f = Vector3Stamped()
+            f.header.stamp = stamp
+            f.header.frame_id = "body"
+            f.vector.x, f.vector.y = (float(v) for v in self.core.alpha[0])
+            self.pub_flex.publish(f)
         self._step_wall0 = time.monotonic()
 
     def fail(self, reason: str) -> None:

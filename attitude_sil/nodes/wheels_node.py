@@ -36,7 +36,7 @@ class WheelsNode(SchemaNode):
     def _rebuild(self) -> None:
         scn = self.scenario()
         self.core = build_wheels(scn, 1)
-        self.dt_ns = int(round(scn.dt * 1e9))
+        self.dt_ns = int(round(self.param("control_period") * 1e9))
 
     def _on_command(self, msg: Vector3Stamped, torque_mode: bool) -> None:
         t = stamp_to_ns(msg.header.stamp)
