@@ -99,6 +99,22 @@ def _format_segments(segments: list[dict]) -> str:
     return "\n".join(lines)
 
 
+def _cmd_linearize(args: argparse.Namespace) -> int:
+    from attitude_sil.core.scenario import load_scenario
+    from attitude_sil.linearize import PAPER_000_COMPARISON_GAINS, format_table, rmse_table
+
+    scn = load_scenario(args.scenario)
+    if scn.param("plant", "model") not in ("rigid_body", "linearized"):
+        raise ValueError(f"{args.scenario}: linearize needs a rigid-body scenario (plant.model), "
+                         f"got {scn.param('plant', 'model')}")
+    gains = tuple(args.gains) if args.gains else PAPER_000_COMPARISON_GAINS
+    table = rmse_table(scn, args.angles, gains, duration=args.duration)
+    print(format_table(args.angles, table))
+    if args.json:
+        print(json.dumps({"angles_deg": list(args.angles), "rmse_deg": table.tolist(), "gains": list(gains)}))
+    return 0
+
+
 def _cmd_param(args: argparse.Namespace) -> int:
     from attitude_sil.paramclient import param_command
 
@@ -133,6 +149,14 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--swap", action="append", metavar="TIME:TYPE",
                      help="swap controller_type at a sim time (repeatable), e.g. --swap 2.0:fuzzy_pid")
     run.set_defaults(func=_cmd_run)
+    lin = sub.add_parser("linearize", help="nonlinear vs linearised model RMSE table (paper 000 Table 1)")
+    lin.add_argument("scenario", help="rigid-body scenario YAML (e.g. config/hst_roll_step.yaml)")
+    lin.add_argument("--angles", type=float, nargs="+", default=[3, 8, 15, 25, 35], help="commands, deg")
+    lin.add_argument("--gains", type=float, nargs=4, metavar=("KP", "KI", "KD", "N"),
+                     help="PID of the comparison (default: paper 000's 52.995 2.488 132.442 4.748)")
+    lin.add_argument("--duration", type=float, help="episode length, s (default: the scenario's)")
+    lin.add_argument("--json", action="store_true", help="also print the table as one JSON object")
+    lin.set_defaults(func=_cmd_linearize)
     param = sub.add_parser("param", help="list, get or set parameters of a running node")
     param.add_argument("action", choices=("list", "get", "set"))
     param.add_argument("node", help="node name, e.g. controller")

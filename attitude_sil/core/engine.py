@@ -23,6 +23,7 @@ import numpy as np
 from .actuators import SpeedLoopWheels, TorqueActuator
 from .controllers import ControllerBank
 from .disturbance import DisturbanceModel, lvlh_attitude, orbit_rate
+from .linear import LinearizedPlant
 from .plants import FLEXIBLE_CASES, FlexibleAxisPlant, PitchNormalizedPlant
 from .quaternion import quat_from_euler, quat_multiply
 from .rigid_body import BodyState, rk4_step
@@ -184,7 +185,8 @@ def initial_attitude(values: dict, rpy0_deg=None) -> np.ndarray:
 def build_plant(scn: Scenario, n_episodes: int = 1, inertia=None, rpy0_deg=None, omega0=None):
     """The body model of the scenario's ``plant`` parameters (per-episode overrides optional).
 
-    ``rigid_body`` gives a :class:`Plant`; ``flexible_axis`` and
+    ``rigid_body`` gives a :class:`Plant`, ``linearized`` the model of
+    :mod:`attitude_sil.core.linear`; ``flexible_axis`` and
     ``pitch_normalized`` the single-axis models of :mod:`attitude_sil.core.plants`.
     """
     p = scn.values["plant"]
@@ -201,6 +203,8 @@ def build_plant(scn: Scenario, n_episodes: int = 1, inertia=None, rpy0_deg=None,
     m = inertia_matrix(p["inertia"] if inertia is None else inertia)
     m = np.array(np.broadcast_to(m, (n_episodes, 3, 3)))
     q0 = np.stack([initial_attitude(p, rpy[i]) for i in range(n_episodes)])
+    if p["model"] == "linearized":
+        return LinearizedPlant(m, dt, q0, w0)
     return Plant(m, dt, p["substeps"], q0, w0)
 
 
@@ -250,9 +254,11 @@ def build_disturbance(scn: Scenario, n_episodes: int = 1, seeds=None, inertia=No
     return DisturbanceModel(d, np.broadcast_to(m, (n_episodes, 3, 3)), seeds)
 
 
-def build_guidance(scn: Scenario, n_episodes: int = 1) -> Guidance:
+def build_guidance(scn: Scenario, n_episodes: int = 1, setpoints_rpy_deg=None) -> Guidance:
+    """Guidance of the scenario; ``setpoints_rpy_deg`` (P, 3) overrides the step target per episode."""
     g = scn.values["guidance"]
-    return Guidance(g["initial_setpoint_rpy_deg"], g["setpoint_rpy_deg"], g["step_time"], n_episodes,
+    final = g["setpoint_rpy_deg"] if setpoints_rpy_deg is None else setpoints_rpy_deg
+    return Guidance(g["initial_setpoint_rpy_deg"], final, g["step_time"], n_episodes,
                     mode=g["mode"], lvlh_rpy_deg=g["orbit.lvlh_initial_rpy_deg"],
                     orbit_rate_rad_s=orbit_rate(g["orbit.mu"], g["orbit.radius"]))
 
@@ -314,6 +320,7 @@ def simulate(
     seeds=None,
     controller: str | None = None,
     schedule: list[tuple[int, str]] | None = None,
+    setpoints_rpy_deg=None,
 ) -> Trajectory:
     """Run P episodes of the scenario in lockstep, vectorised over episodes.
 
@@ -335,6 +342,8 @@ def simulate(
     schedule : list of (step, controller_type), optional
         Swaps applied before the command of that step (default: the
         scenario's ``schedule.*``).
+    setpoints_rpy_deg : array_like, optional
+        Per-episode step targets, (P, 3) deg.
 
     Returns
     -------
@@ -346,7 +355,7 @@ def simulate(
     plant = build_plant(scn, P, inertia=inertia)
     wheels = build_wheels(scn, P)
     dist = build_disturbance(scn, P, seeds=seeds, inertia=inertia)
-    guide = build_guidance(scn, P)
+    guide = build_guidance(scn, P, setpoints_rpy_deg)
     ctrl = build_controller(scn, P, params=controller_params)
     if controller is not None:
         ctrl.active = controller

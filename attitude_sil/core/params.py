@@ -202,8 +202,9 @@ NODE_PARAMS: dict[str, list[ParamSpec]] = {
         _d("initial_error_deg", 0.0, "angle of that extra rotation, deg (paper 001: 1 deg about [-1,1,-1])",
            min=-180.0, max=180.0),
         ParamSpec("model", "string", "rigid_body",
-                  "body model: rigid_body (papers 000, 001, 003), flexible_axis (paper 002), "
-                  "pitch_normalized (paper 004)", choices=("rigid_body", "flexible_axis", "pitch_normalized")),
+                  "body model: rigid_body (papers 000, 001, 003), linearized (paper 000 eq. 20-28 about the "
+                  "initial rate), flexible_axis (paper 002), pitch_normalized (paper 004)",
+                  choices=("rigid_body", "linearized", "flexible_axis", "pitch_normalized")),
         ParamSpec("flex.axis", "integer", 0, "body axis of the flexible single-axis model", min=0, max=2),
         ParamSpec("flex.case", "string", "nominal",
                   "paper 002 parameter set: nominal, case1 (w^2 1.7), case2 (k1 0.76), case3 (w^2 1.7, k2 0.114), "
