@@ -111,6 +111,24 @@ def localhost_environment(env: dict[str, str] | None = None) -> dict[str, str]:
     return target
 
 
+#: metadata.yaml custom_data key holding every node's parameters at the start of the run
+PARAMETERS_KEY = "attitude_sil.parameters"
+
+
+def parameters_snapshot(scn: Scenario, extra: dict[str, Any]) -> str:
+    """Every graph node's full parameter set at the start, as a ROS 2 parameter YAML string.
+
+    Stored in the bag so ``replay --verify-controller`` can configure a fresh
+    controller as recorded; later changes are in ``/parameter_events``.
+    """
+    out = {}
+    for node in GRAPH_NODES:
+        values = dict(scn.values[node])
+        values.update({k: v for k, v in extra.items() if k in values})
+        out[node] = {"ros__parameters": values}
+    return yaml.safe_dump(out, sort_keys=True)
+
+
 def _node_overrides(scn: Scenario, node: str, extra: dict[str, Any]) -> dict[str, Any]:
     values = dict(scn.explicit.get(node, {}))
     values.update({k: v for k, v in extra.items() if k in {s for s in _names(node)}})
@@ -229,7 +247,7 @@ def run_graph(
     writer = None
     if record_dir is not None:
         try:
-            writer = BagWriter(record_dir)
+            writer = BagWriter(record_dir, custom_data={PARAMETERS_KEY: parameters_snapshot(scn, extra)})
         except (FileExistsError, ValueError, OSError) as exc:
             raise RunError(str(exc)) from None
     # compile (or load from numba's cache) every law's kernels before the clock

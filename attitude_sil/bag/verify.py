@@ -1,0 +1,203 @@
+"""``attitude-sil replay BAG --verify-controller``: controller regression against a recording.
+
+A fresh ``controller`` node, configured as recorded, is fed the recorded
+``attitude``, ``body_rate``, ``attitude_setpoint`` and ``rate_setpoint`` of
+each step in turn; its command for the step (``voltage_cmd`` or
+``torque_cmd``) is compared with the recorded one. The configuration comes
+from the parameter snapshot the runner stores in the bag's ``metadata.yaml``
+(or from ``--params FILE``), and recorded ``/parameter_events`` of the
+controller (gain changes, swaps) are applied before the step they precede,
+so a run with a live swap verifies too. This is how a user checks that a
+controller change did not alter behaviour on a library of recorded episodes.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import yaml
+
+from attitude_sil.bag.reader import BagError, open_bag
+from attitude_sil.core.params import spec_for
+from attitude_sil.core.scenario import ScenarioError, load_scenario, scenario_from_dict
+
+__all__ = ["VerifyResult", "verify_controller", "controller_parameters"]
+
+INPUTS = ("attitude", "body_rate", "attitude_setpoint", "rate_setpoint")
+COMMANDS = ("voltage_cmd", "torque_cmd")
+
+
+@dataclass
+class VerifyResult:
+    """Outcome of a verification.
+
+    Attributes
+    ----------
+    steps : int
+        Steps compared.
+    max_deviation : float
+        Largest |new - recorded| over steps and axes (V or N m).
+    worst_time_s : float
+        Sim time of that step.
+    worst_axis : int
+    tolerance : float
+    swaps : int
+        Recorded parameter changes applied.
+    """
+
+    steps: int
+    max_deviation: float
+    worst_time_s: float
+    worst_axis: int
+    tolerance: float
+    swaps: int
+
+    @property
+    def passed(self) -> bool:
+        return self.max_deviation <= self.tolerance
+
+
+def controller_parameters(bag_path: str | Path, params_file: str | Path | None = None) -> dict:
+    """The controller's parameters at the start of the recorded run.
+
+    From ``params_file`` (a scenario or parameter YAML) if given, else from the
+    snapshot in the bag's metadata.yaml.
+    """
+    if params_file is not None:
+        try:
+            return load_scenario(params_file).values["controller"]
+        except ScenarioError as exc:
+            raise BagError(str(exc)) from None
+    path = Path(bag_path)
+    meta = (path if path.is_dir() else path.parent) / "metadata.yaml"
+    snapshot = None
+    if meta.is_file():
+        info = yaml.safe_load(meta.read_text()) or {}
+        custom = info.get("rosbag2_bagfile_information", {}).get("custom_data") or {}
+        from attitude_sil.runner import PARAMETERS_KEY
+
+        snapshot = custom.get(PARAMETERS_KEY)
+    if not snapshot:
+        raise BagError(f"{path}: the bag holds no parameter snapshot (recorded by another tool, or the run "
+                       "was killed before its metadata was written); give --params FILE")
+    data = yaml.safe_load(snapshot)
+    return scenario_from_dict({"controller": data["controller"]}, source=f"{meta}", check=False).values["controller"]
+
+
+def _param_changes(reader) -> list[tuple[int, dict]]:
+    """Recorded changes of the controller's parameters as (stamp ns, {name: value})."""
+    from rclpy.parameter import parameter_value_to_python
+
+    out = []
+    topic = reader.find_topic("parameter_events")
+    if topic is None:
+        return out
+    for raw, msg in reader.iter_decoded(topics=[topic]):
+        if not msg.node.rstrip("/").endswith("controller"):
+            continue
+        changes = {p.name: parameter_value_to_python(p.value) for p in msg.changed_parameters}
+        if changes:
+            out.append((raw.log_time_ns, changes))
+    return out
+
+
+def verify_controller(bag_path: str | Path, params_file: str | Path | None = None, tolerance: float = 1e-9,
+                      timeout: float = 10.0) -> VerifyResult:
+    """Feed the recorded plant topics to a fresh controller node and compare its commands.
+
+    Raises
+    ------
+    BagError
+        Unreadable bag, missing topics, or a controller that does not answer.
+    """
+    import rclpy
+    from rclpy.experimental import EventsExecutor
+    from rclpy.node import Node
+    from rclpy.parameter import Parameter
+
+    from attitude_sil.nodes.common import LOCKSTEP_QOS, stamp_to_ns, typed_parameter
+    from attitude_sil.nodes.controller_node import ControllerNode
+    from attitude_sil.runner import localhost_environment
+    from attitude_sil.topics import STEP_TOPICS, message_class
+
+    reader = open_bag(bag_path)
+    names = {}
+    for short in INPUTS:
+        full = reader.find_topic(short)
+        if full is None:
+            raise BagError(f"{reader.paths[0]}: no {short} topic: cannot feed a controller")
+        names[short] = full
+    cmd_topics = [t for t in (reader.find_topic(c) for c in COMMANDS) if t is not None]
+    if not cmd_topics:
+        raise BagError(f"{reader.paths[0]}: no voltage_cmd or torque_cmd topic to compare with")
+    values = controller_parameters(bag_path, params_file)
+    changes = _param_changes(reader)
+    inputs: dict[int, dict[str, bytes]] = {}
+    for msg in reader.iter_raw(topics=list(names.values())):
+        inputs.setdefault(msg.log_time_ns, {})[msg.topic.split("/")[-1]] = msg.data
+    recorded: dict[int, tuple[str, np.ndarray]] = {}
+    for raw, msg in reader.iter_decoded(topics=cmd_topics):
+        recorded[raw.log_time_ns] = (raw.topic.split("/")[-1], np.array([msg.vector.x, msg.vector.y, msg.vector.z]))
+    stamps = sorted(t for t, v in inputs.items() if len(v) == len(INPUTS) and t in recorded)
+    if not stamps:
+        raise BagError(f"{reader.paths[0]}: no step has all controller inputs and a recorded command")
+
+    localhost_environment()
+    context = rclpy.Context()
+    rclpy.init(args=[], context=context)
+    got: dict[int, tuple[str, np.ndarray]] = {}
+    try:
+        overrides = [typed_parameter(spec_for("controller", k), v) for k, v in values.items() if v != []]
+        ctrl = ControllerNode(context=context, parameter_overrides=overrides)
+        feeder = Node("verify_feeder", context=context)
+        pubs = {n: feeder.create_publisher(message_class(STEP_TOPICS[n]), n, LOCKSTEP_QOS) for n in INPUTS}
+        for c in COMMANDS:
+            feeder.create_subscription(
+                message_class(STEP_TOPICS[c]), c,
+                lambda m, c=c: got.__setitem__(stamp_to_ns(m.header.stamp),
+                                               (c, np.array([m.vector.x, m.vector.y, m.vector.z]))),
+                LOCKSTEP_QOS)
+        executor = EventsExecutor(context=context)
+        executor.add_node(ctrl)
+        executor.add_node(feeder)
+        deadline = time.monotonic() + timeout
+        while any(p.get_subscription_count() < 1 for p in pubs.values()) or \
+                any(s.get_publisher_count() < 1 for s in feeder.subscriptions if s.topic_name.endswith("_cmd")):
+            if time.monotonic() > deadline:
+                raise BagError("the controller node did not connect")
+            executor.spin_once(timeout_sec=0.02)
+        pending = list(changes)
+        applied = 0
+        worst = (0.0, 0.0, 0)
+        for t in stamps:
+            while pending and pending[0][0] < t:
+                _, change = pending.pop(0)
+                results = ctrl.set_parameters([Parameter(k, value=v) for k, v in change.items()])
+                if not all(r.successful for r in results):
+                    raise BagError(f"the recorded change {change} is refused now: "
+                                   f"{'; '.join(r.reason for r in results if not r.successful)}")
+                applied += 1
+            for n in INPUTS:
+                pubs[n].publish(inputs[t][n])
+            deadline = time.monotonic() + timeout
+            while t not in got:
+                if time.monotonic() > deadline:
+                    raise BagError(f"the controller gave no command for t={t * 1e-9:.6f} s")
+                executor.spin_once(timeout_sec=0.05)
+            kind, vec = got[t]
+            rec_kind, rec_vec = recorded[t]
+            if kind != rec_kind:
+                dev, axis = math.inf, 0
+            else:
+                d = np.abs(vec - rec_vec)
+                axis = int(np.argmax(d))
+                dev = float(d[axis])
+            if dev > worst[0]:
+                worst = (dev, t * 1e-9, axis)
+        return VerifyResult(len(stamps), worst[0], worst[1], worst[2], tolerance, applied)
+    finally:
+        rclpy.try_shutdown(context=context)

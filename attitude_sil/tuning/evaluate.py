@@ -1,0 +1,198 @@
+"""Cost of a population of candidates: batch-engine runs and the papers' cost functions.
+
+Every candidate of a population runs as one episode of one vectorised
+:func:`attitude_sil.core.engine.simulate` call per scenario and condition
+(costs are summed over them); with ``workers > 1`` the population is split
+over processes. A candidate that diverges (non-finite state), runs a wheel
+into its speed limit, or breaks a cost's rule gets :data:`PENALTY` and a
+recorded reason; nothing raises.
+
+Costs (``cost.name``):
+
+* ``paper000_j`` — J = |tau - tau_d| + w_os OS (paper 000 eq. 19, OS in %).
+* ``paper001_fitness`` — Ts + beta Ce, i.e. -f of paper 001 eq. 8, with its
+  death penalty (a command above ``cost.limit``, N m) and its rule that the
+  entries of K differ. The law runs unsaturated so the command it asks for
+  is what is judged; the actuator still saturates.
+* ``mse`` — mean squared error (paper 002 eq. 10).
+* ``paper004_objective`` — eq. 7, ``int_0^tf (w1 theta^2 + w2 u^2) dt + w3 tf``
+  plus the two-level penalty of eq. 8 on theta(tf), q(tf); tf is the gene
+  ``final_time``.
+* ``ts_ce`` — the two objectives (Ts, Ce) for NSGA-II, with the death penalty.
+"""
+
+from __future__ import annotations
+
+from concurrent.futures import ProcessPoolExecutor
+from dataclasses import dataclass
+
+import numpy as np
+
+from attitude_sil.core.engine import simulate
+from attitude_sil.core.metrics import scenario_metrics
+from attitude_sil.core.quaternion import euler_from_quat
+
+from .spec import TuningSpec, decode
+
+__all__ = ["PENALTY", "Evaluation", "evaluate", "Evaluator"]
+
+#: cost of a failed candidate (finite, so rankings and medians stay defined)
+PENALTY = 1.0e6
+
+
+@dataclass
+class Evaluation:
+    """Costs of P candidates.
+
+    Attributes
+    ----------
+    F : (P, n_obj) costs to minimise (penalised)
+    terms : dict of (P,) arrays, the cost's ingredients
+    reasons : list of str, '' for a valid candidate
+    values : (P, n_genes) decoded gene values
+    """
+
+    F: np.ndarray
+    terms: dict
+    reasons: list
+    values: np.ndarray
+
+
+def _condition(scn, cond: dict):
+    for key, value in cond.items():
+        node, _, name = key.partition(".")
+        scn = scn.with_values(node, **{name: value})
+    return scn
+
+
+def _add(terms: dict, key: str, value: np.ndarray) -> None:
+    terms[key] = terms.get(key, 0.0) + value
+
+
+def evaluate(spec: TuningSpec, x: np.ndarray) -> Evaluation:
+    """Run and score the candidates ``x`` (P, n_var) in this process."""
+    params, values = decode(spec, x)
+    final_time = params.pop("final_time", None)
+    n = values.shape[0]
+    cost = spec.cost
+    name = cost["name"]
+    n_obj = 2 if name == "ts_ce" else 1
+    F = np.zeros((n, n_obj))
+    terms: dict[str, np.ndarray] = {}
+    reasons = [""] * n
+
+    def fail(mask, why):
+        for p in np.nonzero(mask)[0]:
+            if not reasons[p]:
+                reasons[p] = why
+
+    if "geometric.k" in params:
+        k = params["geometric.k"]
+        fail((k[:, 0] == k[:, 1]) | (k[:, 1] == k[:, 2]) | (k[:, 0] == k[:, 2]),
+             "equal k_i (paper 001: the entries of K must differ)")
+    for base in spec.scenarios:
+        for cond in spec.conditions:
+            scn = _condition(base, cond)
+            if name in ("paper001_fitness", "ts_ce"):
+                scn = scn.with_values("controller", **{"geometric.torque_limit": 1e3})
+            tr = simulate(scn, n, controller_params=params, controller=spec.controller, schedule=[])
+            finite = np.all(np.isfinite(tr.omega_BN_B), axis=(1, 2)) & np.all(np.isfinite(tr.u_cmd), axis=(1, 2))
+            fail(~finite, "diverged: non-finite state")
+            wheels = scn.values["wheels"]
+            if wheels["actuator"] == "reaction_wheels":
+                limit = wheels["motor.speed_max_rpm"] * 2 * np.pi / 60
+                fail(np.max(np.abs(np.nan_to_num(tr.wheel_speed, nan=np.inf)), axis=(1, 2)) >= 0.999 * limit,
+                     "runaway wheel speed: a wheel reached its speed limit")
+            with np.errstate(invalid="ignore"):
+                m = scenario_metrics(tr.t, tr.q_BN, tr.q_RN, tr.tau_c_B, scn.values["scenario"],
+                                     step_time=scn.param("guidance", "step_time"))
+            if name == "paper000_j":
+                fail(~np.isfinite(m["cost_J"]), "never reached 63.2 % of the step")
+                F[:, 0] += np.nan_to_num(m["cost_J"], nan=PENALTY)
+                _add(terms, "time_constant_s", m["time_constant_s"])
+                _add(terms, "overshoot_pct", m["overshoot_pct"])
+            elif name in ("paper001_fitness", "ts_ce"):
+                lim = float(cost.get("limit", scn.values["wheels"]["torque_limit"]))
+                peak = np.max(np.abs(np.nan_to_num(tr.u_cmd, nan=np.inf)), axis=(1, 2))
+                fail(peak > lim, f"death penalty: commanded torque above {lim:g} N m")
+                fail(~np.isfinite(m["settling_time_s"]), "never settled")
+                ts = np.nan_to_num(m["settling_time_s"], nan=PENALTY)
+                ce = m["control_effort_Nms"]
+                if name == "ts_ce":
+                    F[:, 0] += ts
+                    F[:, 1] += ce
+                else:
+                    F[:, 0] += ts + float(cost.get("beta", 1.0)) * ce
+                _add(terms, "settling_time_s", ts)
+                _add(terms, "control_effort_Nms", ce)
+                _add(terms, "peak_command_Nm", peak)
+            elif name == "mse":
+                F[:, 0] += np.nan_to_num(m["mse"], nan=PENALTY)
+                _add(terms, "mse", m["mse"])
+                _add(terms, "settling_time_s", m["settling_time_s"])
+            elif name == "paper004_objective":
+                F[:, 0] += _paper004(tr, scn, cost, final_time, terms)
+    for p, why in enumerate(reasons):
+        if why:
+            F[p] = PENALTY
+    F = np.nan_to_num(F, nan=PENALTY, posinf=PENALTY)
+    return Evaluation(F=F, terms={k: np.asarray(v) for k, v in terms.items()}, reasons=reasons, values=values)
+
+
+def _paper004(tr, scn, cost, final_time, terms) -> np.ndarray:
+    """Paper 004 eq. 7 with the two-level penalty of eq. 8, per candidate."""
+    axis = scn.values["scenario"]["metrics.axis"]
+    theta = euler_from_quat(tr.q_BN)[..., axis]
+    rate = tr.omega_BN_B[..., axis]
+    u = tr.u_cmd[..., axis]
+    dt = tr.t[1] - tr.t[0]
+    n = theta.shape[0]
+    tf = np.full(n, tr.t[-1]) if final_time is None else np.clip(final_time[:, 0], dt, tr.t[-1])
+    k_f = np.minimum(np.round(tf / dt).astype(int), tr.t.size - 1)
+    w1, w2, w3 = (float(cost.get(k, 1.0)) for k in ("w1", "w2", "w3"))
+    k1, k2, big = float(cost.get("k1", 200.0)), float(cost.get("k2", 100.0)), float(cost.get("K", 100.0))
+    theta_max = np.radians(float(cost.get("theta_max_deg", 30.0)))
+    integrand = w1 * theta**2 + w2 * u**2
+    f = np.array([np.sum(integrand[p, :k_f[p]]) * dt for p in range(n)]) + w3 * tf
+    th_f = np.abs(theta[np.arange(n), k_f])
+    q_f = np.abs(rate[np.arange(n), k_f])
+    p0 = k1 * th_f + k2 * q_f
+    pen = np.where(th_f <= theta_max / 4, p0, big * p0)
+    _add(terms, "objective", f)
+    _add(terms, "penalty", pen)
+    _add(terms, "final_time_s", tf)
+    return f + pen
+
+
+class Evaluator:
+    """Scores populations, splitting them over ``workers`` processes.
+
+    Use as a context manager; the pool lives as long as the tuning run.
+    """
+
+    def __init__(self, spec: TuningSpec, workers: int = 1) -> None:
+        self.spec = spec
+        self.workers = max(1, int(workers))
+        self.pool = None
+
+    def __enter__(self) -> Evaluator:
+        if self.workers > 1:
+            import multiprocessing as mp
+
+            self.pool = ProcessPoolExecutor(self.workers, mp_context=mp.get_context("fork"))
+        return self
+
+    def __exit__(self, *exc) -> None:
+        if self.pool is not None:
+            self.pool.shutdown(cancel_futures=True)
+
+    def __call__(self, x: np.ndarray) -> Evaluation:
+        x = np.atleast_2d(x)
+        if self.pool is None or x.shape[0] < 2 * self.workers:
+            return evaluate(self.spec, x)
+        chunks = np.array_split(x, self.workers)
+        parts = list(self.pool.map(evaluate, [self.spec] * len(chunks), chunks))
+        terms = {k: np.concatenate([p.terms[k] for p in parts]) for k in parts[0].terms}
+        return Evaluation(F=np.concatenate([p.F for p in parts]), terms=terms,
+                          reasons=[r for p in parts for r in p.reasons],
+                          values=np.concatenate([p.values for p in parts]))
