@@ -1,8 +1,7 @@
 """The ``attitude-sil`` command.
 
-Subcommands (DESIGN.md section 5): ``run`` and ``param`` are implemented;
-``tune``, ``replay``, ``bag`` and ``plot`` arrive with their issues and say
-so. User errors print one line on stderr and exit 2; Ctrl-C exits 130 after
+Subcommands (DESIGN.md section 5): ``run``, ``tune``, ``replay``, ``bag info``,
+``plot``, ``param`` and ``linearize``. User errors print one line on stderr and exit 2; Ctrl-C exits 130 after
 the bag is closed.
 """
 
@@ -10,9 +9,12 @@ from __future__ import annotations
 
 import argparse
 import json
+import signal
 import sys
 from datetime import datetime
 from pathlib import Path
+
+import yaml
 
 __all__ = ["main"]
 
@@ -126,10 +128,84 @@ def _cmd_param(args: argparse.Namespace) -> int:
     return 0
 
 
-def _not_yet(name: str):
-    def run(args: argparse.Namespace) -> int:
-        raise ValueError(f"'attitude-sil {name}' is not implemented yet")
-    return run
+def _cmd_bag(args: argparse.Namespace) -> int:
+    from attitude_sil.bag.info import format_info
+    from attitude_sil.bag.reader import open_bag
+
+    print(format_info(open_bag(args.bag)))
+    return 0
+
+
+def _cmd_plot(args: argparse.Namespace) -> int:
+    path = Path(args.path)
+    if (path / "summary.json").is_file() or (path / "evaluations.jsonl").is_file():
+        from attitude_sil.tuning.plot import plot_results
+
+        out = plot_results(path, args.output)
+    else:
+        from attitude_sil.plot import plot_bag
+
+        out = plot_bag(path, args.output)
+    print(f"wrote {out}")
+    return 0
+
+
+def _cmd_replay(args: argparse.Namespace) -> int:
+    if args.verify_controller:
+        from attitude_sil.bag.verify import verify_controller
+
+        result = verify_controller(args.bag, params_file=args.params, tolerance=args.tolerance)
+        verdict = "PASS" if result.passed else "FAIL"
+        print(f"{verdict}: {result.steps} steps, largest command deviation {result.max_deviation:.3g} "
+              f"at t={result.worst_time_s:.3f} s (axis {result.worst_axis}), tolerance {result.tolerance:g}, "
+              f"{result.swaps} recorded parameter change(s) applied")
+        return 0 if result.passed else 1
+    from attitude_sil.bag.replay import ReplayOptions, replay_bag
+
+    stop = {"flag": False}
+
+    def on_sigint(signum, frame):
+        stop["flag"] = True
+
+    old = signal.signal(signal.SIGINT, on_sigint)
+    options = ReplayOptions(rate=args.rate, start=args.start, duration=args.duration, topics=args.topics,
+                            loop=args.loop, namespace=args.namespace)
+
+    def progress(t, sent):
+        if not args.quiet:
+            print(f"\rreplay t={t:8.2f} s  {sent} messages", end="", file=sys.stderr, flush=True)
+
+    try:
+        sent = replay_bag(args.bag, options, on_progress=progress, should_stop=lambda: stop["flag"])
+    finally:
+        signal.signal(signal.SIGINT, old)
+    if not args.quiet:
+        print(file=sys.stderr)
+    print(f"replayed {sent} messages" + (" (interrupted)" if stop["flag"] else ""))
+    return 130 if stop["flag"] else 0
+
+
+def _cmd_tune(args: argparse.Namespace) -> int:
+    from attitude_sil.nodes.tuner_node import tune_command
+
+    overrides = {}
+    for item in args.set or []:
+        key, sep, value = item.partition("=")
+        if not sep:
+            raise ValueError(f"--set takes KEY=VALUE, got {item!r}")
+        overrides[key] = yaml.safe_load(value)
+    summary = tune_command(args.spec, resume=args.resume, overrides=overrides, quiet=args.quiet,
+                           record=not args.no_record)
+    best = summary.get("best_cost", [float("nan")])
+    print(f"tuning {summary.get('name')}: best cost {', '.join(f'{v:.6g}' for v in best)} after "
+          f"{summary.get('evaluations')} evaluations in {summary['wall_time_s']:.1f} s"
+          + (" (interrupted: --resume continues)" if summary.get("interrupted") else ""))
+    for name, value in (summary.get("best_parameters") or {}).items():
+        print(f"  {name}: {value}")
+    print(f"results in {summary['output']} (evaluations.csv/.json, best.yaml, summary.json, bags/)")
+    if args.json:
+        print(json.dumps(summary))
+    return 130 if summary.get("interrupted") else 0
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -164,18 +240,48 @@ def build_parser() -> argparse.ArgumentParser:
     param.add_argument("value", nargs="?", help="new value, parsed as YAML (e.g. '[1.0, 2.0, 3.0]')")
     param.add_argument("--timeout", type=float, default=10.0, help="seconds to wait for the node")
     param.set_defaults(func=_cmd_param)
-    for name in ("tune", "replay", "bag", "plot"):
-        p = sub.add_parser(name, help="(not implemented yet)")
-        p.add_argument("rest", nargs=argparse.REMAINDER)
-        p.set_defaults(func=_not_yet(name))
+    bag = sub.add_parser("bag", help="bag tools")
+    bag_sub = bag.add_subparsers(dest="bag_command", required=True)
+    info = bag_sub.add_parser("info", help="duration, start, end, counts and types per topic (like ros2 bag info)")
+    info.add_argument("bag", help="bag directory or .mcap file")
+    info.set_defaults(func=_cmd_bag)
+    plot = sub.add_parser("plot", help="plot a bag, or the results folder of a tuning run")
+    plot.add_argument("path", help="bag directory / .mcap file, or a tuning results folder")
+    plot.add_argument("-o", "--output", required=True, help="PNG file to write")
+    plot.set_defaults(func=_cmd_plot)
+    rep = sub.add_parser("replay", help="republish a bag with its timing, or verify a controller against it")
+    rep.add_argument("bag", help="bag directory or .mcap file")
+    rep.add_argument("--rate", type=float, default=1.0, help="speed factor (0: as fast as possible)")
+    rep.add_argument("--start", type=float, default=0.0, help="seconds into the bag to start from")
+    rep.add_argument("--duration", type=float, help="seconds of the bag to play")
+    rep.add_argument("--topics", nargs="+", help="topics to play (default: all but /parameter_events)")
+    rep.add_argument("--loop", action="store_true", help="start again at the end")
+    rep.add_argument("--namespace", help="publish under this namespace (not /clock)")
+    rep.add_argument("--quiet", action="store_true", help="no progress line")
+    rep.add_argument("--verify-controller", action="store_true",
+                     help="feed the recorded plant topics to a fresh controller and compare its commands")
+    rep.add_argument("--params", help="with --verify-controller: controller parameters from this YAML instead")
+    rep.add_argument("--tolerance", type=float, default=1e-9, help="largest allowed command deviation")
+    rep.set_defaults(func=_cmd_replay)
+    tune = sub.add_parser("tune", help="tune a controller with a spec (GA, PSO, NSGA-II, root locus)")
+    tune.add_argument("spec", help="tuning spec YAML (config/tune_*.yaml)")
+    tune.add_argument("--resume", action="store_true", help="continue the run saved in the output folder")
+    tune.add_argument("--set", action="append", metavar="KEY=VALUE",
+                      help="override a spec entry, e.g. --set cost.beta=1000 --set algorithm.generations=5")
+    tune.add_argument("--no-record", action="store_true", help="do not re-run bests through the graph")
+    tune.add_argument("--quiet", action="store_true", help="no progress bar")
+    tune.add_argument("--json", action="store_true", help="print the summary as one JSON object, last line")
+    tune.set_defaults(func=_cmd_tune)
     return parser
 
 
 def main(argv: list[str] | None = None) -> int:
     """Entry point of ``attitude-sil``."""
+    from attitude_sil.bag.reader import BagError
     from attitude_sil.core.scenario import ScenarioError
     from attitude_sil.paramclient import ParamClientError
     from attitude_sil.runner import RunError
+    from attitude_sil.tuning.spec import SpecError
 
     args = build_parser().parse_args(argv)
     try:
@@ -183,7 +289,7 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:
         print("interrupted; everything recorded so far is kept", file=sys.stderr)
         return 130
-    except (ScenarioError, RunError, ParamClientError, ValueError, FileNotFoundError) as exc:
+    except (ScenarioError, RunError, ParamClientError, BagError, SpecError, ValueError, FileNotFoundError) as exc:
         print(f"attitude-sil: error: {exc}", file=sys.stderr)
         return 2
 

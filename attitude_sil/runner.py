@@ -187,6 +187,144 @@ class _Progress:
             print(line, file=sys.stderr, flush=True)
 
 
+class GraphSession:
+    """A running graph that can play several episodes (the runner's and the tuner's).
+
+    ``with GraphSession(scn, ...) as g: g.run_episode(...)``. The graph is started
+    once: nodes in this process (or one process per node), a recorder, discovery
+    awaited by condition. Each :meth:`run_episode` optionally sets controller
+    parameters through the parameter service, calls ``plant/reset`` and spins
+    until every step topic holds all K+1 messages.
+
+    With ``namespace`` the whole graph, its ``/clock`` included (remapped to
+    ``/<ns>/clock``), lives under that namespace, so replicas on one ROS domain
+    do not hear each other.
+    """
+
+    def __init__(self, scn: Scenario, *, duration: float | None = None, controller: str | None = None,
+                 processes: bool = False, real_time: bool = False, namespace: str | None = None,
+                 connect_timeout: float = 20.0) -> None:
+        if controller is not None:
+            spec_for("controller", "controller_type").validate(controller, "controller")
+        self.scn = scn
+        self.extra = _extra_params(scn, duration, controller, real_time)
+        self.duration = scn.duration if duration is None else float(duration)
+        if self.duration <= 0.0:
+            raise RunError("the runner needs a finite episode: give plant.duration or --duration > 0")
+        self.processes = processes
+        self.namespace = namespace.strip("/") if namespace else None
+        self.connect_timeout = connect_timeout
+        self.controller = controller or scn.param("controller", "controller_type")
+
+    def __enter__(self) -> GraphSession:
+        import rclpy
+        from rclpy.experimental import EventsExecutor
+        from rclpy.signals import SignalHandlerOptions
+
+        from attitude_sil.bag.recorder import Recorder
+
+        localhost_environment()
+        # compile (or load from numba's cache) every law's kernels before the clock
+        # starts, so no node compiles mid-episode and node processes find the cache
+        for kind in OUTPUT_KIND:
+            try:
+                simulate(self.scn, 1, duration=self.scn.dt, controller=kind, schedule=[])
+            except ValueError:
+                pass  # a law this preset's actuator cannot take (e.g. torque into speed-loop wheels)
+        self.context = rclpy.Context()
+        self.interrupt = _Interrupt().__enter__()
+        rclpy.init(args=[], context=self.context, signal_handler_options=SignalHandlerOptions.NO)
+        self.nodes: list = []
+        self.children: list[subprocess.Popen] = []
+        self.tmpdir = None
+        self.recorder = None
+        try:
+            kw = _namespace_kwargs(self.namespace)
+            self.recorder = Recorder(None, keep=("attitude", "attitude_setpoint", "wheel_torque", "body_rate",
+                                                 "voltage_cmd", "torque_cmd"), context=self.context, **kw)
+            self.executor = EventsExecutor(context=self.context)
+            self.executor.add_node(self.recorder)
+            self.plant = None
+            if self.processes:
+                self.tmpdir = tempfile.TemporaryDirectory(prefix="attitude_sil_")
+                self.children = _start_processes(self.scn, self.extra, Path(self.tmpdir.name), self.namespace)
+            else:
+                self.plant = _start_nodes(self.scn, self.extra, self.context, self.executor, self.nodes, kw)
+            _wait_connected(self.recorder, self.spin, self.nodes, self.children, self.connect_timeout)
+        except BaseException:
+            self.__exit__(None, None, None)
+            raise
+        return self
+
+    def spin(self, timeout_sec: float) -> None:
+        """Process callbacks for up to ``timeout_sec``; raises KeyboardInterrupt after Ctrl-C."""
+        self.interrupt.check()
+        self.executor.spin_once(timeout_sec=timeout_sec)
+
+    def run_episode(self, *, record_dir: str | Path | None = None, controller_params: dict | None = None,
+                    progress: bool = False) -> RunResult:
+        """Play one episode; returns its metrics, counts, trajectory and bag."""
+        from attitude_sil.bag.writer import BagWriter
+
+        writer = None
+        if record_dir is not None:
+            extra = dict(self.extra)
+            if controller_params:
+                extra.update(controller_params)
+            try:
+                writer = BagWriter(record_dir, custom_data={PARAMETERS_KEY: parameters_snapshot(self.scn, extra)})
+            except (FileExistsError, ValueError, OSError) as exc:
+                raise RunError(str(exc)) from None
+        self.recorder.start_episode(writer)
+        prog = _Progress(progress, self.duration)
+        schedule = _schedule(self.scn, self.duration)
+        try:
+            if controller_params:
+                set_remote_parameters(self.recorder, self.spin, "controller", controller_params)
+            if schedule:  # a scheduled swap ends with the plant released: hold it again
+                set_remote_parameters(self.recorder, self.spin, "plant", {"hold_at": schedule[0][0]})
+            _call_reset(self.recorder, self.spin, self.connect_timeout)
+            wall0 = time.monotonic()
+            prog.t0 = wall0
+            _spin_episode(self.recorder, self.spin, self.plant, self.children, self.scn.steps(self.duration),
+                          self.scn, prog, schedule)
+            wall = time.monotonic() - wall0
+            prog.update(self.duration, force=True)
+        finally:
+            self.recorder.writer = None  # stop recording; the kept messages stay for the metrics
+            if writer is not None:
+                writer.close()
+        traj = _trajectory(self.recorder.kept)
+        metrics = _metrics(self.scn, traj, self.controller, self.duration, wall, writer, schedule)
+        return RunResult(metrics=metrics, bag=None if writer is None else writer.run_dir,
+                         counts=dict(self.recorder.counts), trajectory=traj)
+
+    def __exit__(self, *exc) -> None:
+        import rclpy
+
+        for node in self.nodes:
+            node.destroy_node()
+        self.nodes = []
+        _stop_processes(self.children)
+        self.children = []
+        if self.recorder is not None:
+            try:
+                self.recorder.destroy_node()
+            except Exception:  # noqa: BLE001 - best effort during teardown
+                pass
+        rclpy.try_shutdown(context=self.context)
+        if self.tmpdir is not None:
+            self.tmpdir.cleanup()
+            self.tmpdir = None
+        self.interrupt.__exit__()
+
+
+def _namespace_kwargs(namespace: str | None) -> dict:
+    if not namespace:
+        return {}
+    return {"namespace": "/" + namespace, "cli_args": ["--ros-args", "-r", f"/clock:=/{namespace}/clock"]}
+
+
 def run_graph(
     scn: Scenario,
     *,
@@ -197,6 +335,8 @@ def run_graph(
     real_time: bool = False,
     progress: bool = True,
     connect_timeout: float = 20.0,
+    namespace: str | None = None,
+    controller_params: dict | None = None,
 ) -> RunResult:
     """Run one episode of ``scn`` through the ROS graph.
 
@@ -217,6 +357,10 @@ def run_graph(
         Print a progress line on stderr.
     connect_timeout : float
         Wall seconds to wait for discovery.
+    namespace : str, optional
+        Run the whole graph (and its clock) under this namespace.
+    controller_params : dict, optional
+        Controller parameters set through the parameter service before the episode.
 
     Returns
     -------
@@ -229,85 +373,12 @@ def run_graph(
     KeyboardInterrupt
         After the bag is closed, so nothing recorded is lost.
     """
-    import rclpy
-    from rclpy.experimental import EventsExecutor
-    from rclpy.signals import SignalHandlerOptions
-
-    from attitude_sil.bag.recorder import Recorder
-    from attitude_sil.bag.writer import BagWriter
-
-    if controller is not None:
-        spec_for("controller", "controller_type").validate(controller, "controller")
-    extra = _extra_params(scn, duration, controller, real_time)
-    dur = scn.duration if duration is None else float(duration)
-    if dur <= 0.0:
-        raise RunError("the runner needs a finite episode: give plant.duration or --duration > 0")
-    k_steps = scn.steps(dur)
-    localhost_environment()
-    writer = None
-    if record_dir is not None:
-        try:
-            writer = BagWriter(record_dir, custom_data={PARAMETERS_KEY: parameters_snapshot(scn, extra)})
-        except (FileExistsError, ValueError, OSError) as exc:
-            raise RunError(str(exc)) from None
-    # compile (or load from numba's cache) every law's kernels before the clock
-    # starts, so no node compiles mid-episode and node processes find the cache
-    for kind in OUTPUT_KIND:
-        try:
-            simulate(scn, 1, duration=scn.dt, controller=kind, schedule=[])
-        except ValueError:
-            pass  # a law this preset's actuator cannot take (e.g. torque into speed-loop wheels)
-    context = rclpy.Context()
-    interrupt = _Interrupt().__enter__()
-    rclpy.init(args=[], context=context, signal_handler_options=SignalHandlerOptions.NO)
-    nodes = []
-    children: list[subprocess.Popen] = []
-    tmpdir = None
-    prog = _Progress(progress, dur)
-    try:
-        recorder = Recorder(writer, keep=("attitude", "attitude_setpoint", "wheel_torque", "body_rate",
-                                          "voltage_cmd", "torque_cmd"), context=context)
-        executor = EventsExecutor(context=context)
-        executor.add_node(recorder)
-        plant = None
-        if processes:
-            tmpdir = tempfile.TemporaryDirectory(prefix="attitude_sil_")
-            children = _start_processes(scn, extra, Path(tmpdir.name))
-        else:
-            plant = _start_nodes(scn, extra, context, executor, nodes)
-        def spin(timeout_sec: float) -> None:
-            interrupt.check()
-            executor.spin_once(timeout_sec=timeout_sec)
-
-        _wait_connected(recorder, spin, nodes, children, connect_timeout)
-        _call_reset(recorder, spin, connect_timeout)
-        wall0 = time.monotonic()
-        prog.t0 = wall0
-        _spin_episode(recorder, spin, plant, children, k_steps, scn, prog, _schedule(scn, dur))
-        wall = time.monotonic() - wall0
-        prog.update(dur, force=True)
-    finally:
-        for node in nodes:
-            node.destroy_node()
-        _stop_processes(children)
-        if writer is not None:
-            writer.close()
-        try:
-            recorder.destroy_node()
-        except Exception:  # noqa: BLE001 - best effort during teardown
-            pass
-        rclpy.try_shutdown(context=context)
-        if tmpdir is not None:
-            tmpdir.cleanup()
-        interrupt.__exit__()
-    traj = _trajectory(recorder.kept)
-    ctrl_type = controller or scn.param("controller", "controller_type")
-    metrics = _metrics(scn, traj, ctrl_type, dur, wall, writer, _schedule(scn, dur))
-    return RunResult(metrics=metrics, bag=None if writer is None else writer.run_dir,
-                     counts=dict(recorder.counts), trajectory=traj)
+    with GraphSession(scn, duration=duration, controller=controller, processes=processes, real_time=real_time,
+                      namespace=namespace, connect_timeout=connect_timeout) as graph:
+        return graph.run_episode(record_dir=record_dir, controller_params=controller_params, progress=progress)
 
 
-def _start_nodes(scn, extra, context, executor, nodes):
+def _start_nodes(scn, extra, context, executor, nodes, node_kwargs=None):
     from rclpy.parameter import Parameter
 
     from attitude_sil.nodes.common import typed_parameter
@@ -326,7 +397,7 @@ def _start_nodes(scn, extra, context, executor, nodes):
         overrides = [typed_parameter(spec_for(name, k), v) for k, v in values.items() if v != []]
         overrides.append(Parameter("use_sim_time", Parameter.Type.BOOL, True))
         try:
-            node = classes[name](context=context, parameter_overrides=overrides)
+            node = classes[name](context=context, parameter_overrides=overrides, **(node_kwargs or {}))
         except ValueError as exc:
             raise RunError(str(exc)) from None
         nodes.append(node)
@@ -336,7 +407,7 @@ def _start_nodes(scn, extra, context, executor, nodes):
     return plant
 
 
-def _start_processes(scn, extra, tmp: Path) -> list[subprocess.Popen]:
+def _start_processes(scn, extra, tmp: Path, namespace: str | None = None) -> list[subprocess.Popen]:
     children = []
     for name in GRAPH_NODES:
         values = {k: v for k, v in _node_overrides(scn, name, extra).items() if v != []}
@@ -344,6 +415,8 @@ def _start_processes(scn, extra, tmp: Path) -> list[subprocess.Popen]:
         path = tmp / f"{name}.yaml"
         path.write_text(yaml.safe_dump({name: {"ros__parameters": values}}))
         cmd = [sys.executable, "-m", f"attitude_sil.nodes.{name}_node", "--ros-args", "--params-file", str(path)]
+        if namespace:
+            cmd += ["-r", f"__ns:=/{namespace}", "-r", f"/clock:=/{namespace}/clock"]
         children.append(subprocess.Popen(cmd, stdin=subprocess.DEVNULL))
     return children
 

@@ -3,7 +3,9 @@
 Raw (serialized CDR) subscriptions go straight into
 :class:`attitude_sil.bag.writer.BagWriter`, so recording costs no
 deserialization. The log time of a message is its header stamp (sim time),
-read from the CDR bytes, so a bag replays with its simulated timing. The
+read from the CDR bytes, so a bag replays with its simulated timing;
+``/parameter_events`` (stamped by each node's clock, wall time before
+``use_sim_time`` takes effect) are logged at the latest lockstep stamp. The
 node also keeps the raw messages of chosen topics in memory for the runner's
 metrics.
 """
@@ -53,6 +55,7 @@ class Recorder(Node):
         super().__init__("recorder", **kwargs)
         self.writer = writer
         self.counts: dict[str, int] = defaultdict(int)
+        self.sim_now = 0  # latest lockstep stamp seen, ns
         self.kept: dict[str, list[tuple[int, bytes]]] = {name: [] for name in keep}
         self.subs = {}
         for name, type_name in (topics or RECORDED_TOPICS).items():
@@ -61,16 +64,34 @@ class Recorder(Node):
                 message_class(type_name), name, lambda data, n=name: self._on_message(n, data), qos, raw=True
             )
             self.subs[name] = sub
-            if writer is not None:
+        self.resolved = {name: sub.topic_name for name, sub in self.subs.items()}
+        self.types = dict(topics or RECORDED_TOPICS)
+        if writer is not None:
+            self.start_episode(writer)
+
+    def start_episode(self, writer: BagWriter | None) -> None:
+        """Clear counts and kept messages and record to ``writer`` (None: stop recording)."""
+        self.counts.clear()
+        self.sim_now = 0
+        for kept in self.kept.values():
+            kept.clear()
+        self.writer = writer
+        if writer is not None:
+            for name, sub in self.subs.items():
                 offered = qos_profiles_yaml(depth=1000) if name == "/parameter_events" else \
                     qos_profiles_yaml(durability="transient_local", depth=LOCKSTEP_QOS.depth)
-                writer.add_topic(sub.topic_name, type_name, offered)
-        self.resolved = {name: sub.topic_name for name, sub in self.subs.items()}
+                writer.add_topic(sub.topic_name, self.types[name], offered)
 
     def _on_message(self, name: str, data: bytes) -> None:
         t = stamp_from_cdr(data)
-        if t is None:
-            t = self.get_clock().now().nanoseconds
+        if name == "/parameter_events":
+            # events carry the node's clock: wall time until use_sim_time is on. Log
+            # them at the sim time of the lockstep instead, so a bag spans sim time only.
+            t = self.sim_now
+        elif t is None:
+            t = self.sim_now
+        else:
+            self.sim_now = max(self.sim_now, t)
         self.counts[name] += 1
         if self.writer is not None:
             self.writer.write(self.resolved[name], data, t)

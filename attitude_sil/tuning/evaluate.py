@@ -92,51 +92,70 @@ def evaluate(spec: TuningSpec, x: np.ndarray) -> Evaluation:
              "equal k_i (paper 001: the entries of K must differ)")
     for base in spec.scenarios:
         for cond in spec.conditions:
-            scn = _condition(base, cond)
-            if name in ("paper001_fitness", "ts_ce"):
-                scn = scn.with_values("controller", **{"geometric.torque_limit": 1e3})
+            scn = scenario_for(spec, base, cond)
             tr = simulate(scn, n, controller_params=params, controller=spec.controller, schedule=[])
-            finite = np.all(np.isfinite(tr.omega_BN_B), axis=(1, 2)) & np.all(np.isfinite(tr.u_cmd), axis=(1, 2))
-            fail(~finite, "diverged: non-finite state")
-            wheels = scn.values["wheels"]
-            if wheels["actuator"] == "reaction_wheels":
-                limit = wheels["motor.speed_max_rpm"] * 2 * np.pi / 60
-                fail(np.max(np.abs(np.nan_to_num(tr.wheel_speed, nan=np.inf)), axis=(1, 2)) >= 0.999 * limit,
-                     "runaway wheel speed: a wheel reached its speed limit")
-            with np.errstate(invalid="ignore"):
-                m = scenario_metrics(tr.t, tr.q_BN, tr.q_RN, tr.tau_c_B, scn.values["scenario"],
-                                     step_time=scn.param("guidance", "step_time"))
-            if name == "paper000_j":
-                fail(~np.isfinite(m["cost_J"]), "never reached 63.2 % of the step")
-                F[:, 0] += np.nan_to_num(m["cost_J"], nan=PENALTY)
-                _add(terms, "time_constant_s", m["time_constant_s"])
-                _add(terms, "overshoot_pct", m["overshoot_pct"])
-            elif name in ("paper001_fitness", "ts_ce"):
-                lim = float(cost.get("limit", scn.values["wheels"]["torque_limit"]))
-                peak = np.max(np.abs(np.nan_to_num(tr.u_cmd, nan=np.inf)), axis=(1, 2))
-                fail(peak > lim, f"death penalty: commanded torque above {lim:g} N m")
-                fail(~np.isfinite(m["settling_time_s"]), "never settled")
-                ts = np.nan_to_num(m["settling_time_s"], nan=PENALTY)
-                ce = m["control_effort_Nms"]
-                if name == "ts_ce":
-                    F[:, 0] += ts
-                    F[:, 1] += ce
-                else:
-                    F[:, 0] += ts + float(cost.get("beta", 1.0)) * ce
-                _add(terms, "settling_time_s", ts)
-                _add(terms, "control_effort_Nms", ce)
-                _add(terms, "peak_command_Nm", peak)
-            elif name == "mse":
-                F[:, 0] += np.nan_to_num(m["mse"], nan=PENALTY)
-                _add(terms, "mse", m["mse"])
-                _add(terms, "settling_time_s", m["settling_time_s"])
-            elif name == "paper004_objective":
-                F[:, 0] += _paper004(tr, scn, cost, final_time, terms)
+            score(spec, scn, tr, final_time, F, terms, fail)
     for p, why in enumerate(reasons):
         if why:
             F[p] = PENALTY
     F = np.nan_to_num(F, nan=PENALTY, posinf=PENALTY)
     return Evaluation(F=F, terms={k: np.asarray(v) for k, v in terms.items()}, reasons=reasons, values=values)
+
+
+def scenario_for(spec: TuningSpec, base, cond: dict):
+    """The scenario a candidate runs in: a condition applied, and for paper 001's
+    costs the law left unsaturated (the actuator still saturates) so the death
+    penalty sees what the law asks for."""
+    scn = _condition(base, cond)
+    if spec.cost["name"] in ("paper001_fitness", "ts_ce"):
+        scn = scn.with_values("controller", **{"geometric.torque_limit": 1e3})
+    return scn
+
+
+def score(spec: TuningSpec, scn, tr, final_time, F: np.ndarray, terms: dict, fail) -> None:
+    """Add the cost of trajectories ``tr`` (batch arrays with a leading P axis) to F and terms.
+
+    ``tr`` needs ``t``, ``q_BN``, ``q_RN``, ``omega_BN_B``, ``tau_c_B``, ``u_cmd``
+    and ``wheel_speed`` (may be None); ``fail(mask, reason)`` records failures.
+    """
+    cost = spec.cost
+    name = cost["name"]
+    finite = np.all(np.isfinite(tr.omega_BN_B), axis=(1, 2)) & np.all(np.isfinite(tr.u_cmd), axis=(1, 2))
+    fail(~finite, "diverged: non-finite state")
+    wheels = scn.values["wheels"]
+    if wheels["actuator"] == "reaction_wheels" and tr.wheel_speed is not None:
+        limit = wheels["motor.speed_max_rpm"] * 2 * np.pi / 60
+        fail(np.max(np.abs(np.nan_to_num(tr.wheel_speed, nan=np.inf)), axis=(1, 2)) >= 0.999 * limit,
+             "runaway wheel speed: a wheel reached its speed limit")
+    with np.errstate(invalid="ignore"):
+        m = scenario_metrics(tr.t, tr.q_BN, tr.q_RN, tr.tau_c_B, scn.values["scenario"],
+                             step_time=scn.param("guidance", "step_time"))
+    if name == "paper000_j":
+        fail(~np.isfinite(m["cost_J"]), "never reached 63.2 % of the step")
+        F[:, 0] += np.nan_to_num(m["cost_J"], nan=PENALTY)
+        _add(terms, "time_constant_s", m["time_constant_s"])
+        _add(terms, "overshoot_pct", m["overshoot_pct"])
+    elif name in ("paper001_fitness", "ts_ce"):
+        lim = float(cost.get("limit", scn.values["wheels"]["torque_limit"]))
+        peak = np.max(np.abs(np.nan_to_num(tr.u_cmd, nan=np.inf)), axis=(1, 2))
+        fail(peak > lim, f"death penalty: commanded torque above {lim:g} N m")
+        fail(~np.isfinite(m["settling_time_s"]), "never settled")
+        ts = np.nan_to_num(m["settling_time_s"], nan=PENALTY)
+        ce = m["control_effort_Nms"]
+        if name == "ts_ce":
+            F[:, 0] += ts
+            F[:, 1] += ce
+        else:
+            F[:, 0] += ts + float(cost.get("beta", 1.0)) * ce
+        _add(terms, "settling_time_s", ts)
+        _add(terms, "control_effort_Nms", ce)
+        _add(terms, "peak_command_Nm", peak)
+    elif name == "mse":
+        F[:, 0] += np.nan_to_num(m["mse"], nan=PENALTY)
+        _add(terms, "mse", m["mse"])
+        _add(terms, "settling_time_s", m["settling_time_s"])
+    elif name == "paper004_objective":
+        F[:, 0] += _paper004(tr, scn, cost, final_time, terms)
 
 
 def _paper004(tr, scn, cost, final_time, terms) -> np.ndarray:

@@ -69,7 +69,7 @@ def build_algorithm(spec: TuningSpec):
 
         variables = {}
         for g in spec.genome:
-            for i, label in enumerate(g.labels()):
+            for label in g.labels():
                 variables[f"{len(variables):03d}:{label}"] = (
                     Integer(bounds=(int(g.low), int(g.high))) if g.kind == "int" else Real(bounds=(g.low, g.high)))
 
