@@ -302,6 +302,8 @@ class GraphSession:
     def __exit__(self, *exc) -> None:
         import rclpy
 
+        if getattr(self, "executor", None) is not None:
+            self.executor.shutdown()
         for node in self.nodes:
             node.destroy_node()
         self.nodes = []

@@ -150,6 +150,7 @@ def verify_controller(bag_path: str | Path, params_file: str | Path | None = Non
     context = rclpy.Context()
     rclpy.init(args=[], context=context)
     got: dict[int, tuple[str, np.ndarray]] = {}
+    executor = ctrl = feeder = None
     try:
         overrides = [typed_parameter(spec_for("controller", k), v) for k, v in values.items() if v != []]
         ctrl = ControllerNode(context=context, parameter_overrides=overrides)
@@ -200,4 +201,9 @@ def verify_controller(bag_path: str | Path, params_file: str | Path | None = Non
                 worst = (dev, t * 1e-9, axis)
         return VerifyResult(len(stamps), worst[0], worst[1], worst[2], tolerance, applied)
     finally:
+        # destroy explicitly: a context shut down with live nodes leaves them in the graph
+        for name in ("executor", "ctrl", "feeder"):
+            obj = locals().get(name)
+            if obj is not None:
+                obj.shutdown() if name == "executor" else obj.destroy_node()
         rclpy.try_shutdown(context=context)
