@@ -146,3 +146,17 @@ def test_flexible_mismatch_cases_are_named_variants():
         tr = simulate(base.with_values("plant", **{"flex.case": case}), 1, duration=10.0)
         finals[case] = euler_from_quat(tr.q_BN[0, -1])[0]
     assert len({round(float(v), 9) for v in finals.values()}) == 5  # five different plants
+
+
+@pytest.mark.parametrize("k,l,ts,ce", [
+    ((0.0604, 0.0017, 0.0302), (0.0968, 0.0968, 0.0984), 176.1, 0.1),     # Table 2 row 4 (best, beta = 1)
+    ((0.0651, 0.0112, 0.0207), (0.0905, 0.0984, 0.0937), 179.4, 0.1),     # Table 2 row 3
+    ((0.0096, 0.0175, 0.0064), (0.0984, 0.0889, 0.0905), 230.8, 0.03956),  # Table 4 row 4 (beta = 1000)
+])
+def test_hawaiisat_reproduces_paper_001_ga_designs(k, l, ts, ce):
+    """The GA designs of paper 001 Tables 2 and 4 give its Ts and Ce in our model (Ce printed to 1-2 digits)."""
+    scn = load_scenario(CONFIG / "hawaiisat_lvlh.yaml")
+    tr = simulate(scn, 1, controller_params={"geometric.k": [list(k)], "geometric.l": [list(l)]})
+    m = tracking_metrics(tr.t, tr.q_BN, tr.q_RN, tr.tau_c_B)
+    assert m["settling_time_s"][0] == pytest.approx(ts, rel=0.01)
+    assert m["control_effort_Nms"][0] == pytest.approx(ce, rel=0.05)
