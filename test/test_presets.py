@@ -153,7 +153,7 @@ def test_flexible_mismatch_cases_are_named_variants():
     ((0.0651, 0.0112, 0.0207), (0.0905, 0.0984, 0.0937), 179.4, 0.1),     # Table 2 row 3
     ((0.0096, 0.0175, 0.0064), (0.0984, 0.0889, 0.0905), 230.8, 0.03956),  # Table 4 row 4 (beta = 1000)
 ])
-def test_hawaiisat_reproduces_paper_001_ga_designs(k, l, ts, ce):
+def test_hawaiisat_reproduces_paper_001_ga_designs(k, l, ts, ce):  # noqa: E741 - the paper's L
     """The GA designs of paper 001 Tables 2 and 4 give its Ts and Ce in our model (Ce printed to 1-2 digits)."""
     scn = load_scenario(CONFIG / "hawaiisat_lvlh.yaml")
     tr = simulate(scn, 1, controller_params={"geometric.k": [list(k)], "geometric.l": [list(l)]})

@@ -139,9 +139,11 @@ def tune_root_locus(spec, progress=None):
     labels = ["pid.kp", "pid.ki", "pid.kd", "pid.n"]
     row = {"generation": 1, "index": 0, "x": x.tolist(), "genome": dict(zip(labels, x.tolist(), strict=True)),
            "cost": [float(m["cost_J"][0])],
-           "terms": {"time_constant_s": float(m["time_constant_s"][0]), "overshoot_pct": float(m["overshoot_pct"][0]),
-                     "linear_rise_time_s": float(info["RiseTime"]), "linear_settling_time_s": float(info["SettlingTime"]),
-                     "linear_overshoot_pct": float(info["Overshoot"]), "pole_fit": float(best.fun)},
+           "terms": {"time_constant_s": float(m["time_constant_s"][0]),
+                     "overshoot_pct": float(m["overshoot_pct"][0]),
+                     "linear_rise_time_s": float(info["RiseTime"]),
+                     "linear_settling_time_s": float(info["SettlingTime"]),
+                     "linear_overshoot_pct": float(info["Overshoot"]), "design_objective": float(best.fun)},
            "failure": ""}
     (out / "evaluations.jsonl").write_text(json.dumps(row) + "\n")
     (out / "evaluations.json").write_text(json.dumps([row], indent=1))
