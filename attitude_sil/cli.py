@@ -58,7 +58,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
     from attitude_sil.core.scenario import load_scenario
     from attitude_sil.runner import run_graph
 
-    scn = load_scenario(args.scenario)
+    scn = _load_with_params(args.scenario, args.params)
     if args.duration is not None and args.duration <= 0:
         raise ValueError(f"--duration must be > 0, got {args.duration}")
     if args.swap:
@@ -79,7 +79,8 @@ def _cmd_run(args: argparse.Namespace) -> int:
         record = Path(args.record) if args.record else Path("bags") / (
             f"{scn.name}_{datetime.now().strftime('%Y%m%d_%H%M%S')}")
     result = run_graph(scn, duration=args.duration, controller=args.controller, record_dir=record,
-                       processes=args.processes, real_time=args.real_time, progress=not args.quiet)
+                       processes=args.processes, real_time=args.real_time, progress=not args.quiet,
+                       namespace=args.namespace)
     print(_format_table(result.metrics))
     if result.metrics.get("segments"):
         print(_format_segments(result.metrics["segments"]))
@@ -114,6 +115,35 @@ def _cmd_linearize(args: argparse.Namespace) -> int:
     print(format_table(args.angles, table))
     if args.json:
         print(json.dumps({"angles_deg": list(args.angles), "rmse_deg": table.tolist(), "gains": list(gains)}))
+    return 0
+
+
+def _load_with_params(scenario: str, params: str | None):
+    """A scenario with a controller parameter file (e.g. a tuner's best.yaml) laid over it."""
+    from attitude_sil.core.scenario import ScenarioError, load_scenario
+
+    scn = load_scenario(scenario)
+    if params:
+        path = Path(params)
+        if not path.is_file():
+            raise ValueError(f"{path}: no such parameter file")
+        data = yaml.safe_load(path.read_text()) or {}
+        for node, section in data.items():
+            values = (section or {}).get("ros__parameters", {})
+            try:
+                scn = scn.with_values(str(node).lstrip("/"), **values)
+            except (ScenarioError, KeyError) as exc:
+                raise ValueError(f"{path}: {exc}") from None
+    return scn
+
+
+def _cmd_robustness(args: argparse.Namespace) -> int:
+    from attitude_sil.tuning.robustness import format_robustness, robustness
+
+    rows = robustness(_load_with_params(args.scenario, args.params))
+    print(format_robustness(rows))
+    if args.json:
+        print(json.dumps(rows))
     return 0
 
 
@@ -222,6 +252,8 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--processes", action="store_true", help="one process per node (over DDS)")
     run.add_argument("--real-time", action="store_true", help="pace the plant at real time")
     run.add_argument("--quiet", action="store_true", help="no progress line")
+    run.add_argument("--params", help="parameter file laid over the scenario (e.g. a tuner's best.yaml)")
+    run.add_argument("--namespace", help="run the whole graph, its /clock included, under this namespace")
     run.add_argument("--swap", action="append", metavar="TIME:TYPE",
                      help="swap controller_type at a sim time (repeatable), e.g. --swap 2.0:fuzzy_pid")
     run.set_defaults(func=_cmd_run)
@@ -233,6 +265,12 @@ def build_parser() -> argparse.ArgumentParser:
     lin.add_argument("--duration", type=float, help="episode length, s (default: the scenario's)")
     lin.add_argument("--json", action="store_true", help="also print the table as one JSON object")
     lin.set_defaults(func=_cmd_linearize)
+    rob = sub.add_parser("robustness", help="a design on perturbed plants: inertia +-12.5 % (paper 001) or the "
+                         "flexible mismatch cases (paper 002)")
+    rob.add_argument("scenario", help="scenario YAML")
+    rob.add_argument("--params", help="controller parameters to evaluate (e.g. a tuner's best.yaml)")
+    rob.add_argument("--json", action="store_true", help="also print the rows as JSON")
+    rob.set_defaults(func=_cmd_robustness)
     param = sub.add_parser("param", help="list, get or set parameters of a running node")
     param.add_argument("action", choices=("list", "get", "set"))
     param.add_argument("node", help="node name, e.g. controller")

@@ -137,3 +137,18 @@ def test_same_seed_same_result(tmp_path):
     a = run_tuning(small("tune_flexible_pid_pso.yaml", tmp_path / "a", 6, 3, 20.0))
     b = run_tuning(small("tune_flexible_pid_pso.yaml", tmp_path / "b", 6, 3, 20.0))
     assert np.array_equal(a.best_x, b.best_x)
+
+
+def test_robustness_over_inertia_errors_and_flexible_cases():
+    from attitude_sil.core.scenario import load_scenario
+    from attitude_sil.tuning.robustness import robustness
+
+    rows = robustness(load_scenario(CONFIG / "hawaiisat_lvlh.yaml"))
+    assert [r["case"] for r in rows][0] == "J -12.5 %" and len(rows) == 11
+    ts = [r["settling_time_s"] for r in rows]
+    ce = [r["control_effort_Nms"] for r in rows]
+    assert np.all(np.diff(ce) > 0)  # a heavier body costs more effort (paper 001 Fig. 6)
+    assert ts[-1] > ts[5] > ts[0]  # and settles later
+    flex = robustness(load_scenario(CONFIG / "flexible_axis.yaml"))
+    assert [r["case"] for r in flex] == ["nominal", "case1", "case2", "case3", "case4"]
+    assert len({round(r["mse"], 9) for r in flex}) == 5

@@ -47,9 +47,12 @@ RPM = 2.0 * np.pi / 60.0
 
 
 def inertia_matrix(values) -> np.ndarray:
-    """3 principal values or 9 row-major entries -> (3, 3) kg m^2 (symmetric, positive definite)."""
+    """3 principal values or 9 row-major entries (or (P, 3) / (P, 9)) -> (..., 3, 3) kg m^2.
+
+    Raises ``ValueError`` unless symmetric and positive definite.
+    """
     v = np.asarray(values, dtype=float)
-    m = np.diag(v) if v.shape[-1] == 3 else v.reshape(v.shape[:-1] + (3, 3))
+    m = v[..., :, None] * np.eye(3) if v.shape[-1] == 3 else v.reshape(v.shape[:-1] + (3, 3))
     if not np.allclose(m, np.swapaxes(m, -1, -2)):
         raise ValueError("inertia must be symmetric")
     if np.any(np.linalg.eigvalsh(m) <= 0.0):
