@@ -55,7 +55,6 @@ def _format_table(metrics: dict) -> str:
 
 
 def _cmd_run(args: argparse.Namespace) -> int:
-    from attitude_sil.core.scenario import load_scenario
     from attitude_sil.runner import run_graph
 
     scn = _load_with_params(args.scenario, args.params)
