@@ -66,7 +66,9 @@ def plot_results(folder: str | Path, out_png: str | Path) -> Path:
         ax2 = ax.twinx()
         ax2.bar(gens, failed, alpha=0.15, color="red", label="failed (penalised)")
         ax2.set_ylabel("failed candidates")
-        ax2.legend(loc="upper right", fontsize=8)
+        ax2.legend(loc="center right", fontsize=8)
+        ax.set_zorder(ax2.get_zorder() + 1)  # lines over the bars
+        ax.patch.set_visible(False)
     ax.legend(loc="upper center", fontsize=8)
     algo = summary.get("algorithm", {}).get("name", "")
     ax.set_title(f"{summary.get('name', folder.name)}: {algo}, {len(rows)} evaluations")
