@@ -98,6 +98,50 @@ def rk4_body(q, w, h, inertia, inertia_inv, tau_c, tau_e, dt, substeps):
     return qo, wo, ho
 
 
+@njit(cache=True, inline="always")
+def _error_quat(q_BN, q_RN, p):
+    # q_BR = q_RN* ⊗ q_BN with a non-negative scalar part
+    bx, by, bz, bw = q_BN[p, 0], q_BN[p, 1], q_BN[p, 2], q_BN[p, 3]
+    rx, ry, rz, rw = -q_RN[p, 0], -q_RN[p, 1], -q_RN[p, 2], q_RN[p, 3]
+    ex = rw * bx + bw * rx + ry * bz - rz * by
+    ey = rw * by + bw * ry + rz * bx - rx * bz
+    ez = rw * bz + bw * rz + rx * by - ry * bx
+    ew = rw * bw - rx * bx - ry * by - rz * bz
+    if ew < 0.0:
+        return -ex, -ey, -ez, -ew
+    return ex, ey, ez, ew
+
+
+@njit(cache=True, inline="always")
+def _segment_uniform(x):
+    # _segment for the evenly spaced vertices -1, -2/3, ..., 1: direct index
+    if x <= -1.0:
+        return 0, 0.0
+    if x >= 1.0:
+        return 5, 1.0
+    s = (x + 1.0) * 3.0
+    j = min(int(s), 5)
+    return j, s - j
+
+
+@njit(cache=True, inline="always")
+def _infer_uniform(xr, xc, r):
+    # _infer1 with evenly spaced input and output sets (output centre of set k is (k - 4) / 3)
+    i, ti = _segment_uniform(xr)
+    j, tj = _segment_uniform(xc)
+    c00, c01, c10, c11 = r[i, j], r[i, j + 1], r[i + 1, j], r[i + 1, j + 1]
+    return ((1.0 - ti) * ((1.0 - tj) * c00 + tj * c01) + ti * ((1.0 - tj) * c10 + tj * c11) - 4.0) / 3.0
+
+
+@njit(cache=True, inline="always")
+def _error3(q_BN, q_RN, p, angle_mode):
+    # the error vector e = -vec(q_BR) (short way round), or 2 asin(e_i) per axis in angle mode
+    ex, ey, ez, _ = _error_quat(q_BN, q_RN, p)
+    if angle_mode:
+        return 2.0 * np.arcsin(-ex), 2.0 * np.arcsin(-ey), 2.0 * np.arcsin(-ez)
+    return -ex, -ey, -ez
+
+
 @njit(cache=True)
 def pid_step(q_BN, q_RN, kp, ki, kd, n, a, integral, filt, dt, u_max, angle_mode):
     """One PID step for every episode and axis; updates ``integral`` and ``filt`` in place.
@@ -109,16 +153,7 @@ def pid_step(q_BN, q_RN, kp, ki, kd, n, a, integral, filt, dt, u_max, angle_mode
     m = q_BN.shape[0]
     u = np.empty((m, 3))
     for p in range(m):
-        bx, by, bz, bw = q_BN[p, 0], q_BN[p, 1], q_BN[p, 2], q_BN[p, 3]
-        rx, ry, rz, rw = -q_RN[p, 0], -q_RN[p, 1], -q_RN[p, 2], q_RN[p, 3]
-        ex = rw * bx + bw * rx + ry * bz - rz * by
-        ey = rw * by + bw * ry + rz * bx - rx * bz
-        ez = rw * bz + bw * rz + rx * by - ry * bx
-        ew = rw * bw - rx * bx - ry * by - rz * bz
-        sign = -1.0 if ew < 0.0 else 1.0
-        e = (-sign * ex, -sign * ey, -sign * ez)
-        if angle_mode:
-            e = (2.0 * np.arcsin(e[0]), 2.0 * np.arcsin(e[1]), 2.0 * np.arcsin(e[2]))
+        e = _error3(q_BN, q_RN, p, angle_mode)
         for i in range(3):
             deriv = n[p, i] * (e[i] - filt[p, i])
             raw = kp[p, i] * e[i] + ki[p, i] * integral[p, i] + kd[p, i] * deriv
@@ -206,41 +241,6 @@ def fuzzy_infer(x_row, x_col, v_row, v_col, rules, centres):
 
 
 @njit(cache=True, inline="always")
-def _error_quat(q_BN, q_RN, p):
-    # q_BR = q_RN* ⊗ q_BN with a non-negative scalar part
-    bx, by, bz, bw = q_BN[p, 0], q_BN[p, 1], q_BN[p, 2], q_BN[p, 3]
-    rx, ry, rz, rw = -q_RN[p, 0], -q_RN[p, 1], -q_RN[p, 2], q_RN[p, 3]
-    ex = rw * bx + bw * rx + ry * bz - rz * by
-    ey = rw * by + bw * ry + rz * bx - rx * bz
-    ez = rw * bz + bw * rz + rx * by - ry * bx
-    ew = rw * bw - rx * bx - ry * by - rz * bz
-    if ew < 0.0:
-        return -ex, -ey, -ez, -ew
-    return ex, ey, ez, ew
-
-
-@njit(cache=True, inline="always")
-def _segment_uniform(x):
-    # _segment for the evenly spaced vertices -1, -2/3, ..., 1: direct index
-    if x <= -1.0:
-        return 0, 0.0
-    if x >= 1.0:
-        return 5, 1.0
-    s = (x + 1.0) * 3.0
-    j = min(int(s), 5)
-    return j, s - j
-
-
-@njit(cache=True, inline="always")
-def _infer_uniform(xr, xc, r):
-    # _infer1 with evenly spaced input and output sets (output centre of set k is (k - 4) / 3)
-    i, ti = _segment_uniform(xr)
-    j, tj = _segment_uniform(xc)
-    c00, c01, c10, c11 = r[i, j], r[i, j + 1], r[i + 1, j], r[i + 1, j + 1]
-    return ((1.0 - ti) * ((1.0 - tj) * c00 + tj * c01) + ti * ((1.0 - tj) * c10 + tj * c11) - 4.0) / 3.0
-
-
-@njit(cache=True, inline="always")
 def _infer1(xr, xc, vr, vc, r, c):
     i, ti = _segment(xr, vr)
     j, tj = _segment(xc, vc)
@@ -261,10 +261,7 @@ def fuzzy_pid_step(q_BN, q_RN, e_prev, has_prev, kp, ki, kd, n, a, integral, fil
     m = q_BN.shape[0]
     out = np.empty((m, 3))
     for p in range(m):
-        ex, ey, ez, _ = _error_quat(q_BN, q_RN, p)
-        e3 = (-ex, -ey, -ez)
-        if angle_mode:
-            e3 = (2.0 * np.arcsin(e3[0]), 2.0 * np.arcsin(e3[1]), 2.0 * np.arcsin(e3[2]))
+        e3 = _error3(q_BN, q_RN, p, angle_mode)
         r = rules[p]
         for i in range(3):
             e = e3[i]
