@@ -152,3 +152,39 @@ def test_robustness_over_inertia_errors_and_flexible_cases():
     flex = robustness(load_scenario(CONFIG / "flexible_axis.yaml"))
     assert [r["case"] for r in flex] == ["nominal", "case1", "case2", "case3", "case4"]
     assert len({round(r["mse"], 9) for r in flex}) == 5
+
+
+def test_tuner_node_publishes_progress():
+    import time
+
+    import rclpy
+    from diagnostic_msgs.msg import DiagnosticStatus
+    from rclpy.executors import SingleThreadedExecutor
+
+    from attitude_sil.nodes.tuner_node import TunerNode
+
+    tuner = TunerNode()
+    got = []
+    ctx = rclpy.Context()
+    rclpy.init(args=[], context=ctx)
+    listener = rclpy.create_node("progress_listener", context=ctx)
+    listener.create_subscription(DiagnosticStatus, "/tuner/progress", got.append, 10)
+    executor = SingleThreadedExecutor(context=ctx)
+    executor.add_node(listener)
+    try:
+        deadline = time.monotonic() + 20
+        while tuner.pub.get_subscription_count() < 1:  # discovery, by condition
+            assert time.monotonic() < deadline
+            executor.spin_once(timeout_sec=0.05)
+        tuner.publish({"generation": 3, "generations": 40, "best": 0.5, "median": 1.25, "failed": 2,
+                       "evals_per_s": 400.0})
+        while not got:
+            assert time.monotonic() < deadline
+            executor.spin_once(timeout_sec=0.05)
+    finally:
+        listener.destroy_node()
+        rclpy.try_shutdown(context=ctx)
+        tuner.close()
+    values = {kv.key: kv.value for kv in got[0].values}
+    assert got[0].name == "tuner" and got[0].message == "generation 3/40"
+    assert values["best"] == "0.5" and values["median"] == "1.25" and values["failed"] == "2"
