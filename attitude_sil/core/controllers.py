@@ -24,7 +24,7 @@ import numpy as np
 
 from .disturbance import aerodynamic_torque, gravity_gradient_torque, orbit_rate
 from .fuzzy import FUZZY_PID_DEFAULT_RULES, UNIFORM_VERTICES, vertices_from_ratios
-from .kernels import fuzzy_infer, fuzzy_pid_step, ga_flc_step, pid_step
+from .kernels import fuzzy_infer, fuzzy_pid_step, ga_flc_step, geometric_step, pid_step
 from .quaternion import cross, error_vector, quat_error, quat_to_dcm
 
 __all__ = [
@@ -424,6 +424,7 @@ class Geometric(_Stateless):
         self.l = np.atleast_2d(np.asarray(l, dtype=float))
         self.inertia = np.asarray(inertia, dtype=float)
         self.environment = environment
+        self._cache = None
 
     def environment_torque(self, inp: StepInput) -> np.ndarray | None:
         """Modelled environmental moment, (P, 3) N m, with the reference taken as LVLH (R_BL = Q^T)."""
@@ -461,7 +462,25 @@ class Geometric(_Stateless):
         return tau
 
     def _law(self, inp: StepInput) -> np.ndarray:
-        return np.clip(self.torque_terms(inp, self.environment_torque(inp)), -self.u_max, self.u_max)
+        """The compiled law (:func:`attitude_sil.core.kernels.geometric_step`), saturated;
+        :meth:`torque_terms` + :meth:`environment_torque` is its numpy reference."""
+        n = inp.q_BN.shape[0]
+        if self._cache is None or self._cache[0].shape[0] != n:
+            env = self.environment or {"models": [], "rate": 0.0, "speed": 0.0, "aero.density": 0.0,
+                                       "aero.drag_coefficient": 0.0, "aero.area": 0.0,
+                                       "aero.cp_offset": [0.0, 0.0, 0.0]}
+            coeff = 0.5 * env["aero.density"] * env["aero.drag_coefficient"] * env["aero.area"] * env["speed"] ** 2
+            self._cache = (_pe(self.k, n, 3), _pe(self.l, n, 3),
+                           np.ascontiguousarray(np.broadcast_to(self.inertia, (n, 3, 3))), float(env["rate"]),
+                           float(coeff), np.asarray(env["aero.cp_offset"], dtype=float),
+                           "gravity_gradient" in env["models"], "aerodynamic" in env["models"])
+        k, l, J, rate, coeff, cp, use_gg, use_aero = self._cache  # noqa: E741
+        c = np.ascontiguousarray
+        has_prev = self.w_d_prev is not None
+        prev = self.w_d_prev if has_prev else np.zeros((n, 3))
+        return geometric_step(c(inp.q_BN, dtype=float), c(inp.omega_BN_B, dtype=float), c(inp.q_RN, dtype=float),
+                              c(inp.omega_RN_R, dtype=float), c(prev, dtype=float), has_prev, k, l, J, self.dt,
+                              self.u_max, rate, coeff, cp, use_gg, use_aero)
 
     def compute(self, inp: StepInput) -> np.ndarray:
         u = np.clip(self._apply_offset(self._law(inp)), -self.u_max, self.u_max)

@@ -318,3 +318,61 @@ def ga_flc_step(q_BN, omega, q_RN, omega_RN_R, rules, vertices, scales, u_max):
                                        r, vertices[p, 2])
             out[p, i] = min(max(u, -u_max), u_max)
     return out
+
+
+@njit(cache=True)
+def geometric_step(q_BN, omega, q_RN, w_d, w_d_prev, has_prev, k, l, inertia, dt, u_max,  # noqa: E741
+                   gg_rate, aero_coeff, cp_offset, use_gg, use_aero):
+    """Geometric tracking law (see ``controllers.Geometric``) for every episode, saturated.
+
+    Shapes: quaternions (P, 4); omega, w_d, w_d_prev, k, l (P, 3); inertia (P, 3, 3);
+    cp_offset (3,). ``aero_coeff`` is 0.5 rho C_d A V^2. Returns (P, 3) N m.
+    """
+    m = q_BN.shape[0]
+    out = np.empty((m, 3))
+    Q = np.empty((3, 3))
+    for p in range(m):
+        x, y, z, w = _error_quat(q_BN, q_RN, p)  # q_BR: Q = R(q_BR) = R_d^T R
+        Q[0, 0] = 1 - 2 * (y * y + z * z)
+        Q[0, 1] = 2 * (x * y - z * w)
+        Q[0, 2] = 2 * (x * z + y * w)
+        Q[1, 0] = 2 * (x * y + z * w)
+        Q[1, 1] = 1 - 2 * (x * x + z * z)
+        Q[1, 2] = 2 * (y * z - x * w)
+        Q[2, 0] = 2 * (x * z - y * w)
+        Q[2, 1] = 2 * (y * z + x * w)
+        Q[2, 2] = 1 - 2 * (x * x + y * y)
+        J = inertia[p]
+        nu = np.zeros(3)
+        wdd = np.zeros(3)
+        for i in range(3):
+            for j in range(3):
+                nu[i] += Q[j, i] * w_d[p, j]
+                if has_prev:
+                    wdd[i] += Q[j, i] * (w_d[p, j] - w_d_prev[p, j]) / dt
+        jnu = J @ nu
+        jwdd = J @ wdd
+        kk = k[p]
+        s_k = (kk[2] * Q[2, 1] - kk[1] * Q[1, 2], kk[0] * Q[0, 2] - kk[2] * Q[2, 0], kk[1] * Q[1, 0] - kk[0] * Q[0, 1])
+        cx = nu[1] * jnu[2] - nu[2] * jnu[1]
+        cy = nu[2] * jnu[0] - nu[0] * jnu[2]
+        cz = nu[0] * jnu[1] - nu[1] * jnu[0]
+        tau = (-l[p, 0] * (omega[p, 0] - nu[0]) - s_k[0] + jwdd[0] + cx,
+               -l[p, 1] * (omega[p, 1] - nu[1]) - s_k[1] + jwdd[1] + cy,
+               -l[p, 2] * (omega[p, 2] - nu[2]) - s_k[2] + jwdd[2] + cz)
+        env = np.zeros(3)
+        if use_gg:
+            nadir = -Q[2, :]  # -l3 in B: column 3 of R_BL = Q^T
+            jn = J @ nadir
+            c = 3.0 * gg_rate * gg_rate
+            env[0] += c * (nadir[1] * jn[2] - nadir[2] * jn[1])
+            env[1] += c * (nadir[2] * jn[0] - nadir[0] * jn[2])
+            env[2] += c * (nadir[0] * jn[1] - nadir[1] * jn[0])
+        if use_aero:
+            v = Q[0, :]  # l1 in B
+            env[0] += aero_coeff * (v[1] * cp_offset[2] - v[2] * cp_offset[1])
+            env[1] += aero_coeff * (v[2] * cp_offset[0] - v[0] * cp_offset[2])
+            env[2] += aero_coeff * (v[0] * cp_offset[1] - v[1] * cp_offset[0])
+        for i in range(3):
+            out[p, i] = min(max(tau[i] - env[i], -u_max), u_max)
+    return out
