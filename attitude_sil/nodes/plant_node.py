@@ -177,6 +177,8 @@ class PlantNode(SchemaNode):
         if self.k >= self.n_steps > 0:
             self.running = False
             self.done = True
+            wall = time.monotonic() - self._episode_wall0
+            self.get_logger().info(f"episode complete: {self.t_ns * 1e-9:g} s of sim time in {wall:.2f} s wall")
 
     def on_parameters_set(self, names: list[str]) -> None:
         if "hold_at" in names and self.holding and self.running:
