@@ -131,14 +131,8 @@ def parameters_snapshot(scn: Scenario, extra: dict[str, Any]) -> str:
 
 def _node_overrides(scn: Scenario, node: str, extra: dict[str, Any]) -> dict[str, Any]:
     values = dict(scn.explicit.get(node, {}))
-    values.update({k: v for k, v in extra.items() if k in {s for s in _names(node)}})
+    values.update({k: v for k, v in extra.items() if k in scn.values[node]})
     return values
-
-
-def _names(node: str) -> set[str]:
-    from attitude_sil.core.params import NODE_PARAMS
-
-    return {s.name for s in NODE_PARAMS[node]}
 
 
 def _schedule(scn: Scenario, duration: float) -> list[tuple[float, int, str]]:
