@@ -57,6 +57,14 @@ class Evaluation:
     reasons: list
     values: np.ndarray
 
+    @classmethod
+    def concat(cls, parts: list[Evaluation]) -> Evaluation:
+        """The evaluations of consecutive slices of a population, joined in order."""
+        return cls(F=np.concatenate([p.F for p in parts]),
+                   terms={k: np.concatenate([p.terms[k] for p in parts]) for k in parts[0].terms},
+                   reasons=[r for p in parts for r in p.reasons],
+                   values=np.concatenate([p.values for p in parts]))
+
 
 def _condition(scn, cond: dict):
     for key, value in cond.items():
@@ -210,8 +218,4 @@ class Evaluator:
         if self.pool is None or x.shape[0] < 2 * self.workers:
             return evaluate(self.spec, x)
         chunks = np.array_split(x, self.workers)
-        parts = list(self.pool.map(evaluate, [self.spec] * len(chunks), chunks))
-        terms = {k: np.concatenate([p.terms[k] for p in parts]) for k in parts[0].terms}
-        return Evaluation(F=np.concatenate([p.F for p in parts]), terms=terms,
-                          reasons=[r for p in parts for r in p.reasons],
-                          values=np.concatenate([p.values for p in parts]))
+        return Evaluation.concat(list(self.pool.map(evaluate, [self.spec] * len(chunks), chunks)))
