@@ -29,6 +29,7 @@ from pathlib import Path
 import numpy as np
 
 from attitude_sil.tuning.evaluate import PENALTY, Evaluation, scenario_for, score
+from attitude_sil.tuning.optimize import parameter_values
 from attitude_sil.tuning.spec import SpecError, TuningSpec, decode, load_spec
 
 __all__ = ["GraphEvaluator", "TunerNode", "tune_command"]
@@ -55,15 +56,10 @@ def _as_batch(traj: dict) -> _GraphTrajectory:
                             tau_c_B=traj["wheel_torque"][None, :n], u_cmd=traj["command"][None, :n])
 
 
-def _param_dict(params: dict, i: int) -> dict:
-    out = {}
-    for name, arr in params.items():
-        row = arr[i]
-        if name == "ga_flc.rules":
-            out[name] = [int(round(v)) for v in row]
-        else:
-            out[name] = [float(v) for v in row]
-    return out
+def _best_params(spec: TuningSpec, x: np.ndarray) -> dict:
+    """Controller parameters (ROS values) of one candidate's optimiser variables."""
+    params, _ = decode(spec, x[None])
+    return parameter_values(params, 0)
 
 
 class _Episodes:
@@ -90,7 +86,7 @@ class _Episodes:
         rows_terms: list[dict] = []
         for i in range(n):
             record_dir = None if self.record is None else self.record / tags[i]
-            result = self.session.run_episode(controller_params=_param_dict(params, i), record_dir=record_dir)
+            result = self.session.run_episode(controller_params=parameter_values(params, i), record_dir=record_dir)
             tr = _as_batch(result.trajectory)
             terms: dict = {}
             f_i = np.zeros((1, n_obj))
@@ -171,12 +167,8 @@ class GraphEvaluator:
         if self.pool is None:
             return self.local.score_rows(x, tags)
         idx = np.array_split(np.arange(x.shape[0]), self.replicas)
-        parts = list(self.pool.map(_worker_score, [x[i] for i in idx], [[tags[j] for j in i] for i in idx]))
-        keys = parts[0].terms.keys()
-        return Evaluation(F=np.concatenate([p.F for p in parts]),
-                          terms={k: np.concatenate([p.terms[k] for p in parts]) for k in keys},
-                          reasons=[r for p in parts for r in p.reasons],
-                          values=np.concatenate([p.values for p in parts]))
+        return Evaluation.concat(list(self.pool.map(_worker_score, [x[i] for i in idx],
+                                                    [[tags[j] for j in i] for i in idx])))
 
 
 def _apply_overrides(spec: TuningSpec, overrides: dict) -> TuningSpec:
@@ -276,9 +268,7 @@ def tune_command(spec_path: str, *, resume: bool = False, overrides: dict | None
             return
         if recorder is None:
             recorder = _Episodes(spec, None, bags)
-        params, _ = decode(spec, x[None])
-        params.pop("final_time", None)
-        recorder.session.run_episode(controller_params=_param_dict(params, 0), record_dir=bags / f"best_g{gen:03d}")
+        recorder.session.run_episode(controller_params=_best_params(spec, x), record_dir=bags / f"best_g{gen:03d}")
         last_recorded[0] = x.copy()
 
     evaluator = None
@@ -294,11 +284,9 @@ def tune_command(spec_path: str, *, resume: bool = False, overrides: dict | None
         if record and mode == "batch" and not result.interrupted and spec.algorithm["name"] != "root_locus":
             if recorder is None:
                 recorder = _Episodes(spec, None, bags)
-            params, _ = decode(spec, result.best_x[None])
-            params.pop("final_time", None)
             final = bags / "best_final"
             if not final.exists():
-                recorder.session.run_episode(controller_params=_param_dict(params, 0), record_dir=final)
+                recorder.session.run_episode(controller_params=_best_params(spec, result.best_x), record_dir=final)
     finally:
         signal.signal(signal.SIGINT, old)
         if evaluator is not None:

@@ -144,24 +144,31 @@ def _load_cache(path: Path) -> dict[int, list[dict]]:
     return cache
 
 
+def parameter_values(params: dict[str, np.ndarray], i: int) -> dict:
+    """Row ``i`` of decoded controller parameters as ROS values: ints for integer arrays, floats otherwise.
+
+    ``final_time`` (a searched episode length, not a parameter) is left out.
+    """
+    from attitude_sil.core.params import spec_for
+
+    out = {}
+    for name, arr in params.items():
+        if name == "final_time":
+            continue
+        if spec_for("controller", name).kind == "integer_array":
+            out[name] = [int(round(v)) for v in arr[i]]
+        else:
+            out[name] = [float(v) for v in arr[i]]
+    return out
+
+
 def write_best_yaml(spec: TuningSpec, x: np.ndarray, path: Path) -> dict:
     """The winning controller parameters as a ready-to-use ROS 2 parameter file."""
     params, _ = decode(spec, x[None])
-    params.pop("final_time", None)
-    values = {"controller_type": spec.controller}
-    for name, arr in params.items():
-        row = arr[0]
-        is_int = any(s.name == name and s.kind == "integer_array" for s in _controller_specs())
-        values[name] = [int(round(v)) for v in row] if is_int else [float(v) for v in row]
+    values = {"controller_type": spec.controller, **parameter_values(params, 0)}
     path.write_text(f"# best of tuning run {spec.name} ({spec.path.name})\n" +
                     yaml.safe_dump({"controller": {"ros__parameters": values}}, sort_keys=False))
     return values
-
-
-def _controller_specs():
-    from attitude_sil.core.params import NODE_PARAMS
-
-    return NODE_PARAMS["controller"]
 
 
 def _rows(spec: TuningSpec, gen: int, x: np.ndarray, ev: Evaluation) -> list[dict]:
