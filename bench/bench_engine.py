@@ -27,7 +27,7 @@ from attitude_sil.core.controllers import CONTROLLER_TYPES  # noqa: E402
 from attitude_sil.core.engine import build_controller, simulate  # noqa: E402
 from attitude_sil.core.quaternion import quat_from_euler  # noqa: E402
 from attitude_sil.core.scenario import load_scenario  # noqa: E402
-from attitude_sil.runner import run_graph  # noqa: E402
+from attitude_sil.graph.session import run_graph  # noqa: E402
 
 
 def main() -> None:

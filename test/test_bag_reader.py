@@ -1,4 +1,4 @@
-"""Tests of attitude_sil.bag.reader, attitude_sil.bag.info and attitude_sil.plot.
+"""Tests of attitude_sil.storage.reader, attitude_sil.storage.info and attitude_sil.tools.plot.
 
 Bags are built here with BagWriter from messages serialized by rclpy (no ROS
 graph): a 2 s run at 100 Hz with every topic of a voltage-commanded run and
@@ -23,10 +23,10 @@ from rclpy.serialization import serialize_message
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
 
-from attitude_sil.bag import BagWriter
-from attitude_sil.bag.info import format_info, format_size
-from attitude_sil.bag.reader import BagError, RawMessage, open_bag
-from attitude_sil.plot import controller_swaps, initial_controller, plot_bag
+from attitude_sil.storage import BagWriter
+from attitude_sil.storage.info import format_info, format_size
+from attitude_sil.storage.reader import BagError, RawMessage, open_bag
+from attitude_sil.tools.plot import controller_swaps, initial_controller, plot_bag
 
 STEPS = 200
 DT_NS = 10_000_000  # 100 Hz

@@ -9,11 +9,11 @@ import numpy as np
 import pytest
 import yaml
 
-from attitude_sil.bag.reader import open_bag
-from attitude_sil.bag.replay import ReplayOptions, replay_bag
 from attitude_sil.core.scenario import load_scenario
-from attitude_sil.plot import controller_swaps
-from attitude_sil.runner import run_graph
+from attitude_sil.graph.session import run_graph
+from attitude_sil.storage.reader import open_bag
+from attitude_sil.tools.plot import controller_swaps
+from attitude_sil.tools.replay import ReplayOptions, replay_bag
 from conftest import CONFIG, ROOT
 
 
@@ -44,8 +44,8 @@ def test_replay_drives_a_live_controller_like_the_recorded_run(tmp_path):
     from rclpy.experimental import EventsExecutor
 
     from attitude_sil.core.params import spec_for
-    from attitude_sil.nodes.common import LOCKSTEP_QOS, stamp_to_ns, typed_parameter
     from attitude_sil.nodes.controller_node import ControllerNode
+    from attitude_sil.ros.node import LOCKSTEP_QOS, stamp_to_ns, typed_parameter
 
     scn = load_scenario(CONFIG / "hst_roll_step.yaml")
     bag = tmp_path / "plain"

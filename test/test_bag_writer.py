@@ -30,7 +30,7 @@ from rclpy.serialization import serialize_message
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
 
-from attitude_sil.bag import (
+from attitude_sil.storage import (
     BagClosedError,
     BagWriter,
     message_definition,
@@ -427,7 +427,7 @@ _CHILD = textwrap.dedent('''
     from builtin_interfaces.msg import Time
     from rclpy.serialization import serialize_message
     from rosgraph_msgs.msg import Clock
-    from attitude_sil.bag import BagWriter
+    from attitude_sil.storage import BagWriter
 
     writer = BagWriter(sys.argv[1], chunk_size=4096)
     writer.add_topic('/clock', 'rosgraph_msgs/msg/Clock')

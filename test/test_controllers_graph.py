@@ -13,7 +13,7 @@ from mcap_ros2.decoder import DecoderFactory
 from attitude_sil.core.controllers import CONTROLLER_TYPES, OUTPUT_KIND
 from attitude_sil.core.engine import simulate
 from attitude_sil.core.scenario import load_scenario
-from attitude_sil.runner import run_graph
+from attitude_sil.graph.session import run_graph
 from conftest import CONFIG, ROOT
 
 ONE_DEG = np.radians(1.0)

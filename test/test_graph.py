@@ -7,8 +7,8 @@ from mcap_ros2.decoder import DecoderFactory
 
 from attitude_sil.core.engine import simulate
 from attitude_sil.core.scenario import load_scenario
-from attitude_sil.runner import run_graph
-from attitude_sil.topics import RECORDED_TOPICS, STEP_TOPICS
+from attitude_sil.graph.session import run_graph
+from attitude_sil.ros.contract import RECORDED_TOPICS, STEP_TOPICS
 from conftest import CONFIG
 
 

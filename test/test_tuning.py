@@ -8,7 +8,7 @@ import yaml
 
 from attitude_sil.core.engine import simulate
 from attitude_sil.core.metrics import scenario_metrics
-from attitude_sil.nodes.tuner_node import GraphEvaluator
+from attitude_sil.graph.tuner_node import GraphEvaluator
 from attitude_sil.tuning.evaluate import PENALTY, evaluate
 from attitude_sil.tuning.optimize import run_tuning
 from attitude_sil.tuning.spec import SpecError, load_spec
@@ -161,7 +161,7 @@ def test_tuner_node_publishes_progress():
     from diagnostic_msgs.msg import DiagnosticStatus
     from rclpy.executors import SingleThreadedExecutor
 
-    from attitude_sil.nodes.tuner_node import TunerNode
+    from attitude_sil.graph.tuner_node import TunerNode
 
     tuner = TunerNode()
     got = []

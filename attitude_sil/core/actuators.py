@@ -2,7 +2,7 @@
 
 Same interface as :class:`attitude_sil.core.engine.Wheels`: ``advance(cmd,
 torque_mode)`` holds a body-axis command over one step and returns a
-:class:`~attitude_sil.core.engine.WheelStep` (momentum at t_k, mean torque on
+:class:`~attitude_sil.core.trajectory.WheelStep` (momentum at t_k, mean torque on
 the body over the step, per-actuator position, velocity, effort).
 
 * :class:`TorqueActuator` — an ideal torquer per body axis saturated at
@@ -23,7 +23,10 @@ from __future__ import annotations
 
 import numpy as np
 
+from attitude_sil.errors import ScenarioError
+
 from .plants import exact_discretization
+from .trajectory import WheelStep
 
 __all__ = ["TorqueActuator", "SpeedLoopWheels"]
 
@@ -43,10 +46,9 @@ class TorqueActuator:
         """Nothing to reset: the torquer has no state."""
 
     def advance(self, cmd_B: np.ndarray, torque_mode: bool = True):
-        from .engine import WheelStep
 
         if not torque_mode:
-            raise ValueError("the torque actuator takes torque_cmd; set the controller's command: torque")
+            raise ScenarioError("the torque actuator takes torque_cmd; set the controller's command: torque")
         tau = np.clip(np.asarray(cmd_B, dtype=float), -self.limit, self.limit)
         zero = np.zeros_like(tau)
         return WheelStep(zero, tau, zero, zero, tau)
@@ -103,10 +105,9 @@ class SpeedLoopWheels:
         self.x = np.zeros((self.n_episodes, 3, 5))
 
     def advance(self, cmd_B: np.ndarray, torque_mode: bool = False):
-        from .engine import WheelStep
 
         if torque_mode:
-            raise ValueError("the speed-loop wheels take voltage_cmd (a speed reference); set command: voltage")
+            raise ScenarioError("the speed-loop wheels take voltage_cmd (a speed reference); set command: voltage")
         x = self.x
         ref = np.clip(-self.rpm_per_volt * np.asarray(cmd_B, dtype=float), -self.speed_max, self.speed_max)
         h0 = self.j_w * RPM * x[:, :, 0]

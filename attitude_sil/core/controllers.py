@@ -22,6 +22,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from attitude_sil.errors import ScenarioError
+
 from .disturbance import aerodynamic_torque, gravity_gradient_torque, orbit_rate
 from .fuzzy import FUZZY_PID_DEFAULT_RULES, UNIFORM_VERTICES, vertices_from_ratios
 from .kernels import fuzzy_infer, fuzzy_pid_step, ga_flc_step, geometric_step, pid_step
@@ -568,7 +570,7 @@ class ControllerBank:
     def request(self, controller_type: str) -> None:
         """Swap to ``controller_type`` at the next step."""
         if controller_type not in self.controllers:
-            raise ValueError(f"unknown controller_type {controller_type!r}")
+            raise ScenarioError(f"unknown controller_type {controller_type!r}")
         self.pending = None if controller_type == self.active else controller_type
 
     @property

@@ -35,6 +35,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from attitude_sil.errors import ScenarioError
+
 from .quaternion import cross, euler_from_quat, quat_conjugate, quat_from_euler, quat_multiply, quat_to_dcm
 
 __all__ = [
@@ -100,7 +102,7 @@ class DisturbanceModel:
         models = list(values["models"])
         unknown = [m for m in models if m not in DISTURBANCE_MODELS]
         if unknown:
-            raise ValueError(f"unknown disturbance model {unknown[0]!r}; known: {', '.join(DISTURBANCE_MODELS)}")
+            raise ScenarioError(f"unknown disturbance model {unknown[0]!r}; known: {', '.join(DISTURBANCE_MODELS)}")
         self.models = tuple(models)
         self.v = dict(values)
         self.dt = float(values["control_period"])
@@ -118,7 +120,7 @@ class DisturbanceModel:
         ratio = self.dt / values["noise.sample_time"]
         self.samples_per_step = int(round(ratio))
         if "noise" in self.models and (self.samples_per_step < 1 or abs(ratio - self.samples_per_step) > 1e-9):
-            raise ValueError(f"noise.sample_time {values['noise.sample_time']} s must divide the control "
+            raise ScenarioError(f"noise.sample_time {values['noise.sample_time']} s must divide the control "
                              f"period {self.dt} s")
         self.noise_std = np.sqrt(np.asarray(values["noise.power"], dtype=float) / values["noise.sample_time"])
         self.reset()

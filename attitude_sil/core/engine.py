@@ -16,9 +16,9 @@ Every object carries a leading episode axis P.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import numpy as np
+
+from attitude_sil.errors import ScenarioError
 
 from .actuators import SpeedLoopWheels, TorqueActuator
 from .controllers import ControllerBank
@@ -28,6 +28,7 @@ from .plants import FLEXIBLE_CASES, FlexibleAxisPlant, PitchNormalizedPlant
 from .quaternion import quat_from_euler, quat_multiply
 from .rigid_body import BodyState, rk4_step
 from .scenario import Scenario
+from .trajectory import Trajectory, WheelStep
 from .wheels import GEOMETRIES, MotorParams, WheelAssembly
 
 __all__ = [
@@ -54,9 +55,9 @@ def inertia_matrix(values) -> np.ndarray:
     v = np.asarray(values, dtype=float)
     m = v[..., :, None] * np.eye(3) if v.shape[-1] == 3 else v.reshape(v.shape[:-1] + (3, 3))
     if not np.allclose(m, np.swapaxes(m, -1, -2)):
-        raise ValueError("inertia must be symmetric")
+        raise ScenarioError("inertia must be symmetric")
     if np.any(np.linalg.eigvalsh(m) <= 0.0):
-        raise ValueError("inertia must be positive definite")
+        raise ScenarioError("inertia must be positive definite")
     return m
 
 
@@ -100,17 +101,6 @@ class Plant:
         self.state = rk4_step(self.state, self.inertia, self.inertia_inv, tau_c_B, tau_ext_B,
                               self.dt, self.substeps)
         return self.state
-
-
-@dataclass
-class WheelStep:
-    """What the wheels publish for step k (all at or from t_k)."""
-
-    h_wheels_B: np.ndarray  # (P, 3) momentum at t_k
-    tau_c_B: np.ndarray  # (P, 3) mean torque on the body over [t_k, t_k+1]
-    position: np.ndarray  # (P, n) rad at t_k
-    velocity: np.ndarray  # (P, n) rad/s at t_k
-    effort: np.ndarray  # (P, n) N m motor torque at t_k
 
 
 class Wheels:
@@ -179,7 +169,7 @@ def initial_attitude(values: dict, rpy0_deg=None) -> np.ndarray:
         axis = np.asarray(values["initial_error_axis"], dtype=float)
         norm = np.linalg.norm(axis)
         if norm == 0.0:
-            raise ValueError("plant.initial_error_axis must not be zero")
+            raise ScenarioError("plant.initial_error_axis must not be zero")
         turn = np.append(np.sin(angle / 2) * axis / norm, np.cos(angle / 2))
         q = quat_multiply(q, np.broadcast_to(turn, q.shape))
     return q
@@ -241,7 +231,7 @@ def build_wheels(scn: Scenario, n_episodes: int = 1):
     speed0 = None
     if w["initial_speed_rpm"]:
         if len(w["initial_speed_rpm"]) != assembly.n_wheels:
-            raise ValueError(
+            raise ScenarioError(
                 f"wheels.initial_speed_rpm has {len(w['initial_speed_rpm'])} values for {assembly.n_wheels} wheels"
             )
         speed0 = np.asarray(w["initial_speed_rpm"]) * RPM
@@ -274,36 +264,6 @@ def build_controller(scn: Scenario, n_episodes: int = 1, params: dict | None = N
     """
     c = scn.values["controller"]
     return ControllerBank(c, c["control_period"], n_episodes, per_episode=params)
-
-
-@dataclass
-class Trajectory:
-    """Batch run result; arrays hold step k = 0..K on axis 1.
-
-    Attributes
-    ----------
-    t : (K+1,) s
-    q_BN : (P, K+1, 4)
-    omega_BN_B : (P, K+1, 3) rad/s
-    q_RN : (P, K+1, 4) setpoint
-    h_wheels_B : (P, K+1, 3) N m s
-    u_cmd : (P, K+1, 3) controller command (V, or N m for a torque law)
-    kind : list of str, per step: ``voltage`` or ``torque``
-    tau_c_B : (P, K+1, 3) mean wheel torque on the body over [t_k, t_k+1], N m
-    tau_ext_B : (P, K+1, 3) disturbance torque, N m
-    wheel_speed : (P, K+1, n) rad/s
-    """
-
-    t: np.ndarray
-    q_BN: np.ndarray
-    omega_BN_B: np.ndarray
-    q_RN: np.ndarray
-    h_wheels_B: np.ndarray
-    u_cmd: np.ndarray
-    tau_c_B: np.ndarray
-    tau_ext_B: np.ndarray
-    wheel_speed: np.ndarray
-    kind: list
 
 
 def schedule_from_scenario(scn: Scenario) -> list[tuple[int, str]]:

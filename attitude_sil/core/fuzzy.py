@@ -22,6 +22,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from attitude_sil.errors import ScenarioError
+
 __all__ = [
     "LABELS",
     "UNIFORM_VERTICES",
@@ -92,7 +94,7 @@ def vertices_from_ratios(ratios: np.ndarray) -> np.ndarray:
     """
     a = np.asarray(ratios, dtype=float)
     if np.any(a <= 0.0) or not np.all(np.isfinite(a)):
-        raise ValueError("membership-function ratios must be positive and finite")
+        raise ScenarioError("membership-function ratios must be positive and finite")
     neg = np.cumsum(a[..., :3], axis=-1) / np.sum(a[..., :3], axis=-1, keepdims=True)
     pos = np.cumsum(a[..., 3:], axis=-1) / np.sum(a[..., 3:], axis=-1, keepdims=True)
     c1 = -np.ones(a.shape[:-1] + (1,))

@@ -30,7 +30,8 @@ def _axis_turn(axis: int, deg: float) -> np.ndarray:
 PAPER_001_SETTLING_ANGLE = float(2.0 * np.arccos(
     quat_multiply(quat_multiply(_axis_turn(0, 0.1), _axis_turn(1, 0.1)), _axis_turn(2, 0.1))[3]))
 
-__all__ = ["step_metrics", "metrics_from_trajectory", "segment_metrics", "tracking_metrics", "scenario_metrics",
+__all__ = ["METRIC_KEYS", "episode_report",
+           "step_metrics", "metrics_from_trajectory", "segment_metrics", "tracking_metrics", "scenario_metrics",
            "principal_angle", "PAPER_001_SETTLING_ANGLE"]
 
 
@@ -270,3 +271,59 @@ def segment_metrics(
         "control_effort_Nms": float(np.sum(np.linalg.norm(tau_c_B[k0:k1], axis=-1) * dt)),
         "max_abs_command": float(np.max(np.abs(u_cmd[k0:k1]))),
     }
+
+
+#: the ``--json`` keys that come from the metrics (null where the scenario has none;
+#: docs/architecture.md, "Command line")
+METRIC_KEYS = ("time_constant_s", "rise_time_s", "settling_time_s", "overshoot_pct", "steady_state_error_rad",
+               "control_effort_Nms", "cost_J", "iae", "ise", "itae")
+
+#: further keys some scenarios define
+_EXTRA_KEYS = ("mse", "max_abs_error_rad", "fitness_f", "final_error_rad")
+
+
+def _finite_or_none(x: float | None) -> float | None:
+    return None if x is None or not np.isfinite(x) else float(x)
+
+
+def episode_report(scn, tr, controller_type: str, duration_s: float, wall_s: float,
+                   schedule: list[tuple[float, int, str]] | None = None) -> dict:
+    """The metrics of one episode (P = 1) as the ``run --json`` object, without ``bag``.
+
+    Parameters
+    ----------
+    scn : Scenario
+    tr : Trajectory
+        One episode (P = 1), from the graph or the batch engine.
+    controller_type : str
+        The law at the start.
+    duration_s, wall_s : float
+        Simulated and wall time, s.
+    schedule : list of (time s, step, controller_type), optional
+        Scheduled swaps: adds ``segments``, the metrics of each controller's stretch.
+    """
+    s = scn.values["scenario"]
+    n = tr.q_BN.shape[1]
+    m = scenario_metrics(tr.t, tr.q_BN[:1], tr.q_RN[:1], tr.tau_c_B[:1], s,
+                         step_time=scn.param("guidance", "step_time"))
+    out: dict = {
+        "scenario": scn.name,
+        "controller_type": controller_type,
+        "sim_time_s": float(duration_s),
+        "wall_time_s": float(wall_s),
+        "real_time_factor": float(duration_s / wall_s) if wall_s > 0 else None,
+    }
+    for key in METRIC_KEYS:
+        out[key] = _finite_or_none(float(m[key][0])) if key in m else None
+    for key in _EXTRA_KEYS:
+        if key in m:
+            out[key] = _finite_or_none(float(m[key][0]))
+    if schedule:
+        bounds = [0] + [k for _, k, _ in schedule] + [n]
+        kinds = [controller_type] + [kind for _, _, kind in schedule]
+        out["segments"] = [
+            {"controller_type": kind, **segment_metrics(tr.t, tr.q_BN[0], tr.q_RN[0], tr.tau_c_B[0], tr.u_cmd[0],
+                                                        k0, k1, axis=s["metrics.axis"])}
+            for kind, k0, k1 in zip(kinds, bounds[:-1], bounds[1:], strict=True) if k1 > k0
+        ]
+    return out

@@ -17,6 +17,8 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
+from attitude_sil.errors import ScenarioError
+
 from .fuzzy import FUZZY_PID_DEFAULT_RULES, PAPER_004_TABLE_2
 
 __all__ = ["ParamSpec", "NODE_PARAMS", "GLOBAL_NODE", "SCENARIO_NODE", "spec_for", "HST_MOTOR"]
@@ -73,29 +75,29 @@ class ParamSpec:
         if isinstance(value, str) and _YAML12_FLOAT.fullmatch(value.strip()):
             value = float(value)  # PyYAML (YAML 1.1) reads 1e-3 as a string; YAML 1.2 and ROS read a number
         if isinstance(value, bool) or not isinstance(value, (int, float)):
-            raise ValueError(f"{where} must be a number, got {type(value).__name__} {value!r}")
+            raise ScenarioError(f"{where} must be a number, got {type(value).__name__} {value!r}")
         if self.kind.startswith("integer"):
             if isinstance(value, float):
                 if not value.is_integer():
-                    raise ValueError(f"{where} must be an integer, got {value!r}")
+                    raise ScenarioError(f"{where} must be an integer, got {value!r}")
                 value = int(value)
         else:
             value = float(value)
             if not math.isfinite(value):
-                raise ValueError(f"{where} must be finite, got {value!r}")
+                raise ScenarioError(f"{where} must be finite, got {value!r}")
         if self.min is not None:
             if value < self.min or (self.min_exclusive and value == self.min):
                 rel = ">" if self.min_exclusive else ">="
-                raise ValueError(f"{where} must be {rel} {self.min}, got {value!r}")
+                raise ScenarioError(f"{where} must be {rel} {self.min}, got {value!r}")
         if self.max is not None and value > self.max:
-            raise ValueError(f"{where} must be <= {self.max}, got {value!r}")
+            raise ScenarioError(f"{where} must be <= {self.max}, got {value!r}")
         return value
 
     def _check_string(self, value: Any, where: str) -> str:
         if not isinstance(value, str):
-            raise ValueError(f"{where} must be a string, got {type(value).__name__} {value!r}")
+            raise ScenarioError(f"{where} must be a string, got {type(value).__name__} {value!r}")
         if self.choices is not None and value not in self.choices:
-            raise ValueError(f"{where} must be one of {', '.join(self.choices)}; got {value!r}")
+            raise ScenarioError(f"{where} must be one of {', '.join(self.choices)}; got {value!r}")
         return value
 
     def validate(self, value: Any, node: str = "") -> Any:
@@ -106,7 +108,7 @@ class ParamSpec:
         where = f"{node}.{self.name}" if node else self.name
         if self.kind == "bool":
             if not isinstance(value, bool):
-                raise ValueError(f"{where} must be true or false, got {value!r}")
+                raise ScenarioError(f"{where} must be true or false, got {value!r}")
             return value
         if self.kind == "string":
             return self._check_string(value, where)
@@ -114,11 +116,11 @@ class ParamSpec:
             return self._check_number(value, where)
         # arrays
         if isinstance(value, (str, bytes)) or not hasattr(value, "__iter__"):
-            raise ValueError(f"{where} must be a list, got {type(value).__name__} {value!r}")
+            raise ScenarioError(f"{where} must be a list, got {type(value).__name__} {value!r}")
         items = list(value)
         if self.lengths is not None and len(items) not in self.lengths:
             allowed = " or ".join(str(n) for n in self.lengths)
-            raise ValueError(f"{where} must have {allowed} elements, got {len(items)}")
+            raise ScenarioError(f"{where} must have {allowed} elements, got {len(items)}")
         if self.kind == "string_array":
             out = [self._check_string(v, f"{where}[{i}]") for i, v in enumerate(items)]
         else:
@@ -126,7 +128,7 @@ class ParamSpec:
         if self.rule is not None:
             broken = self.rule(out)
             if broken:
-                raise ValueError(f"{where} {broken}")
+                raise ScenarioError(f"{where} {broken}")
         return out
 
 

@@ -22,16 +22,14 @@ from typing import Any
 
 import yaml
 
+from attitude_sil.errors import ScenarioError
+
 from .params import GLOBAL_NODE, NODE_PARAMS, SCENARIO_NODE
 
 __all__ = ["ScenarioError", "Scenario", "load_scenario", "scenario_from_dict", "GRAPH_NODES"]
 
 #: nodes of the graph, in the order the runner starts them
 GRAPH_NODES = ("plant", "wheels", "disturbance", "guidance", "controller")
-
-
-class ScenarioError(ValueError):
-    """A scenario file or value that cannot be used; the message is one line."""
 
 
 def _suggest(name: str, options) -> str:
@@ -102,6 +100,21 @@ class Scenario:
                 new.explicit.setdefault(target, {})[name] = copy.deepcopy(v)
         _check_consistency(new)
         return new
+
+    def parameters_yaml(self, extra: dict[str, Any] | None = None) -> str:
+        """Every graph node's full parameter set as a ROS 2 parameter YAML string.
+
+        ``extra`` values override the nodes that declare them. Runs store this
+        in their bag (``metadata.yaml`` custom data) so ``replay
+        --verify-controller`` can configure a fresh controller as recorded.
+        """
+        extra = extra or {}
+        out = {}
+        for node in GRAPH_NODES:
+            values = dict(self.values[node])
+            values.update({k: v for k, v in extra.items() if k in values})
+            out[node] = {"ros__parameters": values}
+        return yaml.safe_dump(out, sort_keys=True)
 
     def params_file_dict(self) -> dict:
         """The explicit values as a ROS 2 parameter YAML mapping."""

@@ -32,6 +32,8 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.linalg import expm
 
+from attitude_sil.errors import ScenarioError
+
 from .kernels import wheel_step
 
 __all__ = [
@@ -100,9 +102,9 @@ class MotorParams:
                      "rotor_inertia", "v_max", "torque_max", "speed_max"):
             value = getattr(self, name)
             if not np.isfinite(value) or value <= 0.0:
-                raise ValueError(f"motor {name} must be a positive finite number, got {value}")
+                raise ScenarioError(f"motor {name} must be a positive finite number, got {value}")
         if not np.isfinite(self.viscous_friction) or self.viscous_friction < 0.0:
-            raise ValueError(f"motor viscous_friction must be >= 0, got {self.viscous_friction}")
+            raise ScenarioError(f"motor viscous_friction must be >= 0, got {self.viscous_friction}")
 
     @property
     def current_max(self) -> float:

@@ -17,23 +17,16 @@ the parameter and the rule; the controller keeps running on its old values.
 from __future__ import annotations
 
 import numpy as np
-from geometry_msgs.msg import QuaternionStamped, Vector3Stamped
 
 from attitude_sil.core.engine import build_controller
+from attitude_sil.core.lockstep import StepSequencer
 from attitude_sil.core.quaternion import euler_from_quat, quat_conjugate, quat_error
-from attitude_sil.nodes.common import LOCKSTEP_QOS, SchemaNode, StepSequencer, run_node, stamp_to_ns
+from attitude_sil.ros.contract import COMMAND_TOPIC, CONTROLLER_INPUTS, STEP_TOPICS, message_class
+from attitude_sil.ros.convert import message_to_array, stamp_to_ns, vector_msg
+from attitude_sil.ros.node import SchemaNode, run_node
+from attitude_sil.ros.qos import LOCKSTEP_QOS
 
-INPUTS = ("attitude", "body_rate", "attitude_setpoint", "rate_setpoint")
-
-
-def _quat(msg: QuaternionStamped) -> np.ndarray:
-    q = msg.quaternion
-    return np.array([[q.x, q.y, q.z, q.w]])
-
-
-def _vec(msg: Vector3Stamped) -> np.ndarray:
-    v = msg.vector
-    return np.array([[v.x, v.y, v.z]])
+INPUTS = CONTROLLER_INPUTS
 
 
 class ControllerNode(SchemaNode):
@@ -43,19 +36,13 @@ class ControllerNode(SchemaNode):
 
     def __init__(self, **kwargs) -> None:
         super().__init__(**kwargs)
-        self.pub_cmd = {
-            "voltage": self.create_publisher(Vector3Stamped, "voltage_cmd", LOCKSTEP_QOS),
-            "torque": self.create_publisher(Vector3Stamped, "torque_cmd", LOCKSTEP_QOS),
-        }
-        self.pub_err = self.create_publisher(Vector3Stamped, "attitude_error", LOCKSTEP_QOS)
-        for name, mtype, conv in (
-            ("attitude", QuaternionStamped, _quat),
-            ("body_rate", Vector3Stamped, _vec),
-            ("attitude_setpoint", QuaternionStamped, _quat),
-            ("rate_setpoint", Vector3Stamped, _vec),
-        ):
-            self.create_subscription(mtype, name, lambda m, n=name, c=conv: self._on_input(n, c(m), m),
-                                     LOCKSTEP_QOS)
+        self.pub_cmd = {kind: self.create_publisher(message_class(STEP_TOPICS[topic]), topic, LOCKSTEP_QOS)
+                        for kind, topic in COMMAND_TOPIC.items()}
+        self.pub_err = self.create_publisher(message_class(STEP_TOPICS["attitude_error"]), "attitude_error",
+                                             LOCKSTEP_QOS)
+        for name in INPUTS:
+            self.create_subscription(message_class(STEP_TOPICS[name]), name,
+                                     lambda m, n=name: self._on_input(n, message_to_array(m)[None], m), LOCKSTEP_QOS)
         self.seq = StepSequencer()
         self._pending: dict[int, dict[str, np.ndarray]] = {}
         self._rebuild()
@@ -93,12 +80,8 @@ class ControllerNode(SchemaNode):
             return
         u = self.core.compute(slot["attitude"], slot["body_rate"], slot["attitude_setpoint"], slot["rate_setpoint"])
         err = euler_from_quat(quat_conjugate(quat_error(slot["attitude"], slot["attitude_setpoint"])))
-        for pub, vec, frame in ((self.pub_cmd[self.core.kind], u[0], "body"), (self.pub_err, err[0], "body")):
-            m = Vector3Stamped()
-            m.header.stamp = msg.header.stamp
-            m.header.frame_id = frame
-            m.vector.x, m.vector.y, m.vector.z = (float(x) for x in vec)
-            pub.publish(m)
+        self.pub_cmd[self.core.kind].publish(vector_msg(u[0], t, "body"))
+        self.pub_err.publish(vector_msg(err[0], t, "body"))
 
 
 def main(args: list[str] | None = None) -> int:

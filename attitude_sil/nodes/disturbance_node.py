@@ -8,11 +8,12 @@ every input whatever the scenario.
 
 from __future__ import annotations
 
-import numpy as np
-from geometry_msgs.msg import QuaternionStamped, Vector3Stamped
-
 from attitude_sil.core.engine import build_disturbance
-from attitude_sil.nodes.common import LOCKSTEP_QOS, SchemaNode, StepSequencer, run_node, stamp_to_ns
+from attitude_sil.core.lockstep import StepSequencer
+from attitude_sil.ros.contract import STEP_TOPICS, message_class
+from attitude_sil.ros.convert import quaternion_to_array, stamp_to_ns, vector_msg
+from attitude_sil.ros.node import SchemaNode, run_node
+from attitude_sil.ros.qos import LOCKSTEP_QOS
 
 
 class DisturbanceNode(SchemaNode):
@@ -22,8 +23,9 @@ class DisturbanceNode(SchemaNode):
 
     def __init__(self, **kwargs) -> None:
         super().__init__(**kwargs)
-        self.pub = self.create_publisher(Vector3Stamped, "disturbance_torque", LOCKSTEP_QOS)
-        self.create_subscription(QuaternionStamped, "attitude", self._on_attitude, LOCKSTEP_QOS)
+        self.pub = self.create_publisher(message_class(STEP_TOPICS["disturbance_torque"]), "disturbance_torque",
+                                         LOCKSTEP_QOS)
+        self.create_subscription(message_class(STEP_TOPICS["attitude"]), "attitude", self._on_attitude, LOCKSTEP_QOS)
         self.seq = StepSequencer()
         self._rebuild()
 
@@ -32,20 +34,15 @@ class DisturbanceNode(SchemaNode):
         self.core = build_disturbance(scn, 1)
         self.dt_ns = int(round(self.param("control_period") * 1e9))
 
-    def _on_attitude(self, msg: QuaternionStamped) -> None:
+    def _on_attitude(self, msg) -> None:
         t = stamp_to_ns(msg.header.stamp)
         kind = self.seq.classify(t, self.dt_ns)
         if kind == StepSequencer.NEW:
             self._rebuild()
         elif kind != StepSequencer.NEXT:
             return
-        q = msg.quaternion
-        tau = self.core.torque(np.array([[q.x, q.y, q.z, q.w]]), t)[0]
-        out = Vector3Stamped()
-        out.header.stamp = msg.header.stamp
-        out.header.frame_id = "body"
-        out.vector.x, out.vector.y, out.vector.z = (float(x) for x in tau)
-        self.pub.publish(out)
+        tau = self.core.torque(quaternion_to_array(msg)[None], t)[0]
+        self.pub.publish(vector_msg(tau, t, "body"))
 
 
 def main(args: list[str] | None = None) -> int:

@@ -9,11 +9,11 @@ Setpoint parameters changed at runtime apply from the next tick.
 
 from __future__ import annotations
 
-from geometry_msgs.msg import QuaternionStamped, Vector3Stamped
-from rosgraph_msgs.msg import Clock
-
 from attitude_sil.core.engine import build_guidance
-from attitude_sil.nodes.common import LOCKSTEP_QOS, SchemaNode, run_node, stamp_to_ns
+from attitude_sil.ros.contract import STEP_TOPICS, message_class
+from attitude_sil.ros.convert import quaternion_msg, stamp_to_ns, vector_msg
+from attitude_sil.ros.node import SchemaNode, run_node
+from attitude_sil.ros.qos import LOCKSTEP_QOS
 
 
 class GuidanceNode(SchemaNode):
@@ -23,27 +23,19 @@ class GuidanceNode(SchemaNode):
 
     def __init__(self, **kwargs) -> None:
         super().__init__(**kwargs)
-        self.pub_q = self.create_publisher(QuaternionStamped, "attitude_setpoint", LOCKSTEP_QOS)
-        self.pub_w = self.create_publisher(Vector3Stamped, "rate_setpoint", LOCKSTEP_QOS)
-        self.create_subscription(Clock, "/clock", self._on_clock, LOCKSTEP_QOS)
+        self.pub_q, self.pub_w = (self.create_publisher(message_class(STEP_TOPICS[name]), name, LOCKSTEP_QOS)
+                                  for name in ("attitude_setpoint", "rate_setpoint"))
+        self.create_subscription(message_class(STEP_TOPICS["/clock"]), "/clock", self._on_clock, LOCKSTEP_QOS)
         self.on_parameters_set([])
 
     def on_parameters_set(self, names: list[str]) -> None:
         self.core = build_guidance(self.scenario(), 1)
 
-    def _on_clock(self, msg: Clock) -> None:
+    def _on_clock(self, msg) -> None:
         t = stamp_to_ns(msg.clock)
         q_RN, w_RN = self.core.setpoint(t * 1e-9)
-        q = QuaternionStamped()
-        q.header.stamp = msg.clock
-        q.header.frame_id = "inertial"
-        q.quaternion.x, q.quaternion.y, q.quaternion.z, q.quaternion.w = (float(v) for v in q_RN[0])
-        self.pub_q.publish(q)
-        w = Vector3Stamped()
-        w.header.stamp = msg.clock
-        w.header.frame_id = "reference"
-        w.vector.x, w.vector.y, w.vector.z = (float(v) for v in w_RN[0])
-        self.pub_w.publish(w)
+        self.pub_q.publish(quaternion_msg(q_RN[0], t, "inertial"))
+        self.pub_w.publish(vector_msg(w_RN[0], t, "reference"))
 
 
 def main(args: list[str] | None = None) -> int:

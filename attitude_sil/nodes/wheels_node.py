@@ -10,12 +10,12 @@ and ``wheel_state`` (per wheel angle, speed and motor torque at t_k).
 
 from __future__ import annotations
 
-import numpy as np
-from geometry_msgs.msg import Vector3Stamped
-from sensor_msgs.msg import JointState
-
 from attitude_sil.core.engine import build_wheels
-from attitude_sil.nodes.common import LOCKSTEP_QOS, SchemaNode, StepSequencer, run_node, stamp_to_ns
+from attitude_sil.core.lockstep import StepSequencer
+from attitude_sil.ros.contract import STEP_TOPICS, message_class
+from attitude_sil.ros.convert import joint_state_msg, stamp_to_ns, vector_msg, vector_to_array
+from attitude_sil.ros.node import SchemaNode, run_node
+from attitude_sil.ros.qos import LOCKSTEP_QOS
 
 
 class WheelsNode(SchemaNode):
@@ -25,11 +25,12 @@ class WheelsNode(SchemaNode):
 
     def __init__(self, **kwargs) -> None:
         super().__init__(**kwargs)
-        self.pub_torque = self.create_publisher(Vector3Stamped, "wheel_torque", LOCKSTEP_QOS)
-        self.pub_momentum = self.create_publisher(Vector3Stamped, "wheel_momentum", LOCKSTEP_QOS)
-        self.pub_state = self.create_publisher(JointState, "wheel_state", LOCKSTEP_QOS)
-        self.create_subscription(Vector3Stamped, "voltage_cmd", lambda m: self._on_command(m, False), LOCKSTEP_QOS)
-        self.create_subscription(Vector3Stamped, "torque_cmd", lambda m: self._on_command(m, True), LOCKSTEP_QOS)
+        self.pub_torque, self.pub_momentum, self.pub_state = (
+            self.create_publisher(message_class(STEP_TOPICS[name]), name, LOCKSTEP_QOS)
+            for name in ("wheel_torque", "wheel_momentum", "wheel_state"))
+        for name, torque_mode in (("voltage_cmd", False), ("torque_cmd", True)):
+            self.create_subscription(message_class(STEP_TOPICS[name]), name,
+                                     lambda m, tm=torque_mode: self._on_command(m, tm), LOCKSTEP_QOS)
         self.seq = StepSequencer()
         self._rebuild()
 
@@ -38,7 +39,7 @@ class WheelsNode(SchemaNode):
         self.core = build_wheels(scn, 1)
         self.dt_ns = int(round(self.param("control_period") * 1e9))
 
-    def _on_command(self, msg: Vector3Stamped, torque_mode: bool) -> None:
+    def _on_command(self, msg, torque_mode: bool) -> None:
         t = stamp_to_ns(msg.header.stamp)
         kind = self.seq.classify(t, self.dt_ns)
         if kind == StepSequencer.NEW:
@@ -49,25 +50,14 @@ class WheelsNode(SchemaNode):
             self.get_logger().error(
                 f"command stamped {t * 1e-9:.6f} s does not follow {self.seq.last_ns * 1e-9:.6f} s; ignored")
             return
-        v = np.array([[msg.vector.x, msg.vector.y, msg.vector.z]])
+        v = vector_to_array(msg)[None]
         if not self.finite(v):
             self.get_logger().error(f"command at t={t * 1e-9:.6f} s is not finite: {v[0].tolist()}; ignored")
             return
         out = self.core.advance(v, torque_mode)
-        stamp = msg.header.stamp
-        for pub, vec in ((self.pub_torque, out.tau_c_B[0]), (self.pub_momentum, out.h_wheels_B[0])):
-            m = Vector3Stamped()
-            m.header.stamp = stamp
-            m.header.frame_id = "body"
-            m.vector.x, m.vector.y, m.vector.z = (float(x) for x in vec)
-            pub.publish(m)
-        js = JointState()
-        js.header.stamp = stamp
-        js.name = self.core.names
-        js.position = out.position[0].tolist()
-        js.velocity = out.velocity[0].tolist()
-        js.effort = out.effort[0].tolist()
-        self.pub_state.publish(js)
+        self.pub_torque.publish(vector_msg(out.tau_c_B[0], t, "body"))
+        self.pub_momentum.publish(vector_msg(out.h_wheels_B[0], t, "body"))
+        self.pub_state.publish(joint_state_msg(self.core.names, out.position[0], out.velocity[0], out.effort[0], t))
 
 
 def main(args: list[str] | None = None) -> int:

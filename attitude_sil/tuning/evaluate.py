@@ -23,6 +23,7 @@ Costs (``cost.name``):
 
 from __future__ import annotations
 
+import multiprocessing as mp
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass
 
@@ -204,8 +205,6 @@ class Evaluator:
 
     def __enter__(self) -> Evaluator:
         if self.workers > 1:
-            import multiprocessing as mp
-
             self.pool = ProcessPoolExecutor(self.workers, mp_context=mp.get_context("fork"))
         return self
 

@@ -25,53 +25,49 @@ ends exactly where an uninterrupted one would.
 
 from __future__ import annotations
 
+import csv
 import json
 import math
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
-import yaml
+from pymoo.algorithms.moo.nsga2 import NSGA2
+from pymoo.algorithms.soo.nonconvex.ga import GA
+from pymoo.algorithms.soo.nonconvex.pso import PSO
+from pymoo.core.mixed import MixedVariableGA
+from pymoo.core.problem import Problem
+from pymoo.core.variable import Integer
+from pymoo.core.variable import Real as RealVariable
+from pymoo.operators.crossover.pntx import TwoPointCrossover
+from pymoo.operators.crossover.sbx import SBX
+from pymoo.operators.mutation.bitflip import BitflipMutation
+from pymoo.operators.mutation.pm import PM
+from pymoo.operators.sampling.rnd import BinaryRandomSampling
 
 from .evaluate import PENALTY, Evaluation, Evaluator
+from .results import TuningResult, write_best_yaml
+from .rootlocus import tune_root_locus
 from .spec import SpecError, TuningSpec, decode
 
 __all__ = ["TuningResult", "run_tuning", "build_algorithm", "write_best_yaml"]
 
 
-@dataclass
-class TuningResult:
-    """What a tuning run found."""
-
-    best_x: np.ndarray
-    best_cost: np.ndarray
-    best_params: dict
-    generations: list = field(default_factory=list)
-    evaluations: int = 0
-    front: list = field(default_factory=list)
-    interrupted: bool = False
-
-
 def build_algorithm(spec: TuningSpec):
     """(pymoo algorithm, pymoo problem, n_generations) for the spec."""
-    from pymoo.core.problem import Problem
-
     a = spec.algorithm
     name = a["name"]
     n_obj = 2 if spec.cost["name"] == "ts_ce" else 1
     gens = int(a.get("generations", 40))
     pop = int(a.get("pop_size", 50))
     if name == "mixed_ga":
-        from pymoo.core.mixed import MixedVariableGA
-        from pymoo.core.variable import Integer, Real
-
         variables = {}
         for g in spec.genome:
             for label in g.labels():
-                variables[f"{len(variables):03d}:{label}"] = (
-                    Integer(bounds=(int(g.low), int(g.high))) if g.kind == "int" else Real(bounds=(g.low, g.high)))
+                key = f"{len(variables):03d}:{label}"
+                variables[key] = (Integer(bounds=(int(g.low), int(g.high))) if g.kind == "int"
+                                  else RealVariable(bounds=(g.low, g.high)))
 
         class Mixed(Problem):
             def __init__(self):
@@ -79,11 +75,6 @@ def build_algorithm(spec: TuningSpec):
 
         return MixedVariableGA(pop_size=pop), Mixed(), gens
     if name == "binary_ga":
-        from pymoo.algorithms.soo.nonconvex.ga import GA
-        from pymoo.operators.crossover.pntx import TwoPointCrossover
-        from pymoo.operators.mutation.bitflip import BitflipMutation
-        from pymoo.operators.sampling.rnd import BinaryRandomSampling
-
         class Binary(Problem):
             def __init__(self):
                 super().__init__(n_var=spec.n_var, n_obj=n_obj, xl=0, xu=1, vtype=bool)
@@ -102,18 +93,11 @@ def build_algorithm(spec: TuningSpec):
             super().__init__(n_var=spec.n_var, n_obj=n_obj, xl=xl, xu=xu)
 
     if name == "pso":
-        from pymoo.algorithms.soo.nonconvex.pso import PSO
-
         algo = PSO(pop_size=pop, w=float(a.get("w", 0.729)), c1=float(a.get("c1", 1.55)), c2=float(a.get("c2", 1.55)),
                    adaptive=False, pertube_best=False)
         return algo, Real(), gens
     if name == "nsga2":
-        from pymoo.algorithms.moo.nsga2 import NSGA2
-
         return NSGA2(pop_size=pop), Real(), gens
-    from pymoo.algorithms.soo.nonconvex.ga import GA
-    from pymoo.operators.crossover.sbx import SBX
-    from pymoo.operators.mutation.pm import PM
 
     algo = GA(pop_size=pop, crossover=SBX(prob=float(a.get("crossover", 0.9)), eta=float(a.get("eta_c", 15))),
               mutation=PM(prob=float(a.get("mutation", 0.9)), eta=float(a.get("eta_m", 20))),
@@ -142,33 +126,6 @@ def _load_cache(path: Path) -> dict[int, list[dict]]:
             break  # a torn last line from a kill: everything before it is whole
         cache.setdefault(row["generation"], []).append(row)
     return cache
-
-
-def parameter_values(params: dict[str, np.ndarray], i: int) -> dict:
-    """Row ``i`` of decoded controller parameters as ROS values: ints for integer arrays, floats otherwise.
-
-    ``final_time`` (a searched episode length, not a parameter) is left out.
-    """
-    from attitude_sil.core.params import spec_for
-
-    out = {}
-    for name, arr in params.items():
-        if name == "final_time":
-            continue
-        if spec_for("controller", name).kind == "integer_array":
-            out[name] = [int(round(v)) for v in arr[i]]
-        else:
-            out[name] = [float(v) for v in arr[i]]
-    return out
-
-
-def write_best_yaml(spec: TuningSpec, x: np.ndarray, path: Path) -> dict:
-    """The winning controller parameters as a ready-to-use ROS 2 parameter file."""
-    params, _ = decode(spec, x[None])
-    values = {"controller_type": spec.controller, **parameter_values(params, 0)}
-    path.write_text(f"# best of tuning run {spec.name} ({spec.path.name})\n" +
-                    yaml.safe_dump({"controller": {"ros__parameters": values}}, sort_keys=False))
-    return values
 
 
 def _rows(spec: TuningSpec, gen: int, x: np.ndarray, ev: Evaluation) -> list[dict]:
@@ -213,8 +170,6 @@ def run_tuning(spec: TuningSpec, *, resume: bool = False, evaluator: Callable[[n
         A resume whose saved candidates do not match what the spec asks now.
     """
     if spec.algorithm["name"] == "root_locus":
-        from .rootlocus import tune_root_locus
-
         return tune_root_locus(spec, progress=progress)
     out = spec.output
     out.mkdir(parents=True, exist_ok=True)
@@ -308,7 +263,6 @@ def _pareto(rows: list[dict]) -> list[dict]:
 
 
 def _write_results(spec, rows, history, best_x, best_f, front) -> None:
-    import csv
 
     out = spec.output
     (out / "evaluations.json").write_text(json.dumps(rows, indent=1))

@@ -6,6 +6,7 @@ import json
 from pathlib import Path
 
 import numpy as np
+from matplotlib.figure import Figure
 
 from .evaluate import PENALTY
 from .spec import SpecError
@@ -35,10 +36,6 @@ def plot_results(folder: str | Path, out_png: str | Path) -> Path:
     SpecError
         The folder holds no evaluations.
     """
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
 
     folder = Path(folder)
     rows = _rows(folder)
@@ -52,7 +49,8 @@ def plot_results(folder: str | Path, out_png: str | Path) -> Path:
     median = np.array([np.median(c[c < PENALTY]) if np.any(c < PENALTY) else np.nan for c in costs.values()])
     failed = np.array([np.sum(c >= PENALTY) for c in costs.values()])
     two = len(rows[0]["cost"]) == 2
-    fig, axes = plt.subplots(1, 2 if two else 1, figsize=(12 if two else 8, 4.6), dpi=110, squeeze=False)
+    fig = Figure(figsize=(12 if two else 8, 4.6), dpi=110)
+    axes = fig.subplots(1, 2 if two else 1, squeeze=False)
     ax = axes[0, 0]
     ax.plot(gens, best_so_far, "-", lw=2, label="best so far")
     ax.plot(gens, gen_best, ".", ms=4, label="best of generation")
@@ -89,5 +87,4 @@ def plot_results(folder: str | Path, out_png: str | Path) -> Path:
     out = Path(out_png)
     out.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(out)
-    plt.close(fig)
     return out

@@ -20,11 +20,16 @@ from __future__ import annotations
 
 import json
 
+import control
 import numpy as np
+from matplotlib.figure import Figure
+from scipy.optimize import minimize
 
 from attitude_sil.core.engine import build_wheels, inertia_matrix, simulate
 from attitude_sil.core.linear import linear_model
 from attitude_sil.core.metrics import scenario_metrics
+
+from .results import TuningResult, write_best_yaml
 
 __all__ = ["roll_loop", "closed_loop", "tune_root_locus"]
 
@@ -35,7 +40,6 @@ def roll_loop(scn, axis: int = 0):
     States: body (omega, g, h_w) and, per wheel, (current, speed); the wheel
     momentum state of the body model is replaced by the motors' own.
     """
-    import control
 
     p = scn.values["plant"]
     inertia = inertia_matrix(p["inertia"])
@@ -67,7 +71,6 @@ def roll_loop(scn, axis: int = 0):
 
 def closed_loop(plant, kp, ki, kd, n):
     """Unity feedback of the PID ``kp + ki/s + kd n s/(s+n)`` around ``plant`` (reference in g units)."""
-    import control
 
     s = control.tf("s")
     pid = kp + ki / s + kd * n * s / (s + n)
@@ -84,10 +87,6 @@ def _targets(scn):
 
 def tune_root_locus(spec, progress=None):
     """Place the dominant closed-loop poles (see the module docstring); write the usual results."""
-    import control
-    from scipy.optimize import minimize
-
-    from .optimize import TuningResult, write_best_yaml
 
     scn = spec.scenarios[0]
     axis = scn.values["scenario"]["metrics.axis"]
@@ -171,13 +170,10 @@ def tune_root_locus(spec, progress=None):
 
 def _plot_locus(plant, kp, ki, kd, n, target, path) -> None:
     """Closed-loop poles as the PID's overall gain k sweeps 0.05-20 x the design, the design marked."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
 
     ks = np.logspace(-1.3, 1.3, 200)
-    fig, ax = plt.subplots(figsize=(7, 5.5), dpi=110)
+    fig = Figure(figsize=(7, 5.5), dpi=110)
+    ax = fig.subplots()
     for k in ks:
         poles = closed_loop(plant, k * kp, k * ki, k * kd, n).poles()
         ax.plot(poles.real, poles.imag, ".", color="0.6", ms=2)
@@ -196,4 +192,3 @@ def _plot_locus(plant, kp, ki, kd, n, target, path) -> None:
     ax.legend(fontsize=8)
     fig.tight_layout()
     fig.savefig(path)
-    plt.close(fig)

@@ -35,18 +35,15 @@ import numpy as np
 import yaml
 
 from attitude_sil.core.params import NODE_PARAMS
-from attitude_sil.core.scenario import Scenario, ScenarioError, load_scenario
+from attitude_sil.core.scenario import Scenario, load_scenario
+from attitude_sil.errors import ScenarioError, SpecError
 
-__all__ = ["SpecError", "Gene", "TuningSpec", "load_spec", "ALGORITHMS", "COSTS"]
+__all__ = ["SpecError", "Gene", "TuningSpec", "load_spec", "apply_overrides", "decode", "ALGORITHMS", "COSTS"]
 
 ALGORITHMS = ("ga", "binary_ga", "pso", "mixed_ga", "nsga2", "root_locus")
 COSTS = ("paper000_j", "paper001_fitness", "mse", "paper004_objective", "ts_ce")
 _TOP = {"name", "description", "scenarios", "conditions", "controller", "genome", "cost", "algorithm", "seed",
         "evaluation", "output", "record"}
-
-
-class SpecError(ValueError):
-    """A tuning spec that cannot be used; one line naming the file and the key."""
 
 
 @dataclass(frozen=True)
@@ -270,3 +267,24 @@ def decode(spec: TuningSpec, x: np.ndarray) -> tuple[dict[str, np.ndarray], np.n
         else:
             arr[:, g.index:g.index + g.count] = vals
     return params, np.concatenate(values, axis=1)
+
+
+def apply_overrides(spec: TuningSpec, overrides: dict[str, Any]) -> TuningSpec:
+    """``--set section.key=value`` on a loaded spec (seed, output, algorithm.*, cost.*, evaluation.*, record.*).
+
+    Raises
+    ------
+    SpecError
+        A key outside those sections.
+    """
+    for key, value in overrides.items():
+        section, _, name = key.partition(".")
+        if section == "seed" and not name:
+            spec.seed = int(value)
+        elif section == "output" and not name:
+            spec.output = Path(str(value))
+        elif section in ("algorithm", "cost", "evaluation", "record") and name:
+            getattr(spec, section)[name] = value
+        else:
+            raise SpecError(f"--set {key}: only seed, output, algorithm.*, cost.*, evaluation.*, record.* can be set")
+    return spec

@@ -1,8 +1,10 @@
-"""The ``attitude-sil`` command.
+"""The ``attitude-sil`` command: subcommands, their arguments, and one-line errors.
 
-Subcommands (DESIGN.md section 5): ``run``, ``tune``, ``replay``, ``bag info``,
-``plot``, ``param`` and ``linearize``. User errors print one line on stderr and exit 2; Ctrl-C exits 130 after
-the bag is closed.
+Subcommands (docs/architecture.md, "Command line"): ``run``, ``tune``,
+``replay``, ``bag info``, ``plot``, ``param``, ``linearize`` and
+``robustness``. Any :class:`~attitude_sil.errors.AttitudeSilError` (every user
+error) prints one line on stderr and exits 2; Ctrl-C exits 130 after the bag is
+closed. A traceback means a bug.
 """
 
 from __future__ import annotations
@@ -14,52 +16,35 @@ import sys
 from datetime import datetime
 from pathlib import Path
 
+import rclpy
 import yaml
+from rclpy.signals import SignalHandlerOptions
 
-__all__ = ["main"]
+from attitude_sil.cli.format import format_bar, format_segments, format_table
+from attitude_sil.core.linearize import PAPER_000_COMPARISON_GAINS, rmse_table
+from attitude_sil.core.linearize import format_table as format_rmse_table
+from attitude_sil.core.scenario import load_scenario
+from attitude_sil.errors import AttitudeSilError, ScenarioError
+from attitude_sil.graph.session import run_graph
+from attitude_sil.graph.tuner_node import TunerNode, tune
+from attitude_sil.ros.environment import localhost_environment
+from attitude_sil.storage.info import format_info
+from attitude_sil.storage.reader import open_bag
+from attitude_sil.tools.paramclient import param_command
+from attitude_sil.tools.plot import plot_bag
+from attitude_sil.tools.replay import ReplayOptions, replay_bag
+from attitude_sil.tools.verify import verify_controller
+from attitude_sil.tuning.plot import plot_results
+from attitude_sil.tuning.robustness import format_robustness, robustness
 
-
-def _format_table(metrics: dict) -> str:
-    rows = [
-        ("controller" + (" (at start)" if metrics.get("segments") else ""), metrics["controller_type"], ""),
-        ("sim time", metrics["sim_time_s"], "s"),
-        ("wall time", metrics["wall_time_s"], "s"),
-        ("real-time factor", metrics["real_time_factor"], "x"),
-        ("time constant (63.2 %)", metrics["time_constant_s"], "s"),
-        ("rise time (10-90 %)", metrics["rise_time_s"], "s"),
-        ("settling time", metrics["settling_time_s"], "s"),
-        ("overshoot", metrics["overshoot_pct"], "%"),
-        ("steady-state error", metrics["steady_state_error_rad"], "rad"),
-        ("control effort Ce", metrics["control_effort_Nms"], "N m s"),
-        ("cost J (eq. 19)", metrics["cost_J"], ""),
-        ("IAE", metrics["iae"], "rad s"),
-        ("ISE", metrics["ise"], "rad^2 s"),
-        ("ITAE", metrics["itae"], "rad s^2"),
-    ]
-    extra = [("MSE (paper 002 eq. 10)", "mse", "rad^2"), ("max |error|", "max_abs_error_rad", "rad"),
-             ("fitness f (paper 001 eq. 8)", "fitness_f", ""),
-             ("final error angle", "final_error_rad", "rad")]
-    rows += [(label, metrics[key], unit) for label, key, unit in extra if key in metrics]
-    lines = [f"scenario {metrics['scenario']}"]
-    for label, value, unit in rows:
-        if value is None:
-            text = "n/a"
-        elif isinstance(value, float):
-            text = f"{value:.6g} {unit}".rstrip()
-        else:
-            text = str(value)
-        lines.append(f"  {label:<24} {text}")
-    if metrics.get("bag"):
-        lines.append(f"  {'bag':<24} {metrics['bag']}")
-    return "\n".join(lines)
+__all__ = ["build_parser", "main"]
 
 
 def _cmd_run(args: argparse.Namespace) -> int:
-    from attitude_sil.runner import run_graph
 
     scn = _load_with_params(args.scenario, args.params)
     if args.duration is not None and args.duration <= 0:
-        raise ValueError(f"--duration must be > 0, got {args.duration}")
+        raise AttitudeSilError(f"--duration must be > 0, got {args.duration}")
     if args.swap:
         times = list(scn.param("scenario", "schedule.times"))
         kinds = list(scn.param("scenario", "schedule.controller_types"))
@@ -68,7 +53,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
             try:
                 times.append(float(t))
             except ValueError:
-                raise ValueError(f"--swap takes TIME:TYPE, e.g. 2.0:fuzzy_pid; got {item!r}") from None
+                raise AttitudeSilError(f"--swap takes TIME:TYPE, e.g. 2.0:fuzzy_pid; got {item!r}") from None
             kinds.append(kind)
         order = sorted(range(len(times)), key=times.__getitem__)
         scn = scn.with_values("scenario", **{"schedule.times": [times[i] for i in order],
@@ -80,38 +65,22 @@ def _cmd_run(args: argparse.Namespace) -> int:
     result = run_graph(scn, duration=args.duration, controller=args.controller, record_dir=record,
                        processes=args.processes, real_time=args.real_time, progress=not args.quiet,
                        namespace=args.namespace)
-    print(_format_table(result.metrics))
+    print(format_table(result.metrics))
     if result.metrics.get("segments"):
-        print(_format_segments(result.metrics["segments"]))
+        print(format_segments(result.metrics["segments"]))
     if args.json:
         print(json.dumps(result.metrics))
     return 0
 
 
-def _format_segments(segments: list[dict]) -> str:
-    rows = [("controller", "controller_type", "{}"), ("from", "t_start_s", "{:.2f} s"), ("to", "t_end_s", "{:.2f} s"),
-            ("IAE", "iae", "{:.4g} rad s"), ("ISE", "ise", "{:.4g} rad^2 s"),
-            ("max |error|", "max_abs_error_rad", "{:.4g} rad"), ("RMS error", "rms_error_rad", "{:.4g} rad"),
-            ("control effort Ce", "control_effort_Nms", "{:.4g} N m s"), ("max |command|", "max_abs_command", "{:.4g}")]
-    width = 22
-    lines = ["per controller (scheduled swaps):"]
-    for label, key, fmt in rows:
-        cells = [fmt.format(seg[key]) if seg.get(key) is not None else "n/a" for seg in segments]
-        lines.append(f"  {label:<20}" + "".join(f"{c:>{width}}" for c in cells))
-    return "\n".join(lines)
-
-
 def _cmd_linearize(args: argparse.Namespace) -> int:
-    from attitude_sil.core.scenario import load_scenario
-    from attitude_sil.linearize import PAPER_000_COMPARISON_GAINS, format_table, rmse_table
-
     scn = load_scenario(args.scenario)
     if scn.param("plant", "model") not in ("rigid_body", "linearized"):
-        raise ValueError(f"{args.scenario}: linearize needs a rigid-body scenario (plant.model), "
+        raise AttitudeSilError(f"{args.scenario}: linearize needs a rigid-body scenario (plant.model), "
                          f"got {scn.param('plant', 'model')}")
     gains = tuple(args.gains) if args.gains else PAPER_000_COMPARISON_GAINS
     table = rmse_table(scn, args.angles, gains, duration=args.duration)
-    print(format_table(args.angles, table))
+    print(format_rmse_table(args.angles, table))
     if args.json:
         print(json.dumps({"angles_deg": list(args.angles), "rmse_deg": table.tolist(), "gains": list(gains)}))
     return 0
@@ -119,25 +88,23 @@ def _cmd_linearize(args: argparse.Namespace) -> int:
 
 def _load_with_params(scenario: str, params: str | None):
     """A scenario with a controller parameter file (e.g. a tuner's best.yaml) laid over it."""
-    from attitude_sil.core.scenario import ScenarioError, load_scenario
 
     scn = load_scenario(scenario)
     if params:
         path = Path(params)
         if not path.is_file():
-            raise ValueError(f"{path}: no such parameter file")
+            raise AttitudeSilError(f"{path}: no such parameter file")
         data = yaml.safe_load(path.read_text()) or {}
         for node, section in data.items():
             values = (section or {}).get("ros__parameters", {})
             try:
                 scn = scn.with_values(str(node).lstrip("/"), **values)
             except (ScenarioError, KeyError) as exc:
-                raise ValueError(f"{path}: {exc}") from None
+                raise AttitudeSilError(f"{path}: {exc}") from None
     return scn
 
 
 def _cmd_robustness(args: argparse.Namespace) -> int:
-    from attitude_sil.tuning.robustness import format_robustness, robustness
 
     rows = robustness(_load_with_params(args.scenario, args.params))
     print(format_robustness(rows))
@@ -147,19 +114,16 @@ def _cmd_robustness(args: argparse.Namespace) -> int:
 
 
 def _cmd_param(args: argparse.Namespace) -> int:
-    from attitude_sil.paramclient import param_command
 
     if args.action in ("get", "set") and not args.name:
-        raise ValueError(f"param {args.action} needs a parameter NAME")
+        raise AttitudeSilError(f"param {args.action} needs a parameter NAME")
     if args.action == "set" and args.value is None:
-        raise ValueError("param set needs a VALUE")
+        raise AttitudeSilError("param set needs a VALUE")
     print(param_command(args.action, args.node, args.name, args.value, timeout=args.timeout))
     return 0
 
 
 def _cmd_bag(args: argparse.Namespace) -> int:
-    from attitude_sil.bag.info import format_info
-    from attitude_sil.bag.reader import open_bag
 
     print(format_info(open_bag(args.bag)))
     return 0
@@ -168,12 +132,8 @@ def _cmd_bag(args: argparse.Namespace) -> int:
 def _cmd_plot(args: argparse.Namespace) -> int:
     path = Path(args.path)
     if (path / "summary.json").is_file() or (path / "evaluations.jsonl").is_file():
-        from attitude_sil.tuning.plot import plot_results
-
         out = plot_results(path, args.output)
     else:
-        from attitude_sil.plot import plot_bag
-
         out = plot_bag(path, args.output)
     print(f"wrote {out}")
     return 0
@@ -181,15 +141,12 @@ def _cmd_plot(args: argparse.Namespace) -> int:
 
 def _cmd_replay(args: argparse.Namespace) -> int:
     if args.verify_controller:
-        from attitude_sil.bag.verify import verify_controller
-
         result = verify_controller(args.bag, params_file=args.params, tolerance=args.tolerance)
         verdict = "PASS" if result.passed else "FAIL"
         print(f"{verdict}: {result.steps} steps, largest command deviation {result.max_deviation:.3g} "
               f"at t={result.worst_time_s:.3f} s (axis {result.worst_axis}), tolerance {result.tolerance:g}, "
               f"{result.swaps} recorded parameter change(s) applied")
         return 0 if result.passed else 1
-    from attitude_sil.bag.replay import ReplayOptions, replay_bag
 
     stop = {"flag": False}
 
@@ -215,16 +172,42 @@ def _cmd_replay(args: argparse.Namespace) -> int:
 
 
 def _cmd_tune(args: argparse.Namespace) -> int:
-    from attitude_sil.nodes.tuner_node import tune_command
-
     overrides = {}
     for item in args.set or []:
         key, sep, value = item.partition("=")
         if not sep:
-            raise ValueError(f"--set takes KEY=VALUE, got {item!r}")
+            raise AttitudeSilError(f"--set takes KEY=VALUE, got {item!r}")
         overrides[key] = yaml.safe_load(value)
-    summary = tune_command(args.spec, resume=args.resume, overrides=overrides, quiet=args.quiet,
-                           record=not args.no_record)
+    stop = {"flag": False}
+
+    def on_sigint(signum, frame):
+        if stop["flag"]:
+            raise KeyboardInterrupt
+        stop["flag"] = True
+        print("\nstopping after this generation (Ctrl-C again to stop now)", file=sys.stderr)
+
+    localhost_environment()
+    context = rclpy.Context()
+    rclpy.init(args=[], context=context, signal_handler_options=SignalHandlerOptions.NO)
+    node = TunerNode(context=context)
+
+    def progress(stats: dict) -> None:
+        node.publish(stats)
+        if not args.quiet:
+            print(format_bar(stats), file=sys.stderr, flush=True)
+
+    old = signal.signal(signal.SIGINT, on_sigint)
+    try:
+        outcome = tune(args.spec, resume=args.resume, overrides=overrides, record=not args.no_record,
+                       on_progress=progress, should_stop=lambda: stop["flag"])
+    finally:
+        signal.signal(signal.SIGINT, old)
+        node.destroy_node()
+        rclpy.try_shutdown(context=context)
+    out = outcome.spec.output
+    summary = json.loads((out / "summary.json").read_text()) if (out / "summary.json").exists() else {}
+    summary.update(wall_time_s=outcome.wall_time_s, interrupted=outcome.result.interrupted,
+                   evaluations=outcome.result.evaluations, output=str(out))
     best = summary.get("best_cost", [float("nan")])
     print(f"tuning {summary.get('name')}: best cost {', '.join(f'{v:.6g}' for v in best)} after "
           f"{summary.get('evaluations')} evaluations in {summary['wall_time_s']:.1f} s"
@@ -238,6 +221,7 @@ def _cmd_tune(args: argparse.Namespace) -> int:
 
 
 def build_parser() -> argparse.ArgumentParser:
+    """The ``attitude-sil`` argument parser with every subcommand."""
     parser = argparse.ArgumentParser(prog="attitude-sil", description="Spacecraft attitude-control SIL on ROS 2.")
     sub = parser.add_subparsers(dest="command", required=True)
     run = sub.add_parser("run", help="run a scenario headless through the ROS 2 graph")
@@ -264,7 +248,7 @@ def build_parser() -> argparse.ArgumentParser:
     lin.add_argument("--duration", type=float, help="episode length, s (default: the scenario's)")
     lin.add_argument("--json", action="store_true", help="also print the table as one JSON object")
     lin.set_defaults(func=_cmd_linearize)
-    rob = sub.add_parser("robustness", help="a design on perturbed plants: inertia +-12.5 % (paper 001) or the "
+    rob = sub.add_parser("robustness", help="a design on perturbed plants: inertia +-12.5 %% (paper 001) or the "
                          "flexible mismatch cases (paper 002)")
     rob.add_argument("scenario", help="scenario YAML")
     rob.add_argument("--params", help="controller parameters to evaluate (e.g. a tuner's best.yaml)")
@@ -313,23 +297,13 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
-    """Entry point of ``attitude-sil``."""
-    from attitude_sil.bag.reader import BagError
-    from attitude_sil.core.scenario import ScenarioError
-    from attitude_sil.paramclient import ParamClientError
-    from attitude_sil.runner import RunError
-    from attitude_sil.tuning.spec import SpecError
-
+    """Entry point of ``attitude-sil``; returns the exit code."""
     args = build_parser().parse_args(argv)
     try:
         return args.func(args)
     except KeyboardInterrupt:
         print("interrupted; everything recorded so far is kept", file=sys.stderr)
         return 130
-    except (ScenarioError, RunError, ParamClientError, BagError, SpecError, ValueError, FileNotFoundError) as exc:
+    except (AttitudeSilError, ValueError, FileNotFoundError) as exc:
         print(f"attitude-sil: error: {exc}", file=sys.stderr)
         return 2
-
-
-if __name__ == "__main__":
-    raise SystemExit(main())

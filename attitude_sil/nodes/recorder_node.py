@@ -1,7 +1,7 @@
 """``recorder`` node: writes every topic of the run to a rosbag2 MCAP bag.
 
 Raw (serialized CDR) subscriptions go straight into
-:class:`attitude_sil.bag.writer.BagWriter`, so recording costs no
+:class:`attitude_sil.storage.writer.BagWriter`, so recording costs no
 deserialization. The log time of a message is its header stamp (sim time),
 read from the CDR bytes, so a bag replays with its simulated timing;
 ``/parameter_events`` (stamped by each node's clock, wall time before
@@ -12,29 +12,14 @@ metrics.
 
 from __future__ import annotations
 
-import struct
 from collections import defaultdict
 
 from rclpy.node import Node
-from rclpy.qos import qos_profile_parameter_events
 
-from attitude_sil.bag.writer import BagWriter, qos_profiles_yaml
-from attitude_sil.nodes.common import LOCKSTEP_QOS
-from attitude_sil.topics import RECORDED_TOPICS, message_class
-
-_STAMP = struct.Struct("<iI")
-
-
-def stamp_from_cdr(data: bytes) -> int | None:
-    """Nanoseconds of the ``builtin_interfaces/Time`` that opens a message, or None.
-
-    Every recorded type starts with a stamp (a ``Header``, ``Clock.clock`` or
-    ``ParameterEvent.stamp``), right after the 4-byte CDR encapsulation header.
-    """
-    if len(data) < 12 or data[1] not in (0, 1):
-        return None
-    sec, nsec = _STAMP.unpack_from(data, 4) if data[1] == 1 else struct.unpack_from(">iI", data, 4)
-    return sec * 1_000_000_000 + nsec
+from attitude_sil.ros.contract import PARAMETER_EVENTS, RECORDED_TOPICS, message_class
+from attitude_sil.ros.qos import LOCKSTEP_QOS, PARAMETER_EVENTS_QOS, offered_qos_yaml
+from attitude_sil.storage.cdr import stamp_from_cdr
+from attitude_sil.storage.writer import BagWriter
 
 
 class Recorder(Node):
@@ -47,8 +32,8 @@ class Recorder(Node):
     keep : iterable of str
         Relative topic names whose raw messages stay in memory (``kept``).
     topics : dict, optional
-        ``name -> type``; default every topic of DESIGN.md section 3 plus
-        ``/parameter_events``.
+        ``name -> type``; default :data:`~attitude_sil.ros.contract.RECORDED_TOPICS`
+        (every topic of the contract plus ``/parameter_events``).
     """
 
     def __init__(self, writer: BagWriter | None, keep=(), topics: dict[str, str] | None = None, **kwargs) -> None:
@@ -59,7 +44,7 @@ class Recorder(Node):
         self.kept: dict[str, list[tuple[int, bytes]]] = {name: [] for name in keep}
         self.subs = {}
         for name, type_name in (topics or RECORDED_TOPICS).items():
-            qos = qos_profile_parameter_events if name == "/parameter_events" else LOCKSTEP_QOS
+            qos = PARAMETER_EVENTS_QOS if name == PARAMETER_EVENTS else LOCKSTEP_QOS
             sub = self.create_subscription(
                 message_class(type_name), name, lambda data, n=name: self._on_message(n, data), qos, raw=True
             )
@@ -78,13 +63,11 @@ class Recorder(Node):
         self.writer = writer
         if writer is not None:
             for name, sub in self.subs.items():
-                offered = qos_profiles_yaml(depth=1000) if name == "/parameter_events" else \
-                    qos_profiles_yaml(durability="transient_local", depth=LOCKSTEP_QOS.depth)
-                writer.add_topic(sub.topic_name, self.types[name], offered)
+                writer.add_topic(sub.topic_name, self.types[name], offered_qos_yaml(name))
 
     def _on_message(self, name: str, data: bytes) -> None:
         t = stamp_from_cdr(data)
-        if name == "/parameter_events":
+        if name == PARAMETER_EVENTS:
             # events carry the node's clock: wall time until use_sim_time is on. Log
             # them at the sim time of the lockstep instead, so a bag spans sim time only.
             t = self.sim_now

@@ -1,7 +1,7 @@
 """Read rosbag2 bags with MCAP storage, including runs killed before closing.
 
 :func:`open_bag` takes a rosbag2 directory (``<run>/<run>_0.mcap`` plus
-``metadata.yaml``, as :mod:`attitude_sil.bag.writer` or ``ros2 bag record -s
+``metadata.yaml``, as :mod:`attitude_sil.storage.writer` or ``ros2 bag record -s
 mcap`` lays it out) or a single ``.mcap`` file and returns a
 :class:`BagReader`, which lists the topics and time range and iterates over
 the messages in log-time order, raw (CDR bytes) or decoded from the schemas
@@ -48,6 +48,8 @@ from mcap.records import (
 )
 from mcap.stream_reader import breakup_chunk
 
+from attitude_sil.errors import BagError
+
 __all__ = ['BagError', 'BagReader', 'RawMessage', 'TopicInfo', 'open_bag']
 
 MAGIC = b'\x89MCAP0\r\n'
@@ -56,10 +58,6 @@ _FOOTER_LENGTH = 8 + 8 + 4  # summary start, summary offset start, summary CRC
 _FOOTER_RECORD_SIZE = _RECORD_HEADER.size + _FOOTER_LENGTH
 _KNOWN_OPCODES = frozenset(int(op) for op in Opcode)
 _METADATA_FILE = 'metadata.yaml'
-
-
-class BagError(ValueError):
-    """A bag cannot be read: the message is one line naming the file and the problem."""
 
 
 @dataclass(frozen=True)

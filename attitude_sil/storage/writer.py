@@ -13,7 +13,7 @@ rosbags can all read it:
   encoding ``cdr`` whose channel metadata holds ``offered_qos_profiles`` (a
   YAML string in the rosbag2 version-9 form) and ``topic_type_hash``; each
   type is a schema of encoding ``ros2msg`` named ``pkg/msg/Name`` whose data
-  is the concatenated definition from :mod:`attitude_sil.bag.msgdefs`;
+  is the concatenated definition from :mod:`attitude_sil.storage.msgdefs`;
 * messages go into chunks (zstd-compressed by default) that reach the file as
   soon as they are complete;
 * :meth:`BagWriter.close` writes the summary and indexes, a ``rosbag2``
@@ -54,6 +54,8 @@ import yaml
 from mcap.writer import CompressionType
 from mcap.writer import Writer as McapWriter
 
+from attitude_sil.errors import BagWriteError
+
 from .msgdefs import message_definition, normalize_type_name, type_description_hash
 
 __all__ = [
@@ -62,8 +64,13 @@ __all__ = [
     'BagClosedError',
     'BagWriteError',
     'BagWriter',
+    'PARAMETERS_KEY',
     'qos_profiles_yaml',
 ]
+
+#: metadata.yaml ``custom_data`` key holding every node's parameters at the start of a run
+#: (a ROS 2 parameter YAML string; docs/architecture.md, "Bags")
+PARAMETERS_KEY = 'attitude_sil.parameters'
 
 #: metadata.yaml format version written (rosbag2 in ROS 2 Jazzy).
 ROSBAG2_FORMAT_VERSION = 9
@@ -101,10 +108,6 @@ _COMPRESSIONS = {
 
 class BagClosedError(RuntimeError):
     """Raised when using a :class:`BagWriter` that is closed or closing."""
-
-
-class BagWriteError(RuntimeError):
-    """Raised when the bag file could not be written (e.g. the disk is full)."""
 
 
 def qos_profiles_yaml(*, reliability: str = 'reliable', durability: str = 'volatile',
@@ -222,7 +225,7 @@ def _library_string() -> str:
         mcap_version = importlib.metadata.version('mcap')
     except importlib.metadata.PackageNotFoundError:
         mcap_version = 'unknown'
-    return f'attitude_sil/{own} (attitude_sil.bag.writer; mcap-python/{mcap_version})'
+    return f'attitude_sil/{own} (attitude_sil.storage.writer; mcap-python/{mcap_version})'
 
 
 def _timestamp(value: Any, what: str) -> int:

@@ -15,8 +15,14 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
-from attitude_sil.bag.reader import BagError, open_bag
-from attitude_sil.topics import message_class
+import rclpy
+from rclpy.node import Node
+
+from attitude_sil.errors import BagError
+from attitude_sil.ros.contract import PARAMETER_EVENTS, message_class
+from attitude_sil.ros.environment import localhost_environment
+from attitude_sil.ros.qos import LOCKSTEP_QOS
+from attitude_sil.storage.reader import open_bag
 
 __all__ = ["ReplayOptions", "replay_bag", "remap_topic"]
 
@@ -57,7 +63,7 @@ class ReplayOptions:
 
 def remap_topic(topic: str, namespace: str | None) -> str:
     """``/attitude`` -> ``/<namespace>/attitude``; /clock and /parameter_events stay global."""
-    if not namespace or topic in ("/clock", "/parameter_events"):
+    if not namespace or topic in ("/clock", PARAMETER_EVENTS):
         return topic
     return "/" + namespace.strip("/") + "/" + topic.split("/")[-1]
 
@@ -65,7 +71,7 @@ def remap_topic(topic: str, namespace: str | None) -> str:
 def _select(reader, wanted: list[str] | None) -> list[str]:
     names = list(reader.topics)
     if wanted is None:
-        return [n for n in names if n != "/parameter_events"]
+        return [n for n in names if n != PARAMETER_EVENTS]
     chosen = []
     for w in wanted:
         match = w if w in reader.topics else reader.find_topic(w.strip("/"))
@@ -95,12 +101,6 @@ def replay_bag(path: str | Path, options: ReplayOptions, context=None,
     BagError
         Unreadable bag, unknown topic, or subscribers that never came.
     """
-    import rclpy
-    from rclpy.node import Node
-
-    from attitude_sil.nodes.common import LOCKSTEP_QOS
-    from attitude_sil.runner import localhost_environment
-
     reader = open_bag(path)
     topics = _select(reader, options.topics)
     if options.rate < 0:

@@ -19,16 +19,28 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+import rclpy
 import yaml
+from rclpy.experimental import EventsExecutor
+from rclpy.node import Node
+from rclpy.parameter import Parameter, parameter_value_to_python
 
-from attitude_sil.bag.reader import BagError, open_bag
 from attitude_sil.core.params import spec_for
-from attitude_sil.core.scenario import ScenarioError, load_scenario, scenario_from_dict
+from attitude_sil.core.scenario import load_scenario, scenario_from_dict
+from attitude_sil.errors import BagError, ScenarioError
+from attitude_sil.nodes.controller_node import ControllerNode
+from attitude_sil.ros.contract import COMMAND_TOPICS, CONTROLLER_INPUTS, STEP_TOPICS, message_class
+from attitude_sil.ros.convert import stamp_to_ns, vector_to_array
+from attitude_sil.ros.environment import localhost_environment
+from attitude_sil.ros.parameters import typed_parameter
+from attitude_sil.ros.qos import LOCKSTEP_QOS
+from attitude_sil.storage.reader import open_bag
+from attitude_sil.storage.writer import PARAMETERS_KEY
 
 __all__ = ["VerifyResult", "verify_controller", "controller_parameters"]
 
-INPUTS = ("attitude", "body_rate", "attitude_setpoint", "rate_setpoint")
-COMMANDS = ("voltage_cmd", "torque_cmd")
+INPUTS = CONTROLLER_INPUTS
+COMMANDS = COMMAND_TOPICS
 
 
 @dataclass
@@ -78,8 +90,6 @@ def controller_parameters(bag_path: str | Path, params_file: str | Path | None =
     if meta.is_file():
         info = yaml.safe_load(meta.read_text()) or {}
         custom = info.get("rosbag2_bagfile_information", {}).get("custom_data") or {}
-        from attitude_sil.runner import PARAMETERS_KEY
-
         snapshot = custom.get(PARAMETERS_KEY)
     if not snapshot:
         raise BagError(f"{path}: the bag holds no parameter snapshot (recorded by another tool, or the run "
@@ -90,8 +100,6 @@ def controller_parameters(bag_path: str | Path, params_file: str | Path | None =
 
 def _param_changes(reader) -> list[tuple[int, dict]]:
     """Recorded changes of the controller's parameters as (stamp ns, {name: value})."""
-    from rclpy.parameter import parameter_value_to_python
-
     out = []
     topic = reader.find_topic("parameter_events")
     if topic is None:
@@ -114,16 +122,6 @@ def verify_controller(bag_path: str | Path, params_file: str | Path | None = Non
     BagError
         Unreadable bag, missing topics, or a controller that does not answer.
     """
-    import rclpy
-    from rclpy.experimental import EventsExecutor
-    from rclpy.node import Node
-    from rclpy.parameter import Parameter
-
-    from attitude_sil.nodes.common import LOCKSTEP_QOS, stamp_to_ns, typed_parameter
-    from attitude_sil.nodes.controller_node import ControllerNode
-    from attitude_sil.runner import localhost_environment
-    from attitude_sil.topics import STEP_TOPICS, message_class
-
     reader = open_bag(bag_path)
     names = {}
     for short in INPUTS:
@@ -141,7 +139,7 @@ def verify_controller(bag_path: str | Path, params_file: str | Path | None = Non
         inputs.setdefault(msg.log_time_ns, {})[msg.topic.split("/")[-1]] = msg.data
     recorded: dict[int, tuple[str, np.ndarray]] = {}
     for raw, msg in reader.iter_decoded(topics=cmd_topics):
-        recorded[raw.log_time_ns] = (raw.topic.split("/")[-1], np.array([msg.vector.x, msg.vector.y, msg.vector.z]))
+        recorded[raw.log_time_ns] = (raw.topic.split("/")[-1], vector_to_array(msg))
     stamps = sorted(t for t, v in inputs.items() if len(v) == len(INPUTS) and t in recorded)
     if not stamps:
         raise BagError(f"{reader.paths[0]}: no step has all controller inputs and a recorded command")
@@ -159,8 +157,7 @@ def verify_controller(bag_path: str | Path, params_file: str | Path | None = Non
         for c in COMMANDS:
             feeder.create_subscription(
                 message_class(STEP_TOPICS[c]), c,
-                lambda m, c=c: got.__setitem__(stamp_to_ns(m.header.stamp),
-                                               (c, np.array([m.vector.x, m.vector.y, m.vector.z]))),
+                lambda m, c=c: got.__setitem__(stamp_to_ns(m.header.stamp), (c, vector_to_array(m))),
                 LOCKSTEP_QOS)
         executor = EventsExecutor(context=context)
         executor.add_node(ctrl)

@@ -17,9 +17,14 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from matplotlib.figure import Figure
+from matplotlib.lines import Line2D
+from matplotlib.transforms import blended_transform_factory
 
-from attitude_sil.bag.reader import BagError, BagReader, open_bag
 from attitude_sil.core.quaternion import euler_from_quat
+from attitude_sil.errors import BagError
+from attitude_sil.ros.convert import quaternion_to_array, vector_to_array
+from attitude_sil.storage.reader import BagReader, open_bag
 
 __all__ = ['controller_swaps', 'initial_controller', 'plot_bag']
 
@@ -108,23 +113,15 @@ class _Series:
         return bool(self.t)
 
 
-def _vector(m: Any) -> tuple[float, float, float]:
-    return (m.vector.x, m.vector.y, m.vector.z)
-
-
-def _quaternion(m: Any) -> tuple[float, float, float, float]:
-    return (m.quaternion.x, m.quaternion.y, m.quaternion.z, m.quaternion.w)
-
-
 _EXTRACT = {
-    'attitude': _quaternion,
-    'attitude_setpoint': _quaternion,
-    'attitude_error': _vector,
-    'body_rate': _vector,
-    'voltage_cmd': _vector,
-    'torque_cmd': _vector,
-    'disturbance_torque': _vector,
-    'flexible_mode': _vector,
+    'attitude': quaternion_to_array,
+    'attitude_setpoint': quaternion_to_array,
+    'attitude_error': vector_to_array,
+    'body_rate': vector_to_array,
+    'voltage_cmd': vector_to_array,
+    'torque_cmd': vector_to_array,
+    'disturbance_torque': vector_to_array,
+    'flexible_mode': vector_to_array,
 }
 
 
@@ -212,12 +209,6 @@ def plot_bag(bag_path: str | Path, out_png: str | Path, title: str | None = None
     BagError
         If the bag cannot be read or has no attitude messages.
     """
-    import matplotlib
-
-    matplotlib.use('Agg')
-    import matplotlib.pyplot as plt
-    from matplotlib.lines import Line2D
-    from matplotlib.transforms import blended_transform_factory
 
     bag_path = Path(bag_path)
     out_png = Path(out_png)
@@ -243,8 +234,8 @@ def plot_bag(bag_path: str | Path, out_png: str | Path, title: str | None = None
         panels.append('wheels')
     panels += [p for p in ('disturbance_torque', 'flexible_mode') if p in series]
 
-    fig, axes = plt.subplots(len(panels), 1, sharex=True, squeeze=False,
-                             figsize=(_FIG_WIDTH_IN, _PANEL_HEIGHT_IN * len(panels)), dpi=_DPI)
+    fig = Figure(figsize=(_FIG_WIDTH_IN, _PANEL_HEIGHT_IN * len(panels)), dpi=_DPI)
+    axes = fig.subplots(len(panels), 1, sharex=True, squeeze=False)
     axes = axes[:, 0]
     try:
         for ax, panel in zip(axes, panels, strict=True):
@@ -323,7 +314,7 @@ def plot_bag(bag_path: str | Path, out_png: str | Path, title: str | None = None
         out_png.parent.mkdir(parents=True, exist_ok=True)
         fig.savefig(out_png, dpi=_DPI)
     finally:
-        plt.close(fig)
+        fig.clear()
     return out_png
 
 

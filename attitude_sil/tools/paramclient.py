@@ -11,19 +11,21 @@ from __future__ import annotations
 import time
 from typing import Any
 
+import rclpy
 import yaml
+from rcl_interfaces.msg import ParameterType as T
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.parameter import Parameter, parameter_value_to_python
+from rclpy.parameter_client import AsyncParameterClient
+
+from attitude_sil.errors import ParamClientError
+from attitude_sil.ros.environment import localhost_environment
 
 __all__ = ["ParamClientError", "param_command"]
 
 
-class ParamClientError(RuntimeError):
-    """The node is not there, or refused; the message is one line."""
-
-
 def _coerce(value: Any, ptype) -> Any:
     """YAML value -> the declared parameter type (ints become floats for doubles)."""
-    from rcl_interfaces.msg import ParameterType as T
-
     def num(v, kind):
         if isinstance(v, bool) or not isinstance(v, (int, float)):
             raise ParamClientError(f"expected a number, got {v!r}")
@@ -59,18 +61,10 @@ def param_command(action: str, node_name: str, name: str | None = None, value: s
     ParamClientError
         Node not found, unknown parameter, bad value or refusal.
     """
-    import rclpy
-    from rclpy.parameter import Parameter, parameter_value_to_python
-    from rclpy.parameter_client import AsyncParameterClient
-
-    from attitude_sil.runner import localhost_environment
-
     localhost_environment()
     context = rclpy.Context()
     rclpy.init(args=[], context=context)
     node = rclpy.create_node(f"attitude_sil_param_{int(time.time() * 1000) % 100000}", context=context)
-    from rclpy.executors import SingleThreadedExecutor
-
     executor = SingleThreadedExecutor(context=context)
     executor.add_node(node)
 

@@ -1,0 +1,5 @@
+"""``python -m attitude_sil.cli``: the ``attitude-sil`` command."""
+
+from attitude_sil.cli.main import main
+
+raise SystemExit(main())

@@ -1,0 +1,198 @@
+"""The lockstep protocol as plain code: step sequencing, hold, pacing, watchdog, autostart.
+
+The graph advances in lockstep (docs/architecture.md, "Lockstep"): for step k
+at t_k = k dt every message carries the stamp t_k; the plant publishes the
+state of step k, waits for ``wheel_torque``, ``wheel_momentum`` and
+``disturbance_torque`` stamped t_k, integrates to t_k+1 and publishes again.
+This module holds the decisions of that protocol, free of rclpy and of any
+clock: every method takes the wall time ``now`` (s, monotonic) as an argument,
+so the rules are unit-tested directly and the nodes only carry them out.
+
+* :class:`StepSequencer` - what a downstream node does with a stamp
+  (new episode, next step, duplicate, mismatch).
+* :class:`PlantLockstep` - the plant's episode: which input completes a step,
+  when to publish, hold (``hold_at``), pace (``real_time_factor``), time out
+  (``input_timeout``) and autostart.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from enum import Enum
+
+import numpy as np
+
+__all__ = ["StepSequencer", "PlantLockstep", "Action", "PLANT_INPUTS"]
+
+#: the inputs the plant needs for every step
+PLANT_INPUTS = ("wheel_torque", "wheel_momentum", "disturbance_torque")
+
+
+class StepSequencer:
+    """Tracks the step stamps a downstream node has handled.
+
+    A stamp of 0, or one earlier than the last, starts a new episode (the
+    plant was reset); the next stamp must be the last plus ``dt``; a repeat
+    of the last stamp is a duplicate. Anything else is a mismatch the node
+    refuses, so it never integrates with a stale or skipped input.
+    """
+
+    NEW, NEXT, DUPLICATE, MISMATCH = "new", "next", "duplicate", "mismatch"
+
+    def __init__(self) -> None:
+        self.last_ns: int | None = None
+
+    def classify(self, t_ns: int, dt_ns: int) -> str:
+        """Classify stamp ``t_ns`` (ns) for a step of ``dt_ns`` (ns); NEW and NEXT are accepted."""
+        last = self.last_ns
+        if last is None or t_ns == 0 or t_ns < last:
+            kind = self.NEW
+        elif t_ns == last:
+            return self.DUPLICATE
+        elif t_ns == last + dt_ns:
+            kind = self.NEXT
+        else:
+            return self.MISMATCH
+        self.last_ns = t_ns
+        return kind
+
+
+class Action(Enum):
+    """What the plant node must do next."""
+
+    NONE = "none"  #: nothing (wait for inputs or the pacing deadline)
+    PUBLISH = "publish"  #: publish the state of the current step k
+    ADVANCE = "advance"  #: every input of step k is in: integrate to k+1, then call :meth:`PlantLockstep.advanced`
+    HOLD = "hold"  #: stopped before step k at ``hold_at``
+    PACE = "pace"  #: publish at :attr:`PlantLockstep.publish_at` (wall s), then call :meth:`PlantLockstep.paced`
+    START = "start"  #: autostart: the graph is wired, start an episode
+    FAIL = "fail"  #: the episode stopped; :attr:`PlantLockstep.error` says why
+
+
+@dataclass
+class PlantLockstep:
+    """The plant's side of the lockstep, one episode at a time.
+
+    Attributes
+    ----------
+    n_steps : int
+        K: the episode publishes steps 0..K.
+    dt_ns : int
+        Step, ns.
+    k : int
+        Current step; its state is published (or about to be).
+    inputs : dict
+        Inputs of step k received so far, ``name -> (3,)`` array.
+    running, done, holding : bool
+    error : str
+        Why the episode stopped ('' while fine).
+    publish_at : float or None
+        Wall time (s) a paced step is due.
+    """
+
+    n_steps: int = 0
+    dt_ns: int = 1
+    k: int = 0
+    inputs: dict[str, np.ndarray] = field(default_factory=dict)
+    running: bool = False
+    done: bool = False
+    holding: bool = False
+    error: str = ""
+    publish_at: float | None = None
+    episode_wall0: float = 0.0
+    step_wall0: float = 0.0
+
+    @property
+    def t_ns(self) -> int:
+        """Stamp of step k, ns."""
+        return self.k * self.dt_ns
+
+    def start(self, n_steps: int, dt_ns: int, now: float, hold_at: float) -> Action:
+        """Begin an episode at step 0 (after a reset); returns PUBLISH or HOLD."""
+        self.n_steps, self.dt_ns, self.k = int(n_steps), int(dt_ns), 0
+        self.inputs = {}
+        self.running, self.done, self.holding, self.error = True, False, False, ""
+        self.publish_at = None
+        self.episode_wall0 = now
+        return self.finish_step(hold_at)
+
+    def fail(self, reason: str) -> Action:
+        """Stop the episode with ``reason`` (the first reason wins)."""
+        if self.running:
+            self.running = False
+            self.error = reason
+            return Action.FAIL
+        return Action.NONE
+
+    def offer(self, name: str, t_ns: int, value: np.ndarray) -> Action:
+        """An input message arrived; returns ADVANCE when it completes step k, FAIL or NONE.
+
+        Stale stamps (earlier steps or episodes) are dropped; a stamp ahead of
+        step k, or a non-finite value, stops the episode: the plant never
+        integrates with a mismatched input.
+        """
+        if not self.running or t_ns < self.t_ns:
+            return Action.NONE
+        if t_ns > self.t_ns:
+            return self.fail(f"plant: {name} stamped {t_ns * 1e-9:.6f} s while waiting for step "
+                             f"{self.t_ns * 1e-9:.6f} s")
+        if not np.all(np.isfinite(value)):
+            return self.fail(f"plant: {name} at t={t_ns * 1e-9:.6f} s is not finite: {np.ravel(value).tolist()}")
+        self.inputs[name] = value
+        if len(self.inputs) == len(PLANT_INPUTS) and self.k < self.n_steps:
+            return Action.ADVANCE
+        return Action.NONE
+
+    def advanced(self, state_finite: bool, now: float, real_time_factor: float, hold_at: float) -> Action:
+        """The body was integrated to step k+1; returns FAIL, PACE, PUBLISH or HOLD."""
+        self.inputs = {}
+        self.k += 1
+        if not state_finite:
+            return self.fail(f"plant: state diverged at t={self.t_ns * 1e-9:.6f} s")
+        if real_time_factor > 0.0:
+            due = self.episode_wall0 + self.t_ns * 1e-9 / real_time_factor
+            if due > now:
+                self.publish_at = due
+                return Action.PACE
+        return self.finish_step(hold_at)
+
+    def paced(self, hold_at: float) -> Action:
+        """The pacing deadline passed; returns PUBLISH, HOLD or NONE (episode stopped meanwhile)."""
+        self.publish_at = None
+        return self.finish_step(hold_at) if self.running else Action.NONE
+
+    def finish_step(self, hold_at: float) -> Action:
+        """Publish step k unless ``hold_at`` (s, < 0: never) stops the plant before it."""
+        if hold_at >= 0.0 and self.t_ns >= round(hold_at * 1e9):
+            self.holding = True
+            return Action.HOLD
+        return Action.PUBLISH
+
+    def published(self, now: float) -> bool:
+        """The state of step k went out; returns True when that was the last step."""
+        self.step_wall0 = now
+        if self.n_steps > 0 and self.k >= self.n_steps:
+            self.running = False
+            self.done = True
+            return True
+        return False
+
+    def release(self, hold_at: float, now: float) -> Action:
+        """``hold_at`` changed; returns PUBLISH (or HOLD again) if the plant was holding, else NONE."""
+        if not (self.holding and self.running):
+            return Action.NONE
+        if hold_at < 0.0 or self.t_ns < round(hold_at * 1e9):
+            self.holding = False
+            self.step_wall0 = now
+            return self.finish_step(hold_at)
+        return Action.NONE
+
+    def watchdog(self, now: float, input_timeout: float, autostart: bool, wired: bool) -> Action:
+        """Periodic check: START an idle wired graph with ``autostart``; FAIL a step whose inputs are late."""
+        if not self.running and not self.done and not self.error and autostart and wired:
+            return Action.START
+        if self.running and self.publish_at is None and not self.holding and now - self.step_wall0 > input_timeout:
+            missing = [n for n in PLANT_INPUTS if n not in self.inputs]
+            return self.fail(f"plant: no {', '.join(missing)} for step t={self.t_ns * 1e-9:.6f} s "
+                             f"within {input_timeout:g} s; episode stopped")
+        return Action.NONE

@@ -1,0 +1,169 @@
+"""Start and stop the five graph nodes, and wait until they are wired.
+
+``launch`` is not on PyPI, so this is the project's own launcher. Two ways:
+
+* :func:`start_nodes`: every node in this process, in one rclpy context and
+  executor (the ``EventsExecutor``: about 7x less overhead per message than
+  the ``SingleThreadedExecutor`` here);
+* :func:`start_processes`: one process per node (their console-script
+  modules) given a ``--params-file``, talking over DDS.
+
+:func:`wait_connected` waits by condition (matched publisher and subscription
+counts), never by sleeping.
+"""
+
+from __future__ import annotations
+
+import signal
+import subprocess
+import sys
+import time
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import yaml
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+
+from attitude_sil.core.params import spec_for
+from attitude_sil.core.scenario import GRAPH_NODES, Scenario
+from attitude_sil.errors import RunError
+from attitude_sil.nodes.controller_node import ControllerNode
+from attitude_sil.nodes.disturbance_node import DisturbanceNode
+from attitude_sil.nodes.guidance_node import GuidanceNode
+from attitude_sil.nodes.plant_node import PlantNode
+from attitude_sil.nodes.recorder_node import Recorder
+from attitude_sil.nodes.wheels_node import WheelsNode
+from attitude_sil.ros.contract import GRAPH_SUBSCRIBERS, STEP_TOPICS
+from attitude_sil.ros.parameters import typed_parameter
+
+__all__ = ["NODE_CLASSES", "namespace_kwargs", "node_overrides", "start_nodes", "start_processes", "stop_processes",
+           "wait_connected"]
+
+#: the node class of each graph node name
+NODE_CLASSES = {"plant": PlantNode, "wheels": WheelsNode, "disturbance": DisturbanceNode,
+                "guidance": GuidanceNode, "controller": ControllerNode}
+
+
+def namespace_kwargs(namespace: str | None) -> dict:
+    """Node keyword arguments that put a node, and its ``/clock``, under ``namespace``."""
+    if not namespace:
+        return {}
+    return {"namespace": "/" + namespace, "cli_args": ["--ros-args", "-r", f"/clock:=/{namespace}/clock"]}
+
+
+def node_overrides(scn: Scenario, node: str, extra: dict[str, Any]) -> dict[str, Any]:
+    """What node ``node`` is given: the scenario's explicit values, then ``extra`` where it declares them."""
+    values = dict(scn.explicit.get(node, {}))
+    values.update({k: v for k, v in extra.items() if k in scn.values[node]})
+    return values
+
+
+def start_nodes(scn: Scenario, extra: dict[str, Any], context, executor, nodes: list[Node],
+                node_kwargs: dict | None = None) -> PlantNode:
+    """Create the five nodes in this process, add them to ``executor`` and ``nodes``; return the plant.
+
+    Raises
+    ------
+    RunError
+        A node refused its parameters.
+    """
+    plant = None
+    for name in GRAPH_NODES:
+        values = node_overrides(scn, name, extra)
+        # an empty list cannot be typed through an override; every empty value is a default here
+        overrides = [typed_parameter(spec_for(name, k), v) for k, v in values.items() if v != []]
+        overrides.append(Parameter("use_sim_time", Parameter.Type.BOOL, True))
+        try:
+            node = NODE_CLASSES[name](context=context, parameter_overrides=overrides, **(node_kwargs or {}))
+        except ValueError as exc:
+            raise RunError(str(exc)) from None
+        nodes.append(node)
+        executor.add_node(node)
+        if name == "plant":
+            plant = node
+    return plant
+
+
+def start_processes(scn: Scenario, extra: dict[str, Any], tmp: Path,
+                    namespace: str | None = None) -> list[subprocess.Popen]:
+    """Start one process per node, each with a parameter file written to ``tmp``."""
+    children = []
+    for name in GRAPH_NODES:
+        values = {k: v for k, v in node_overrides(scn, name, extra).items() if v != []}
+        values["use_sim_time"] = True
+        path = tmp / f"{name}.yaml"
+        path.write_text(yaml.safe_dump({name: {"ros__parameters": values}}))
+        cmd = [sys.executable, "-m", f"attitude_sil.nodes.{name}_node", "--ros-args", "--params-file", str(path)]
+        if namespace:
+            cmd += ["-r", f"__ns:=/{namespace}", "-r", f"/clock:=/{namespace}/clock"]
+        children.append(subprocess.Popen(cmd, stdin=subprocess.DEVNULL))
+    return children
+
+
+def stop_processes(children: list[subprocess.Popen], timeout: float = 5.0) -> None:
+    """SIGINT every node process, then kill what has not exited after ``timeout`` s."""
+    for child in children:
+        if child.poll() is None:
+            child.send_signal(signal.SIGINT)
+    deadline = time.monotonic() + timeout
+    for child in children:
+        try:
+            child.wait(timeout=max(0.1, deadline - time.monotonic()))
+        except subprocess.TimeoutExpired:
+            child.kill()
+            child.wait()
+
+
+def check_children(children: list[subprocess.Popen], when: str = "") -> None:
+    """Raise RunError if a node process has exited."""
+    for child in children:
+        if child.poll() is not None:
+            raise RunError(f"node process {child.args[2]} exited with code {child.returncode}{when}")
+
+
+def wait_connected(recorder: Recorder, spin: Callable[[float], None], nodes: list[Node],
+                   children: list[subprocess.Popen], timeout: float) -> None:
+    """Spin until every publisher has met every subscriber it should (matched, not merely seen).
+
+    Raises
+    ------
+    RunError
+        Discovery did not complete within ``timeout`` s, or a node process exited.
+    """
+    deadline = time.monotonic() + timeout
+
+    def in_process_ready() -> bool:
+        subs_per_topic: dict[str, int] = {}
+        pubs_per_topic: dict[str, int] = {}
+        for node in nodes + [recorder]:
+            for s in node.subscriptions:
+                subs_per_topic[s.topic_name] = subs_per_topic.get(s.topic_name, 0) + 1
+            for p in node.publishers:
+                pubs_per_topic[p.topic_name] = pubs_per_topic.get(p.topic_name, 0) + 1
+        for node in nodes:
+            for p in node.publishers:
+                if p.get_subscription_count() < subs_per_topic.get(p.topic_name, 0):
+                    return False
+        for node in nodes + [recorder]:
+            for s in node.subscriptions:
+                if s.get_publisher_count() < pubs_per_topic.get(s.topic_name, 0):
+                    return False
+        return True
+
+    def multi_process_ready() -> bool:
+        for name, sub in recorder.subs.items():
+            if name in STEP_TOPICS and sub.get_publisher_count() < 1:
+                return False
+        for name, n in GRAPH_SUBSCRIBERS.items():
+            if recorder.count_subscribers(recorder.resolved[name]) < n + 1:
+                return False
+        return True
+
+    ready = multi_process_ready if children else in_process_ready
+    while not ready():
+        check_children(children, " during start-up")
+        if time.monotonic() > deadline:
+            raise RunError(f"the graph did not connect within {timeout:g} s (DDS discovery)")
+        spin(0.02)

@@ -1,0 +1,374 @@
+"""Run episodes on a live graph: the runner's and the tuner's.
+
+:class:`GraphSession` starts the graph once (:mod:`attitude_sil.graph.launcher`:
+nodes in this process, or one process per node), adds a recorder and waits for
+discovery by condition. Each :meth:`GraphSession.run_episode` sets controller
+parameters through the parameter service, calls ``plant/reset``, spins until
+every step topic holds all K+1 messages (applying scheduled controller swaps
+at the plant's holds), and returns the episode as a
+:class:`~attitude_sil.core.trajectory.Trajectory` with its metrics and bag.
+:func:`run_graph` is one episode on a fresh graph (``attitude-sil run``).
+
+Unless the user chose a domain or a discovery range, the graph stays on this
+machine (:func:`attitude_sil.ros.environment.localhost_environment`).
+"""
+
+from __future__ import annotations
+
+import signal
+import subprocess
+import sys
+import tempfile
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import rclpy
+from rclpy.experimental import EventsExecutor
+from rclpy.signals import SignalHandlerOptions
+
+from attitude_sil.core.controllers import OUTPUT_KIND
+from attitude_sil.core.engine import schedule_from_scenario, simulate
+from attitude_sil.core.metrics import episode_report
+from attitude_sil.core.params import spec_for
+from attitude_sil.core.scenario import Scenario
+from attitude_sil.core.trajectory import Trajectory
+from attitude_sil.errors import AttitudeSilError, RunError
+from attitude_sil.graph.launcher import (
+    check_children,
+    namespace_kwargs,
+    start_nodes,
+    start_processes,
+    stop_processes,
+    wait_connected,
+)
+from attitude_sil.graph.trajectory import KEPT_TOPICS, trajectory_from_messages
+from attitude_sil.nodes.recorder_node import Recorder
+from attitude_sil.ros.contract import COMMAND_TOPICS, STEP_TOPICS
+from attitude_sil.ros.environment import localhost_environment
+from attitude_sil.ros.services import call_reset, set_remote_parameters
+from attitude_sil.storage.writer import PARAMETERS_KEY, BagWriter
+
+__all__ = ["RunError", "RunResult", "GraphSession", "run_graph"]
+
+
+class _Interrupt:
+    """Turns Ctrl-C into a flag the spin loops check between callbacks.
+
+    A ``KeyboardInterrupt`` raised inside a node callback would tear a step in
+    half (and the executor logs it as a fatal callback error); checking a flag
+    between ``spin_once`` calls stops the run at a clean point instead.
+    """
+
+    def __init__(self) -> None:
+        self.requested = False
+        self._old = None
+
+    def __enter__(self) -> _Interrupt:
+        try:
+            self._old = signal.signal(signal.SIGINT, self._on_signal)
+        except ValueError:  # not the main thread: leave signals alone
+            self._old = None
+        return self
+
+    def _on_signal(self, signum, frame) -> None:
+        self.requested = True
+
+    def check(self) -> None:
+        if self.requested:
+            raise KeyboardInterrupt
+
+    def __exit__(self, *exc) -> None:
+        if self._old is not None:
+            signal.signal(signal.SIGINT, self._old)
+
+
+@dataclass
+class RunResult:
+    """Outcome of one graph episode.
+
+    Attributes
+    ----------
+    metrics : dict
+        The ``run --json`` object (docs/architecture.md, "Command line").
+    bag : Path or None
+        The bag recorded, if any.
+    counts : dict
+        Messages received per topic.
+    trajectory : Trajectory
+        The episode (P = 1), the batch engine's type.
+    """
+
+    metrics: dict[str, Any]
+    bag: Path | None
+    counts: dict[str, int]
+    trajectory: Trajectory
+
+
+def _schedule(scn: Scenario, duration: float) -> list[tuple[float, int, str]]:
+    """Scheduled swaps inside the episode as (time s, step index, controller_type)."""
+    k_end = scn.steps(duration)
+    return [(k * scn.dt, k, kind) for k, kind in schedule_from_scenario(scn) if k <= k_end]
+
+
+def _extra_params(scn: Scenario, duration: float | None, controller: str | None, real_time: bool) -> dict:
+    extra: dict[str, Any] = {"autostart": False}
+    sched = _schedule(scn, scn.duration if duration is None else duration)
+    if sched:
+        extra["hold_at"] = sched[0][0]
+    if duration is not None:
+        extra["duration"] = float(duration)
+    if controller is not None:
+        extra["controller_type"] = controller
+    if real_time:
+        extra["real_time_factor"] = 1.0
+    return extra
+
+
+class _Progress:
+    """A progress line on stderr: sim time, wall time, real-time factor."""
+
+    def __init__(self, enabled: bool, sim_end: float) -> None:
+        self.enabled = enabled
+        self.sim_end = sim_end
+        self.tty = sys.stderr.isatty()
+        self.t0 = time.monotonic()
+        self.last = self.t0
+
+    def update(self, sim_t: float, force: bool = False) -> None:
+        now = time.monotonic()
+        if not self.enabled or (not force and now - self.last < (0.25 if self.tty else 2.0)):
+            return
+        self.last = now
+        wall = now - self.t0
+        rtf = sim_t / wall if wall > 0 else 0.0
+        line = f"sim {sim_t:7.2f} / {self.sim_end:.2f} s   wall {wall:6.2f} s   {rtf:6.1f}x real time"
+        if self.tty:
+            print("\r" + line, end="\n" if force else "", file=sys.stderr, flush=True)
+        else:
+            print(line, file=sys.stderr, flush=True)
+
+
+class GraphSession:
+    """A running graph that can play several episodes (the runner's and the tuner's).
+
+    ``with GraphSession(scn, ...) as g: g.run_episode(...)``. The graph is started
+    once: nodes in this process (or one process per node), a recorder, discovery
+    awaited by condition. Each :meth:`run_episode` optionally sets controller
+    parameters through the parameter service, calls ``plant/reset`` and spins
+    until every step topic holds all K+1 messages.
+
+    With ``namespace`` the whole graph, its ``/clock`` included (remapped to
+    ``/<ns>/clock``), lives under that namespace, so replicas on one ROS domain
+    do not hear each other.
+    """
+
+    def __init__(self, scn: Scenario, *, duration: float | None = None, controller: str | None = None,
+                 processes: bool = False, real_time: bool = False, namespace: str | None = None,
+                 connect_timeout: float = 20.0) -> None:
+        if controller is not None:
+            spec_for("controller", "controller_type").validate(controller, "controller")
+        self.scn = scn
+        self.extra = _extra_params(scn, duration, controller, real_time)
+        self.duration = scn.duration if duration is None else float(duration)
+        if self.duration <= 0.0:
+            raise RunError("the runner needs a finite episode: give plant.duration or --duration > 0")
+        self.processes = processes
+        self.namespace = namespace.strip("/") if namespace else None
+        self.connect_timeout = connect_timeout
+        self.controller = controller or scn.param("controller", "controller_type")
+
+    def __enter__(self) -> GraphSession:
+        localhost_environment()
+        # compile (or load from numba's cache) every law's kernels before the clock
+        # starts, so no node compiles mid-episode and node processes find the cache
+        for kind in OUTPUT_KIND:
+            try:
+                simulate(self.scn, 1, duration=self.scn.dt, controller=kind, schedule=[])
+            except (AttitudeSilError, ValueError):
+                pass  # a law this preset's actuator cannot take (e.g. torque into speed-loop wheels)
+        self.context = rclpy.Context()
+        self.interrupt = _Interrupt().__enter__()
+        rclpy.init(args=[], context=self.context, signal_handler_options=SignalHandlerOptions.NO)
+        self.nodes: list = []
+        self.children: list[subprocess.Popen] = []
+        self.tmpdir = None
+        self.recorder = None
+        try:
+            kw = namespace_kwargs(self.namespace)
+            self.recorder = Recorder(None, keep=KEPT_TOPICS, context=self.context, **kw)
+            self.executor = EventsExecutor(context=self.context)
+            self.executor.add_node(self.recorder)
+            self.plant = None
+            if self.processes:
+                self.tmpdir = tempfile.TemporaryDirectory(prefix="attitude_sil_")
+                self.children = start_processes(self.scn, self.extra, Path(self.tmpdir.name), self.namespace)
+            else:
+                self.plant = start_nodes(self.scn, self.extra, self.context, self.executor, self.nodes, kw)
+            wait_connected(self.recorder, self.spin, self.nodes, self.children, self.connect_timeout)
+        except BaseException:
+            self.__exit__(None, None, None)
+            raise
+        return self
+
+    def spin(self, timeout_sec: float) -> None:
+        """Process callbacks for up to ``timeout_sec``; raises KeyboardInterrupt after Ctrl-C."""
+        self.interrupt.check()
+        self.executor.spin_once(timeout_sec=timeout_sec)
+
+    def run_episode(self, *, record_dir: str | Path | None = None, controller_params: dict | None = None,
+                    progress: bool = False) -> RunResult:
+        """Play one episode; returns its metrics, counts, trajectory and bag.
+
+        Raises
+        ------
+        RunError
+            A refused parameter or reset, a bag that cannot be created, an
+            input timeout or a failed node.
+        KeyboardInterrupt
+            After Ctrl-C, once the bag is closed (nothing recorded is lost).
+        """
+        writer = None
+        if record_dir is not None:
+            extra = dict(self.extra)
+            if controller_params:
+                extra.update(controller_params)
+            try:
+                writer = BagWriter(record_dir, custom_data={PARAMETERS_KEY: self.scn.parameters_yaml(extra)})
+            except (FileExistsError, ValueError, OSError) as exc:
+                raise RunError(str(exc)) from None
+        self.recorder.start_episode(writer)
+        prog = _Progress(progress, self.duration)
+        schedule = _schedule(self.scn, self.duration)
+        try:
+            if controller_params:
+                set_remote_parameters(self.recorder, self.spin, "controller", controller_params)
+            if schedule:  # a scheduled swap ends with the plant released: hold it again
+                set_remote_parameters(self.recorder, self.spin, "plant", {"hold_at": schedule[0][0]})
+            call_reset(self.recorder, self.spin, self.connect_timeout)
+            wall0 = time.monotonic()
+            prog.t0 = wall0
+            _spin_episode(self.recorder, self.spin, self.plant, self.children, self.scn.steps(self.duration),
+                          self.scn, prog, schedule)
+            wall = time.monotonic() - wall0
+            prog.update(self.duration, force=True)
+        finally:
+            self.recorder.writer = None  # stop recording; the kept messages stay for the metrics
+            if writer is not None:
+                writer.close()
+        traj = trajectory_from_messages(self.recorder.kept)
+        metrics = episode_report(self.scn, traj, self.controller, self.duration, wall,
+                                 schedule if schedule else None)
+        bag = None if writer is None else writer.run_dir
+        metrics["bag"] = None if bag is None else str(bag)
+        return RunResult(metrics=metrics, bag=bag, counts=dict(self.recorder.counts), trajectory=traj)
+
+    def __exit__(self, *exc) -> None:
+        if getattr(self, "executor", None) is not None:
+            self.executor.shutdown()
+        for node in self.nodes:
+            node.destroy_node()
+        self.nodes = []
+        stop_processes(self.children)
+        self.children = []
+        if self.recorder is not None:
+            try:
+                self.recorder.destroy_node()
+            except Exception:  # noqa: BLE001 - best effort during teardown
+                pass
+        rclpy.try_shutdown(context=self.context)
+        if self.tmpdir is not None:
+            self.tmpdir.cleanup()
+            self.tmpdir = None
+        self.interrupt.__exit__()
+
+
+def run_graph(
+    scn: Scenario,
+    *,
+    duration: float | None = None,
+    controller: str | None = None,
+    record_dir: str | Path | None = None,
+    processes: bool = False,
+    real_time: bool = False,
+    progress: bool = True,
+    connect_timeout: float = 20.0,
+    namespace: str | None = None,
+    controller_params: dict | None = None,
+) -> RunResult:
+    """Run one episode of ``scn`` through the ROS graph.
+
+    Parameters
+    ----------
+    scn : Scenario
+    duration : float, optional
+        Episode length, s (default ``plant.duration``).
+    controller : str, optional
+        ``controller_type`` to start with.
+    record_dir : path, optional
+        Bag directory to record to; None records nothing.
+    processes : bool
+        One process per node instead of one process for all.
+    real_time : bool
+        Pace the plant at real time (``real_time_factor`` 1.0).
+    progress : bool
+        Print a progress line on stderr.
+    connect_timeout : float
+        Wall seconds to wait for discovery.
+    namespace : str, optional
+        Run the whole graph (and its clock) under this namespace.
+    controller_params : dict, optional
+        Controller parameters set through the parameter service before the episode.
+
+    Returns
+    -------
+    RunResult
+
+    Raises
+    ------
+    RunError
+        The graph did not connect, an input timed out, or a node failed.
+    KeyboardInterrupt
+        After the bag is closed, so nothing recorded is lost.
+    """
+    with GraphSession(scn, duration=duration, controller=controller, processes=processes, real_time=real_time,
+                      namespace=namespace, connect_timeout=connect_timeout) as graph:
+        return graph.run_episode(record_dir=record_dir, controller_params=controller_params, progress=progress)
+
+
+def _spin_episode(recorder: Recorder, spin, plant, children, k_steps: int, scn: Scenario, prog: _Progress,
+                  schedule: list[tuple[float, int, str]]) -> None:
+    """Spin until every step topic has all K+1 messages; apply scheduled swaps at their holds."""
+    counts = recorder.counts
+    needed = k_steps + 1
+    dt = scn.dt
+    timeout = scn.param("plant", "input_timeout") + 2.0
+    last_count, last_change = -1, time.monotonic()
+    step_topics = [t for t in STEP_TOPICS if t not in COMMAND_TOPICS]
+    pending = list(schedule)
+
+    def commands() -> int:
+        return sum(counts[t] for t in COMMAND_TOPICS)
+
+    while True:
+        spin(0.1)
+        n = counts["wheel_torque"]
+        if pending and counts["attitude"] == pending[0][1] and n == pending[0][1] and commands() == n:
+            # the plant holds before step k: swap, then release to the next hold
+            _, _, kind = pending.pop(0)
+            set_remote_parameters(recorder, spin, "controller", {"controller_type": kind})
+            set_remote_parameters(recorder, spin, "plant", {"hold_at": pending[0][0] if pending else -1.0})
+            last_change = time.monotonic()
+        if n >= needed and commands() >= needed and all(counts[t] >= needed for t in step_topics):
+            return
+        if plant is not None and plant.error:
+            raise RunError(plant.error)
+        now = time.monotonic()
+        if n != last_count:
+            last_count, last_change = n, now
+            prog.update(max(n - 1, 0) * dt)
+        elif now - last_change > timeout:
+            missing = [t for t in step_topics if counts[t] < needed]
+            raise RunError(f"episode stalled at t={max(n - 1, 0) * dt:.3f} s: no progress on {', '.join(missing)}")
+        check_children(children)

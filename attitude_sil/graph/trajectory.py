@@ -1,0 +1,78 @@
+"""Decode the messages of one graph episode into a :class:`~attitude_sil.core.trajectory.Trajectory`.
+
+A graph run returns the batch engine's type with P = 1, so one vocabulary
+(``q_BN``, ``omega_BN_B``, ``q_RN``, ``u_cmd``, ``tau_c_B``, ...) runs from the
+graph to the metrics and cost functions.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from rclpy.serialization import deserialize_message
+
+from attitude_sil.core.trajectory import Trajectory
+from attitude_sil.ros.contract import COMMAND_TOPIC, STEP_TOPICS, message_class
+from attitude_sil.ros.convert import decode_step_messages
+
+__all__ = ["KEPT_TOPICS", "trajectory_from_messages"]
+
+#: the topics an episode keeps in memory to build its trajectory
+KEPT_TOPICS = ("attitude", "body_rate", "attitude_setpoint", "wheel_torque", "wheel_momentum", "disturbance_torque",
+               "wheel_state", *COMMAND_TOPIC.values())
+
+#: Trajectory field <- topic
+_FIELDS = {"q_BN": "attitude", "omega_BN_B": "body_rate", "q_RN": "attitude_setpoint", "tau_c_B": "wheel_torque",
+           "h_wheels_B": "wheel_momentum", "tau_ext_B": "disturbance_torque"}
+
+
+def _wheel_speeds(items: list[tuple[int, bytes]]) -> tuple[np.ndarray, np.ndarray]:
+    by_t = dict(items)
+    cls = message_class(STEP_TOPICS["wheel_state"])
+    times = sorted(by_t)
+    rows = [list(deserialize_message(by_t[t], cls).velocity) for t in times]
+    speeds = np.array(rows, dtype=float)
+    if speeds.ndim != 2:  # no messages, or wheels without names (a torque actuator)
+        speeds = np.zeros((len(rows), 0))
+    return np.array(times, dtype=np.int64), speeds
+
+
+def trajectory_from_messages(kept: dict[str, list[tuple[int, bytes]]]) -> Trajectory:
+    """Serialized step messages -> a P = 1 Trajectory over the steps every topic holds.
+
+    Parameters
+    ----------
+    kept : dict
+        ``topic -> [(stamp ns, CDR bytes), ...]`` for the topics of
+        :data:`KEPT_TOPICS` (the recorder's in-memory copies). A stamp received
+        twice keeps its last copy.
+
+    Returns
+    -------
+    Trajectory
+        Arrays of shape (1, n, .) where n is the number of steps present on
+        every topic, with the command of each step taken from whichever
+        command topic carried it (``kind`` says which).
+    """
+    arrays: dict[str, tuple[np.ndarray, np.ndarray]] = {}
+    for name, topic in _FIELDS.items():
+        arrays[name] = decode_step_messages(topic, kept.get(topic, []))
+    commands: dict[int, tuple[str, np.ndarray]] = {}
+    for kind, topic in COMMAND_TOPIC.items():
+        times, values = decode_step_messages(topic, kept.get(topic, []))
+        commands.update({int(t): (kind, v) for t, v in zip(times, values, strict=True)})
+    speeds = _wheel_speeds(kept.get("wheel_state", []))
+    n = min([len(t) for t, _ in arrays.values()] + [len(commands), len(speeds[0])])
+    times = arrays["q_BN"][0][:n]
+    cmd_times = sorted(commands)[:n]
+    return Trajectory(
+        t=times * 1e-9,
+        q_BN=arrays["q_BN"][1][None, :n],
+        omega_BN_B=arrays["omega_BN_B"][1][None, :n],
+        q_RN=arrays["q_RN"][1][None, :n],
+        h_wheels_B=arrays["h_wheels_B"][1][None, :n],
+        u_cmd=np.array([commands[t][1] for t in cmd_times]).reshape(1, n, 3),
+        tau_c_B=arrays["tau_c_B"][1][None, :n],
+        tau_ext_B=arrays["tau_ext_B"][1][None, :n],
+        wheel_speed=speeds[1][None, :n],
+        kind=[commands[t][0] for t in cmd_times],
+    )

@@ -1,0 +1,117 @@
+"""Message <-> numpy conversions: the one place the project turns ROS messages into arrays.
+
+Every node, the recorder's episode decoder, replay, verify and the bag plots
+use these functions. The ``*_to_array`` readers only read attributes, so they
+take rclpy messages and the messages ``mcap_ros2`` decodes from a bag alike.
+
+Conventions (docs/architecture.md, "ROS contract"): quaternions in ROS order
+``(x, y, z, w)``, Hamilton; vectors in SI units; stamps are integer
+nanoseconds of sim time.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable
+
+import numpy as np
+from builtin_interfaces.msg import Time
+from geometry_msgs.msg import QuaternionStamped, Vector3Stamped
+from rclpy.serialization import deserialize_message
+from sensor_msgs.msg import JointState
+
+from attitude_sil.ros.contract import STEP_TOPICS, message_class
+
+__all__ = [
+    "stamp_to_ns",
+    "ns_to_stamp",
+    "quaternion_to_array",
+    "vector_to_array",
+    "message_to_array",
+    "quaternion_msg",
+    "vector_msg",
+    "joint_state_msg",
+    "decode_step_messages",
+]
+
+
+def stamp_to_ns(stamp) -> int:
+    """``builtin_interfaces/Time`` -> integer nanoseconds."""
+    return int(stamp.sec) * 1_000_000_000 + int(stamp.nanosec)
+
+
+def ns_to_stamp(t_ns: int) -> Time:
+    """Integer nanoseconds -> ``builtin_interfaces/Time``."""
+    return Time(sec=t_ns // 1_000_000_000, nanosec=t_ns % 1_000_000_000)
+
+
+def quaternion_to_array(msg) -> np.ndarray:
+    """A ``QuaternionStamped`` -> (4,) array ``(x, y, z, w)``."""
+    q = msg.quaternion
+    return np.array([q.x, q.y, q.z, q.w], dtype=float)
+
+
+def vector_to_array(msg) -> np.ndarray:
+    """A ``Vector3Stamped`` -> (3,) array ``(x, y, z)``."""
+    v = msg.vector
+    return np.array([v.x, v.y, v.z], dtype=float)
+
+
+def message_to_array(msg) -> np.ndarray:
+    """A stamped quaternion (4,) or vector (3,) message as an array."""
+    return quaternion_to_array(msg) if hasattr(msg, "quaternion") else vector_to_array(msg)
+
+
+def quaternion_msg(q: Iterable[float], t_ns: int, frame_id: str) -> QuaternionStamped:
+    """(4,) ``(x, y, z, w)`` -> ``QuaternionStamped`` stamped ``t_ns`` in ``frame_id``."""
+    m = QuaternionStamped()
+    m.header.stamp = ns_to_stamp(t_ns)
+    m.header.frame_id = frame_id
+    m.quaternion.x, m.quaternion.y, m.quaternion.z, m.quaternion.w = (float(v) for v in q)
+    return m
+
+
+def vector_msg(v: Iterable[float], t_ns: int, frame_id: str) -> Vector3Stamped:
+    """(3,) (or (2,), z = 0) -> ``Vector3Stamped`` stamped ``t_ns`` in ``frame_id``."""
+    m = Vector3Stamped()
+    m.header.stamp = ns_to_stamp(t_ns)
+    m.header.frame_id = frame_id
+    values = [float(x) for x in v] + [0.0] * 3
+    m.vector.x, m.vector.y, m.vector.z = values[:3]
+    return m
+
+
+def joint_state_msg(names: list[str], position: np.ndarray, velocity: np.ndarray, effort: np.ndarray,
+                    t_ns: int) -> JointState:
+    """Per-wheel angle (rad), speed (rad/s) and motor torque (N m), each (n,), as a ``JointState``."""
+    js = JointState()
+    js.header.stamp = ns_to_stamp(t_ns)
+    js.name = list(names)
+    js.position = [float(x) for x in position]
+    js.velocity = [float(x) for x in velocity]
+    js.effort = [float(x) for x in effort]
+    return js
+
+
+def decode_step_messages(topic: str, items: Iterable[tuple[int, bytes]]) -> tuple[np.ndarray, np.ndarray]:
+    """Serialized messages of one step topic -> (stamps ns (n,), values (n, 3|4)), ordered by stamp.
+
+    The last copy of a stamp wins (a step republished after a reset replaces
+    the earlier one).
+
+    Parameters
+    ----------
+    topic : str
+        A relative step topic name of :data:`~attitude_sil.ros.contract.STEP_TOPICS`
+        carrying a stamped quaternion or vector.
+    items : iterable of (int, bytes)
+        ``(stamp ns, CDR bytes)``.
+    """
+    by_t: dict[int, bytes] = {}
+    for t, data in items:
+        by_t[t] = data
+    cls = message_class(STEP_TOPICS[topic])
+    times = sorted(by_t)
+    rows = [message_to_array(deserialize_message(by_t[t], cls)) for t in times]
+    width = 4 if STEP_TOPICS[topic].endswith("QuaternionStamped") else 3
+    values = np.array(rows, dtype=float) if rows else np.empty((0, width))
+    return np.array(times, dtype=np.int64), values

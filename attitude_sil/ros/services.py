@@ -1,0 +1,78 @@
+"""Client side of the graph's services: set another node's parameters, reset the plant.
+
+Both wait by condition (the service is ready, the future is done) while a
+caller-supplied ``spin(timeout_s)`` processes callbacks, so they work inside
+any executor loop; a node that never answers raises :class:`RunError`.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from typing import Any
+
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+from rclpy.parameter_client import AsyncParameterClient
+from std_srvs.srv import Trigger
+
+from attitude_sil.errors import RunError
+
+__all__ = ["set_remote_parameters", "call_reset", "wait_future"]
+
+Spin = Callable[[float], None]
+
+
+def wait_future(future, spin: Spin, deadline: float, what: str):
+    """Spin until ``future`` is done; raise RunError naming ``what`` after ``deadline`` (monotonic s)."""
+    while not future.done():
+        if time.monotonic() > deadline:
+            raise RunError(f"{what} did not answer")
+        spin(0.02)
+    return future.result()
+
+
+def set_remote_parameters(node: Node, spin: Spin, target: str, params: dict[str, Any],
+                          timeout: float = 10.0) -> None:
+    """Set parameters of node ``target`` through its parameter service.
+
+    Raises
+    ------
+    RunError
+        The service did not appear or answer within ``timeout`` s, or ``target``
+        refused a value (the message names the parameter and the node's reason).
+    """
+    client = AsyncParameterClient(node, target)
+    deadline = time.monotonic() + timeout
+    while not client.services_are_ready():
+        if time.monotonic() > deadline:
+            raise RunError(f"parameter service of {target} did not appear")
+        spin(0.02)
+    result = wait_future(client.set_parameters([Parameter(k, value=v) for k, v in params.items()]), spin, deadline,
+                         f"{target} (parameter set)")
+    for name, r in zip(params, result.results, strict=True):
+        if not r.successful:
+            raise RunError(f"{target} refused {name}: {r.reason}")
+
+
+def call_reset(node: Node, spin: Spin, timeout: float, service: str = "plant/reset") -> str:
+    """Call the plant's ``reset`` service (std_srvs/Trigger); returns its message.
+
+    Raises
+    ------
+    RunError
+        The service did not appear or answer, or the plant refused the reset.
+    """
+    client = node.create_client(Trigger, service)
+    try:
+        deadline = time.monotonic() + timeout
+        while not client.service_is_ready():
+            if time.monotonic() > deadline:
+                raise RunError(f"service {service} did not appear")
+            spin(0.02)
+        response = wait_future(client.call_async(Trigger.Request()), spin, deadline, service)
+        if not response.success:
+            raise RunError(response.message)
+        return response.message
+    finally:
+        node.destroy_client(client)
