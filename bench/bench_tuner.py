@@ -20,7 +20,7 @@ os.environ.setdefault("ROS_DOMAIN_ID", str(150 + os.getpid() % 50))
 
 import numpy as np  # noqa: E402
 
-from attitude_sil.graph.tuner_node import GraphEvaluator  # noqa: E402
+from attitude_sil.graph.evaluator import GraphEvaluator  # noqa: E402
 from attitude_sil.tuning.optimize import run_tuning  # noqa: E402
 from attitude_sil.tuning.spec import load_spec  # noqa: E402
 

@@ -45,7 +45,9 @@ def test_replay_drives_a_live_controller_like_the_recorded_run(tmp_path):
 
     from attitude_sil.core.params import spec_for
     from attitude_sil.nodes.controller_node import ControllerNode
-    from attitude_sil.ros.node import LOCKSTEP_QOS, stamp_to_ns, typed_parameter
+    from attitude_sil.ros.convert import stamp_to_ns, vector_to_array
+    from attitude_sil.ros.parameters import typed_parameter
+    from attitude_sil.ros.qos import LOCKSTEP_QOS
 
     scn = load_scenario(CONFIG / "hst_roll_step.yaml")
     bag = tmp_path / "plain"
@@ -62,7 +64,7 @@ def test_replay_drives_a_live_controller_like_the_recorded_run(tmp_path):
         ctrl = ControllerNode(context=context, parameter_overrides=overrides)
         listener = rclpy.create_node("listener", context=context)
         listener.create_subscription(Vector3Stamped, "voltage_cmd", lambda m: got.__setitem__(
-            stamp_to_ns(m.header.stamp), np.array([m.vector.x, m.vector.y, m.vector.z])), LOCKSTEP_QOS)
+            stamp_to_ns(m.header.stamp), vector_to_array(m)), LOCKSTEP_QOS)
         executor = EventsExecutor(context=context)
         executor.add_node(ctrl)
         executor.add_node(listener)

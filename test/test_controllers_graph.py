@@ -29,8 +29,8 @@ def test_each_controller_settles_the_hst_step_in_graph_and_batch(controller):
     assert m["steady_state_error_rad"] < 0.02 * ONE_DEG
     assert m["overshoot_pct"] < 2.0
     tr = simulate(scn, 1, controller=controller)
-    assert np.max(np.abs(result.trajectory["attitude"] - tr.q_BN[0])) <= 1e-9
-    assert np.max(np.abs(result.trajectory["body_rate"] - tr.omega_BN_B[0])) <= 1e-9
+    assert np.max(np.abs(result.trajectory.q_BN[0] - tr.q_BN[0])) <= 1e-9
+    assert np.max(np.abs(result.trajectory.omega_BN_B[0] - tr.omega_BN_B[0])) <= 1e-9
     kind_topic = "torque_cmd" if controller == "geometric" else "voltage_cmd"
     assert result.counts[kind_topic] == 2001
 
@@ -72,8 +72,8 @@ def test_scheduled_swap_in_yaml_runs_through_the_parameter_service(tmp_path):
     scn = load_scenario(path)
     result = run_graph(scn, duration=5.0, record_dir=tmp_path / "bag", progress=False)
     tr = simulate(scn, 1, duration=5.0)
-    assert np.max(np.abs(result.trajectory["attitude"] - tr.q_BN[0])) <= 1e-9
-    assert np.max(np.abs(result.trajectory["body_rate"] - tr.omega_BN_B[0])) <= 1e-9
+    assert np.max(np.abs(result.trajectory.q_BN[0] - tr.q_BN[0])) <= 1e-9
+    assert np.max(np.abs(result.trajectory.omega_BN_B[0] - tr.omega_BN_B[0])) <= 1e-9
     assert [s["controller_type"] for s in result.metrics["segments"]] == ["pid", "fuzzy_pid", "geometric"]
     # the bag shows the swaps as parameter events, and the command topic follows the law
     changes, cmds = [], {"/voltage_cmd": [], "/torque_cmd": []}

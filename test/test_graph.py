@@ -16,10 +16,15 @@ def _assert_same_as_batch(scn, result, duration):
     tr = simulate(scn, 1, duration=duration)
     k = tr.t.size
     g = result.trajectory
-    assert g["attitude"].shape == (k, 4) and g["body_rate"].shape == (k, 3)
-    assert np.array_equal(g["attitude_t"], np.round(tr.t * 1e9).astype(np.int64))
-    assert np.max(np.abs(g["attitude"] - tr.q_BN[0])) <= 1e-9
-    assert np.max(np.abs(g["body_rate"] - tr.omega_BN_B[0])) <= 1e-9
+    assert g.q_BN.shape == (1, k, 4) and g.omega_BN_B.shape == (1, k, 3)
+    assert np.array_equal(np.round(g.t * 1e9).astype(np.int64), np.round(tr.t * 1e9).astype(np.int64))
+    assert np.max(np.abs(g.q_BN - tr.q_BN)) <= 1e-9
+    assert np.max(np.abs(g.omega_BN_B - tr.omega_BN_B)) <= 1e-9
+    # the commands, wheel torques and momenta the graph exchanged are the batch engine's too
+    assert np.max(np.abs(g.u_cmd - tr.u_cmd)) <= 1e-9
+    assert np.max(np.abs(g.tau_c_B - tr.tau_c_B)) <= 1e-9
+    assert np.max(np.abs(g.h_wheels_B - tr.h_wheels_B)) <= 1e-9
+    assert g.kind == tr.kind
     # and the run really moved: otherwise agreement would prove nothing
     assert np.max(np.abs(tr.omega_BN_B)) > 1e-4
 

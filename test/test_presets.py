@@ -28,8 +28,8 @@ def test_preset_runs_through_the_graph_as_in_batch(name, duration, topic):
     tr = simulate(scn, 1, duration=duration)
     steps = scn.steps(duration) + 1
     assert result.counts[topic] == steps
-    assert np.max(np.abs(result.trajectory["attitude"] - tr.q_BN[0])) <= 1e-9
-    assert np.max(np.abs(result.trajectory["body_rate"] - tr.omega_BN_B[0])) <= 1e-9
+    assert np.max(np.abs(result.trajectory.q_BN[0] - tr.q_BN[0])) <= 1e-9
+    assert np.max(np.abs(result.trajectory.omega_BN_B[0] - tr.omega_BN_B[0])) <= 1e-9
     assert np.max(np.abs(tr.omega_BN_B)) > 1e-5  # something happened
     if name == "flexible_axis":
         assert result.counts["flexible_mode"] == steps

@@ -8,7 +8,7 @@ import yaml
 
 from attitude_sil.core.engine import simulate
 from attitude_sil.core.metrics import scenario_metrics
-from attitude_sil.graph.tuner_node import GraphEvaluator
+from attitude_sil.graph.evaluator import GraphEvaluator
 from attitude_sil.tuning.evaluate import PENALTY, evaluate
 from attitude_sil.tuning.optimize import run_tuning
 from attitude_sil.tuning.spec import SpecError, load_spec
@@ -163,10 +163,10 @@ def test_tuner_node_publishes_progress():
 
     from attitude_sil.graph.tuner_node import TunerNode
 
-    tuner = TunerNode()
     got = []
     ctx = rclpy.Context()
     rclpy.init(args=[], context=ctx)
+    tuner = TunerNode(context=ctx)
     listener = rclpy.create_node("progress_listener", context=ctx)
     listener.create_subscription(DiagnosticStatus, "/tuner/progress", got.append, 10)
     executor = SingleThreadedExecutor(context=ctx)
@@ -183,8 +183,8 @@ def test_tuner_node_publishes_progress():
             executor.spin_once(timeout_sec=0.05)
     finally:
         listener.destroy_node()
+        tuner.destroy_node()
         rclpy.try_shutdown(context=ctx)
-        tuner.close()
     values = {kv.key: kv.value for kv in got[0].values}
     assert got[0].name == "tuner" and got[0].message == "generation 3/40"
     assert values["best"] == "0.5" and values["median"] == "1.25" and values["failed"] == "2"
