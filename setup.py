@@ -37,7 +37,7 @@ setup(
     description="Spacecraft attitude-control software-in-the-loop simulator on ROS 2 Jazzy",
     license="Apache-2.0",
     entry_points={
-        "console_scripts": [f"attitude-sil = {PACKAGE}.cli:main"]
+        "console_scripts": [f"attitude-sil = {PACKAGE}.cli:main", f"tuner_node = {PACKAGE}.graph.tuner_node:main"]
         + [f"{n}_node = {PACKAGE}.nodes.{n}_node:main" for n in NODES],
     },
 )

@@ -1,0 +1,132 @@
+"""The package's layers: imports flow one way, the ROS-free layers stay ROS-free, no import cycles.
+
+Read from the source with ``ast`` (nothing is imported), so the test fails the
+moment someone adds an upward arrow, a cycle, or an import hidden inside a
+function to dodge one. The layout is described in docs/architecture.md.
+"""
+
+import ast
+from pathlib import Path
+
+from conftest import ROOT
+
+PACKAGE = ROOT / "attitude_sil"
+
+#: layer -> the layers it may import from (itself included)
+ALLOWED = {
+    "errors": {"errors"},
+    "core": {"errors", "core"},
+    "storage": {"errors", "storage"},
+    "tuning": {"errors", "core", "tuning"},
+    "ros": {"errors", "core", "storage", "ros"},
+    "nodes": {"errors", "core", "storage", "ros", "nodes"},
+    "graph": {"errors", "core", "storage", "tuning", "ros", "nodes", "graph"},
+    "tools": {"errors", "core", "storage", "ros", "nodes", "graph", "tools"},
+    "cli": {"errors", "core", "storage", "tuning", "ros", "nodes", "graph", "tools", "cli"},
+}
+ROS_FREE = ("errors", "core", "storage", "tuning")
+ROS_PACKAGES = ("rclpy", "rcl_interfaces", "builtin_interfaces", "geometry_msgs", "sensor_msgs", "std_msgs",
+                "std_srvs", "rosgraph_msgs", "diagnostic_msgs", "rosidl_runtime_py")
+
+
+def _modules() -> dict[str, Path]:
+    out = {}
+    for path in PACKAGE.rglob("*.py"):
+        parts = path.relative_to(ROOT).with_suffix("").parts
+        name = ".".join(parts[:-1] if parts[-1] == "__init__" else parts)
+        out[name] = path
+    return out
+
+
+def _imports(name: str, path: Path) -> list[tuple[str, bool]]:
+    """(imported module, at function level?) for every import of a module."""
+    tree = ast.parse(path.read_text())
+    package = name if path.name == "__init__.py" else name.rpartition(".")[0]
+    found = []
+
+    def visit(node, in_function):
+        for child in ast.iter_child_nodes(node):
+            nested = in_function or isinstance(child, (ast.FunctionDef, ast.AsyncFunctionDef, ast.Lambda))
+            if isinstance(child, ast.Import):
+                found.extend((a.name, in_function) for a in child.names)
+            elif isinstance(child, ast.ImportFrom):
+                if child.level:
+                    base = package.split(".")[: len(package.split(".")) - child.level + 1]
+                    mod = ".".join(base + ([child.module] if child.module else []))
+                else:
+                    mod = child.module
+                found.append((mod, in_function))
+                # "from pkg import module" imports a module too
+                found.extend((f"{mod}.{a.name}", in_function) for a in child.names)
+            visit(child, nested)
+
+    visit(tree, False)
+    return found
+
+
+def _layer(module: str) -> str:
+    return module.split(".")[1] if module.count(".") else "package"
+
+
+MODULES = _modules()
+IMPORTS = {name: _imports(name, path) for name, path in MODULES.items()}
+
+
+def test_every_module_is_in_a_layer():
+    assert {_layer(m) for m in MODULES} <= set(ALLOWED) | {"package"}
+    assert len([m for m in MODULES if _layer(m) == "package"]) == 1  # only attitude_sil/__init__.py
+
+
+def test_imports_flow_one_way():
+    wrong = []
+    for name, imports in IMPORTS.items():
+        src = _layer(name)
+        for mod, _ in imports:
+            if mod in MODULES and mod != "attitude_sil" and _layer(mod) not in ALLOWED.get(src, set(ALLOWED)):
+                wrong.append(f"{name} -> {mod}")
+    assert not wrong, "imports against the layering:\n" + "\n".join(wrong)
+
+
+def test_ros_free_layers_import_no_ros():
+    wrong = [f"{name} -> {mod}" for name, imports in IMPORTS.items() if _layer(name) in ROS_FREE
+             for mod, _ in imports if mod.split(".")[0] in ROS_PACKAGES]
+    assert not wrong, "\n".join(wrong)
+
+
+def test_no_project_import_inside_a_function():
+    wrong = [f"{name} -> {mod}" for name, imports in IMPORTS.items() for mod, in_function in imports
+             if in_function and (mod.startswith("attitude_sil") or mod.split(".")[0] in ROS_PACKAGES)]
+    assert not wrong, "function-level imports (they hide cycles and layer breaks):\n" + "\n".join(wrong)
+
+
+def test_no_import_cycles():
+    graph = {name: {mod for mod, _ in imports if mod in MODULES and mod != name} for name, imports in IMPORTS.items()}
+    # a package's __init__ re-exporting its own modules is not a cycle of behaviour
+    for name in graph:
+        if MODULES[name].name == "__init__.py":
+            graph[name] = {m for m in graph[name] if not m.startswith(name + ".")}
+    state: dict[str, int] = {}
+    stack: list[str] = []
+
+    def dfs(node):
+        state[node] = 1
+        stack.append(node)
+        for nxt in sorted(graph[node]):
+            if state.get(nxt) == 1:
+                raise AssertionError("import cycle: " + " -> ".join(stack[stack.index(nxt):] + [nxt]))
+            if nxt not in state:
+                dfs(nxt)
+        stack.pop()
+        state[node] = 2
+
+    for node in sorted(graph):
+        if node not in state:
+            dfs(node)
+
+
+def test_the_checker_sees_a_planted_violation(tmp_path):
+    # the rules above are only worth something if the parser finds imports where they hide
+    src = tmp_path / "x.py"
+    src.write_text("import os\n\ndef f():\n    from attitude_sil.graph import session\n")
+    assert ("attitude_sil.graph", True) in _imports("attitude_sil.core.x", src)
+    assert ("os", False) in _imports("attitude_sil.core.x", src)
