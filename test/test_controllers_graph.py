@@ -89,16 +89,22 @@ def test_scheduled_swap_in_yaml_runs_through_the_parameter_service(tmp_path):
     assert len(cmds["/voltage_cmd"]) + len(cmds["/torque_cmd"]) == 501
 
 
-def _param(*args):
+def _param(*args, timeout=60.0):
+    # discovery of a fresh process can take long on a loaded machine: wait for the node up to
+    # 60 s (by condition, inside param), unless the call gives its own --timeout
+    if "--timeout" not in args:
+        args = (*args, "--timeout", str(timeout))
     return subprocess.run([sys.executable, "-m", "attitude_sil.cli", "param", *args], cwd=ROOT,
-                          capture_output=True, text=True, timeout=60, stdin=subprocess.DEVNULL)
+                          capture_output=True, text=True, timeout=timeout + 60, stdin=subprocess.DEVNULL)
 
 
 def test_live_param_set_from_a_second_process(tmp_path):
     bag = tmp_path / "live"
+    # the episode outlasts any test run (it is stopped with Ctrl-C below), so a slow machine
+    # cannot end it before the parameter calls are done: each call waits by condition only
     run = subprocess.Popen(
         [sys.executable, "-m", "attitude_sil.cli", "run", "config/hst_roll_step.yaml", "--real-time",
-         "--duration", "30", "--record", str(bag)],
+         "--duration", "3600", "--record", str(bag)],
         cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, stdin=subprocess.DEVNULL,
         preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     try:
@@ -113,10 +119,13 @@ def test_live_param_set_from_a_second_process(tmp_path):
             bad = _param("set", "controller", name, value)
             assert bad.returncode == 2, bad.stdout
             assert needle in bad.stderr and name in bad.stderr and "Traceback" not in bad.stderr
-        assert _param("get", "controller", "pid.kp").stdout.strip() == "[48.894, 48.894, 48.894]"
+        got = _param("get", "controller", "pid.kp")
+        assert got.stdout.strip() == "[48.894, 48.894, 48.894]", got.stderr
         ok = _param("set", "controller", "controller_type", "ga_flc")
         assert ok.returncode == 0, ok.stderr
-        assert _param("get", "controller", "controller_type").stdout.strip() == "ga_flc"
+        got = _param("get", "controller", "controller_type")
+        assert got.stdout.strip() == "ga_flc", got.stderr
+        assert run.poll() is None, "the run ended during the test"
         missing = _param("get", "nosuchnode", "x", "--timeout", "1")
         assert missing.returncode == 2 and "not found" in missing.stderr
     finally:
