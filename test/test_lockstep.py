@@ -6,10 +6,11 @@ is checked directly, with the wall clock passed in.
 
 import numpy as np
 
-from attitude_sil.core.lockstep import PLANT_INPUTS, Action, PlantLockstep, StepSequencer
+from attitude_sil.core.lockstep import Action, PlantLockstep, StepSequencer
 
 DT = 10_000_000  # 10 ms in ns
 ZERO = np.zeros((1, 3))
+PLANT_INPUTS = ("wheel_torque", "wheel_momentum", "disturbance_torque")
 
 
 def _feed_all(ls: PlantLockstep, t_ns: int) -> Action:
@@ -31,7 +32,7 @@ def test_sequencer_accepts_next_refuses_skips_and_restarts_on_reset():
 
 
 def test_a_step_advances_only_when_every_input_of_that_step_is_in():
-    ls = PlantLockstep()
+    ls = PlantLockstep(PLANT_INPUTS)
     assert ls.start(3, DT, now=0.0, hold_at=-1.0) is Action.PUBLISH
     assert ls.published(0.0) is False
     assert ls.offer("wheel_torque", 0, ZERO) is Action.NONE
@@ -43,7 +44,7 @@ def test_a_step_advances_only_when_every_input_of_that_step_is_in():
 
 
 def test_stale_inputs_are_dropped_and_future_or_nonfinite_ones_stop_the_episode():
-    ls = PlantLockstep()
+    ls = PlantLockstep(PLANT_INPUTS)
     ls.start(10, DT, 0.0, -1.0)
     ls.published(0.0)
     _feed_all(ls, 0)
@@ -61,7 +62,7 @@ def test_stale_inputs_are_dropped_and_future_or_nonfinite_ones_stop_the_episode(
 
 
 def test_episode_ends_after_the_last_step_and_takes_no_more_inputs():
-    ls = PlantLockstep()
+    ls = PlantLockstep(PLANT_INPUTS)
     ls.start(2, DT, 0.0, -1.0)
     for k in range(2):
         assert ls.published(0.0) is False
@@ -72,7 +73,7 @@ def test_episode_ends_after_the_last_step_and_takes_no_more_inputs():
 
 
 def test_divergence_stops_the_episode():
-    ls = PlantLockstep()
+    ls = PlantLockstep(PLANT_INPUTS)
     ls.start(5, DT, 0.0, -1.0)
     _feed_all(ls, 0)
     assert ls.advanced(False, 0.0, 0.0, -1.0) is Action.FAIL
@@ -80,7 +81,7 @@ def test_divergence_stops_the_episode():
 
 
 def test_hold_stops_before_the_step_and_release_publishes_it():
-    ls = PlantLockstep()
+    ls = PlantLockstep(PLANT_INPUTS)
     assert ls.start(100, DT, 0.0, hold_at=0.0) is Action.HOLD  # a swap scheduled at t = 0
     assert ls.release(hold_at=0.02, now=1.0) is Action.PUBLISH
     ls.published(1.0)
@@ -93,13 +94,13 @@ def test_hold_stops_before_the_step_and_release_publishes_it():
     assert ls.release(hold_at=0.02, now=2.0) is Action.NONE  # the same hold: stay
     assert ls.release(hold_at=-1.0, now=2.0) is Action.PUBLISH and not ls.holding
     # a holding plant does not time out, however long the tool takes
-    ls2 = PlantLockstep()
+    ls2 = PlantLockstep(PLANT_INPUTS)
     ls2.start(10, DT, 0.0, hold_at=0.0)
     assert ls2.watchdog(now=1e6, input_timeout=10.0, autostart=False, wired=True) is Action.NONE
 
 
 def test_pacing_delays_a_step_until_its_wall_time():
-    ls = PlantLockstep()
+    ls = PlantLockstep(PLANT_INPUTS)
     ls.start(100, DT, now=100.0, hold_at=-1.0)
     ls.published(100.0)
     _feed_all(ls, 0)
@@ -119,7 +120,7 @@ def test_pacing_delays_a_step_until_its_wall_time():
 
 
 def test_watchdog_names_the_missing_inputs_after_the_timeout():
-    ls = PlantLockstep()
+    ls = PlantLockstep(PLANT_INPUTS)
     ls.start(10, DT, 0.0, -1.0)
     ls.published(now=5.0)
     ls.offer("wheel_torque", 0, ZERO)
@@ -130,7 +131,7 @@ def test_watchdog_names_the_missing_inputs_after_the_timeout():
 
 
 def test_autostart_only_when_idle_and_wired():
-    ls = PlantLockstep()
+    ls = PlantLockstep(PLANT_INPUTS)
     assert ls.watchdog(0.0, 10.0, autostart=True, wired=False) is Action.NONE
     assert ls.watchdog(0.0, 10.0, autostart=False, wired=True) is Action.NONE
     assert ls.watchdog(0.0, 10.0, autostart=True, wired=True) is Action.START

@@ -2,8 +2,8 @@
 
 The graph advances in lockstep (docs/architecture.md, "Lockstep"): for step k
 at t_k = k dt every message carries the stamp t_k; the plant publishes the
-state of step k, waits for ``wheel_torque``, ``wheel_momentum`` and
-``disturbance_torque`` stamped t_k, integrates to t_k+1 and publishes again.
+state of step k, waits for its inputs (wheel torque, wheel momentum,
+disturbance torque) stamped t_k, integrates to t_k+1 and publishes again.
 This module holds the decisions of that protocol, free of rclpy and of any
 clock: every method takes the wall time ``now`` (s, monotonic) as an argument,
 so the rules are unit-tested directly and the nodes only carry them out.
@@ -22,10 +22,7 @@ from enum import Enum
 
 import numpy as np
 
-__all__ = ["StepSequencer", "PlantLockstep", "Action", "PLANT_INPUTS"]
-
-#: the inputs the plant needs for every step
-PLANT_INPUTS = ("wheel_torque", "wheel_momentum", "disturbance_torque")
+__all__ = ["StepSequencer", "PlantLockstep", "Action"]
 
 
 class StepSequencer:
@@ -75,6 +72,9 @@ class PlantLockstep:
 
     Attributes
     ----------
+    inputs_needed : tuple of str
+        The inputs that complete a step (the plant node passes the topic
+        contract's ``PLANT_INPUTS``).
     n_steps : int
         K: the episode publishes steps 0..K.
     dt_ns : int
@@ -90,6 +90,7 @@ class PlantLockstep:
         Wall time (s) a paced step is due.
     """
 
+    inputs_needed: tuple[str, ...] = ()
     n_steps: int = 0
     dt_ns: int = 1
     k: int = 0
@@ -139,7 +140,7 @@ class PlantLockstep:
         if not np.all(np.isfinite(value)):
             return self.fail(f"plant: {name} at t={t_ns * 1e-9:.6f} s is not finite: {np.ravel(value).tolist()}")
         self.inputs[name] = value
-        if len(self.inputs) == len(PLANT_INPUTS) and self.k < self.n_steps:
+        if len(self.inputs) == len(self.inputs_needed) and self.k < self.n_steps:
             return Action.ADVANCE
         return Action.NONE
 
@@ -192,7 +193,7 @@ class PlantLockstep:
         if not self.running and not self.done and not self.error and autostart and wired:
             return Action.START
         if self.running and self.publish_at is None and not self.holding and now - self.step_wall0 > input_timeout:
-            missing = [n for n in PLANT_INPUTS if n not in self.inputs]
+            missing = [n for n in self.inputs_needed if n not in self.inputs]
             return self.fail(f"plant: no {', '.join(missing)} for step t={self.t_ns * 1e-9:.6f} s "
                              f"within {input_timeout:g} s; episode stopped")
         return Action.NONE

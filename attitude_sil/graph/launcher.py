@@ -35,7 +35,7 @@ from attitude_sil.nodes.guidance_node import GuidanceNode
 from attitude_sil.nodes.plant_node import PlantNode
 from attitude_sil.nodes.recorder_node import Recorder
 from attitude_sil.nodes.wheels_node import WheelsNode
-from attitude_sil.ros.contract import GRAPH_SUBSCRIBERS, STEP_TOPICS
+from attitude_sil.ros.contract import GRAPH_SUBSCRIBERS, STEP_TOPICS, clock_remap
 from attitude_sil.ros.parameters import typed_parameter
 
 __all__ = ["NODE_CLASSES", "namespace_kwargs", "node_overrides", "start_nodes", "start_processes", "stop_processes",
@@ -50,7 +50,7 @@ def namespace_kwargs(namespace: str | None) -> dict:
     """Node keyword arguments that put a node, and its ``/clock``, under ``namespace``."""
     if not namespace:
         return {}
-    return {"namespace": "/" + namespace, "cli_args": ["--ros-args", "-r", f"/clock:=/{namespace}/clock"]}
+    return {"namespace": "/" + namespace, "cli_args": ["--ros-args", *clock_remap(namespace)]}
 
 
 def node_overrides(scn: Scenario, node: str, extra: dict[str, Any]) -> dict[str, Any]:
@@ -97,7 +97,7 @@ def start_processes(scn: Scenario, extra: dict[str, Any], tmp: Path,
         path.write_text(yaml.safe_dump({name: {"ros__parameters": values}}))
         cmd = [sys.executable, "-m", f"attitude_sil.nodes.{name}_node", "--ros-args", "--params-file", str(path)]
         if namespace:
-            cmd += ["-r", f"__ns:=/{namespace}", "-r", f"/clock:=/{namespace}/clock"]
+            cmd += ["-r", f"__ns:=/{namespace}", *clock_remap(namespace)]
         children.append(subprocess.Popen(cmd, stdin=subprocess.DEVNULL))
     return children
 

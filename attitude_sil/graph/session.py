@@ -45,7 +45,7 @@ from attitude_sil.graph.launcher import (
 )
 from attitude_sil.graph.trajectory import KEPT_TOPICS, trajectory_from_messages
 from attitude_sil.nodes.recorder_node import Recorder
-from attitude_sil.ros.contract import COMMAND_TOPICS, STEP_TOPICS
+from attitude_sil.ros.contract import ATTITUDE, COMMAND_TOPICS, STEP_TOPICS, WHEEL_TORQUE
 from attitude_sil.ros.environment import localhost_environment
 from attitude_sil.ros.services import call_reset, set_remote_parameters
 from attitude_sil.storage.writer import PARAMETERS_KEY, BagWriter
@@ -353,8 +353,8 @@ def _spin_episode(recorder: Recorder, spin, plant, children, k_steps: int, scn: 
 
     while True:
         spin(0.1)
-        n = counts["wheel_torque"]
-        if pending and counts["attitude"] == pending[0][1] and n == pending[0][1] and commands() == n:
+        n = counts[WHEEL_TORQUE]
+        if pending and counts[ATTITUDE] == pending[0][1] and n == pending[0][1] and commands() == n:
             # the plant holds before step k: swap, then release to the next hold
             _, _, kind = pending.pop(0)
             set_remote_parameters(recorder, spin, "controller", {"controller_type": kind})

@@ -11,23 +11,34 @@ import numpy as np
 from rclpy.serialization import deserialize_message
 
 from attitude_sil.core.trajectory import Trajectory
-from attitude_sil.ros.contract import COMMAND_TOPIC, STEP_TOPICS, message_class
+from attitude_sil.ros.contract import (
+    ATTITUDE,
+    ATTITUDE_SETPOINT,
+    BODY_RATE,
+    COMMAND_TOPIC,
+    DISTURBANCE_TORQUE,
+    STEP_TOPICS,
+    WHEEL_MOMENTUM,
+    WHEEL_STATE,
+    WHEEL_TORQUE,
+    message_class,
+)
 from attitude_sil.ros.convert import decode_step_messages
 
 __all__ = ["KEPT_TOPICS", "trajectory_from_messages"]
 
 #: the topics an episode keeps in memory to build its trajectory
-KEPT_TOPICS = ("attitude", "body_rate", "attitude_setpoint", "wheel_torque", "wheel_momentum", "disturbance_torque",
-               "wheel_state", *COMMAND_TOPIC.values())
+KEPT_TOPICS = (ATTITUDE, BODY_RATE, ATTITUDE_SETPOINT, WHEEL_TORQUE, WHEEL_MOMENTUM, DISTURBANCE_TORQUE,
+               WHEEL_STATE, *COMMAND_TOPIC.values())
 
 #: Trajectory field <- topic
-_FIELDS = {"q_BN": "attitude", "omega_BN_B": "body_rate", "q_RN": "attitude_setpoint", "tau_c_B": "wheel_torque",
-           "h_wheels_B": "wheel_momentum", "tau_ext_B": "disturbance_torque"}
+_FIELDS = {"q_BN": ATTITUDE, "omega_BN_B": BODY_RATE, "q_RN": ATTITUDE_SETPOINT, "tau_c_B": WHEEL_TORQUE,
+           "h_wheels_B": WHEEL_MOMENTUM, "tau_ext_B": DISTURBANCE_TORQUE}
 
 
 def _wheel_speeds(items: list[tuple[int, bytes]]) -> tuple[np.ndarray, np.ndarray]:
     by_t = dict(items)
-    cls = message_class(STEP_TOPICS["wheel_state"])
+    cls = message_class(STEP_TOPICS[WHEEL_STATE])
     times = sorted(by_t)
     rows = [list(deserialize_message(by_t[t], cls).velocity) for t in times]
     speeds = np.array(rows, dtype=float)
@@ -60,7 +71,7 @@ def trajectory_from_messages(kept: dict[str, list[tuple[int, bytes]]]) -> Trajec
     for kind, topic in COMMAND_TOPIC.items():
         times, values = decode_step_messages(topic, kept.get(topic, []))
         commands.update({int(t): (kind, v) for t, v in zip(times, values, strict=True)})
-    speeds = _wheel_speeds(kept.get("wheel_state", []))
+    speeds = _wheel_speeds(kept.get(WHEEL_STATE, []))
     n = min([len(t) for t, _ in arrays.values()] + [len(commands), len(speeds[0])])
     times = arrays["q_BN"][0][:n]
     cmd_times = sorted(commands)[:n]

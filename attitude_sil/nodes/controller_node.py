@@ -21,10 +21,9 @@ import numpy as np
 from attitude_sil.core.engine import build_controller
 from attitude_sil.core.lockstep import StepSequencer
 from attitude_sil.core.quaternion import euler_from_quat, quat_conjugate, quat_error
-from attitude_sil.ros.contract import COMMAND_TOPIC, CONTROLLER_INPUTS, STEP_TOPICS, message_class
+from attitude_sil.ros.contract import ATTITUDE, ATTITUDE_ERROR, ATTITUDE_SETPOINT, COMMAND_TOPIC, CONTROLLER_INPUTS
 from attitude_sil.ros.convert import message_to_array, stamp_to_ns, vector_msg
 from attitude_sil.ros.node import SchemaNode, run_node
-from attitude_sil.ros.qos import LOCKSTEP_QOS
 
 INPUTS = CONTROLLER_INPUTS
 
@@ -36,13 +35,10 @@ class ControllerNode(SchemaNode):
 
     def __init__(self, **kwargs) -> None:
         super().__init__(**kwargs)
-        self.pub_cmd = {kind: self.create_publisher(message_class(STEP_TOPICS[topic]), topic, LOCKSTEP_QOS)
-                        for kind, topic in COMMAND_TOPIC.items()}
-        self.pub_err = self.create_publisher(message_class(STEP_TOPICS["attitude_error"]), "attitude_error",
-                                             LOCKSTEP_QOS)
+        self.pub_cmd = {kind: self.step_publisher(topic) for kind, topic in COMMAND_TOPIC.items()}
+        self.pub_err = self.step_publisher(ATTITUDE_ERROR)
         for name in INPUTS:
-            self.create_subscription(message_class(STEP_TOPICS[name]), name,
-                                     lambda m, n=name: self._on_input(n, message_to_array(m)[None], m), LOCKSTEP_QOS)
+            self.step_subscription(name, lambda m, n=name: self._on_input(n, message_to_array(m)[None], m))
         self.seq = StepSequencer()
         self._pending: dict[int, dict[str, np.ndarray]] = {}
         self._rebuild()
@@ -78,8 +74,8 @@ class ControllerNode(SchemaNode):
         elif kind != StepSequencer.NEXT:
             self.get_logger().error(f"inputs stamped {t * 1e-9:.6f} s out of sequence ({kind}); ignored")
             return
-        u = self.core.compute(slot["attitude"], slot["body_rate"], slot["attitude_setpoint"], slot["rate_setpoint"])
-        err = euler_from_quat(quat_conjugate(quat_error(slot["attitude"], slot["attitude_setpoint"])))
+        u = self.core.compute(*(slot[name] for name in INPUTS))
+        err = euler_from_quat(quat_conjugate(quat_error(slot[ATTITUDE], slot[ATTITUDE_SETPOINT])))
         self.pub_cmd[self.core.kind].publish(vector_msg(u[0], t, "body"))
         self.pub_err.publish(vector_msg(err[0], t, "body"))
 

@@ -10,10 +10,9 @@ from __future__ import annotations
 
 from attitude_sil.core.engine import build_disturbance
 from attitude_sil.core.lockstep import StepSequencer
-from attitude_sil.ros.contract import STEP_TOPICS, message_class
+from attitude_sil.ros.contract import ATTITUDE, DISTURBANCE_TORQUE
 from attitude_sil.ros.convert import quaternion_to_array, stamp_to_ns, vector_msg
 from attitude_sil.ros.node import SchemaNode, run_node
-from attitude_sil.ros.qos import LOCKSTEP_QOS
 
 
 class DisturbanceNode(SchemaNode):
@@ -23,9 +22,8 @@ class DisturbanceNode(SchemaNode):
 
     def __init__(self, **kwargs) -> None:
         super().__init__(**kwargs)
-        self.pub = self.create_publisher(message_class(STEP_TOPICS["disturbance_torque"]), "disturbance_torque",
-                                         LOCKSTEP_QOS)
-        self.create_subscription(message_class(STEP_TOPICS["attitude"]), "attitude", self._on_attitude, LOCKSTEP_QOS)
+        self.pub = self.step_publisher(DISTURBANCE_TORQUE)
+        self.step_subscription(ATTITUDE, self._on_attitude)
         self.seq = StepSequencer()
         self._rebuild()
 

@@ -10,10 +10,9 @@ Setpoint parameters changed at runtime apply from the next tick.
 from __future__ import annotations
 
 from attitude_sil.core.engine import build_guidance
-from attitude_sil.ros.contract import STEP_TOPICS, message_class
+from attitude_sil.ros.contract import ATTITUDE_SETPOINT, CLOCK, RATE_SETPOINT
 from attitude_sil.ros.convert import quaternion_msg, stamp_to_ns, vector_msg
 from attitude_sil.ros.node import SchemaNode, run_node
-from attitude_sil.ros.qos import LOCKSTEP_QOS
 
 
 class GuidanceNode(SchemaNode):
@@ -23,9 +22,9 @@ class GuidanceNode(SchemaNode):
 
     def __init__(self, **kwargs) -> None:
         super().__init__(**kwargs)
-        self.pub_q, self.pub_w = (self.create_publisher(message_class(STEP_TOPICS[name]), name, LOCKSTEP_QOS)
-                                  for name in ("attitude_setpoint", "rate_setpoint"))
-        self.create_subscription(message_class(STEP_TOPICS["/clock"]), "/clock", self._on_clock, LOCKSTEP_QOS)
+        self.pub_q = self.step_publisher(ATTITUDE_SETPOINT)
+        self.pub_w = self.step_publisher(RATE_SETPOINT)
+        self.step_subscription(CLOCK, self._on_clock)
         self.on_parameters_set([])
 
     def on_parameters_set(self, names: list[str]) -> None:

@@ -32,14 +32,11 @@ from rosgraph_msgs.msg import Clock
 from std_srvs.srv import Trigger
 
 from attitude_sil.core.engine import build_plant
-from attitude_sil.core.lockstep import PLANT_INPUTS, Action, PlantLockstep
+from attitude_sil.core.lockstep import Action, PlantLockstep
 from attitude_sil.errors import AttitudeSilError
-from attitude_sil.ros.contract import MODEL_TOPICS, STEP_TOPICS, message_class
+from attitude_sil.ros.contract import ATTITUDE, BODY_RATE, CLOCK, FLEXIBLE_MODE, PLANT_INPUTS
 from attitude_sil.ros.convert import ns_to_stamp, quaternion_msg, stamp_to_ns, vector_msg, vector_to_array
 from attitude_sil.ros.node import SchemaNode, run_node, steady_clock
-from attitude_sil.ros.qos import LOCKSTEP_QOS
-
-INPUTS = PLANT_INPUTS
 
 
 class PlantNode(SchemaNode):
@@ -49,21 +46,14 @@ class PlantNode(SchemaNode):
 
     def __init__(self, **kwargs) -> None:
         super().__init__(**kwargs)
-        self.pub_clock = self.create_publisher(Clock, "/clock", LOCKSTEP_QOS)
-        self.pub_attitude = self.create_publisher(message_class(STEP_TOPICS["attitude"]), "attitude", LOCKSTEP_QOS)
-        self.pub_rate = self.create_publisher(message_class(STEP_TOPICS["body_rate"]), "body_rate", LOCKSTEP_QOS)
-        self.pub_flex = None
-        if self.param("model") == "flexible_axis":
-            self.pub_flex = self.create_publisher(message_class(MODEL_TOPICS["flexible_mode"]), "flexible_mode",
-                                                  LOCKSTEP_QOS)
-        self.subs = [
-            self.create_subscription(message_class(STEP_TOPICS[name]), name,
-                                     lambda m, n=name: self._on_input(n, m), LOCKSTEP_QOS)
-            for name in INPUTS
-        ]
+        self.pub_clock = self.step_publisher(CLOCK)
+        self.pub_attitude = self.step_publisher(ATTITUDE)
+        self.pub_rate = self.step_publisher(BODY_RATE)
+        self.pub_flex = self.step_publisher(FLEXIBLE_MODE) if self.param("model") == "flexible_axis" else None
+        self.subs = [self.step_subscription(name, lambda m, n=name: self._on_input(n, m)) for name in PLANT_INPUTS]
         self.create_service(Trigger, "~/reset", self._on_reset)
         self._wall = steady_clock()
-        self.lockstep = PlantLockstep()
+        self.lockstep = PlantLockstep(PLANT_INPUTS)
         self._pace_timer = None
         self._watchdog = self.create_timer(0.05, self._on_watchdog, clock=self._wall)
 
@@ -111,7 +101,7 @@ class PlantNode(SchemaNode):
                 self.get_logger().info(f"episode complete: {ls.t_ns * 1e-9:g} s of sim time in {wall:.2f} s wall")
         elif action is Action.ADVANCE:
             inp = ls.inputs
-            self.core.advance(inp["wheel_torque"], inp["wheel_momentum"], inp["disturbance_torque"])
+            self.core.advance(*(inp[name] for name in PLANT_INPUTS))
             finite = bool(np.all(np.isfinite(self.core.state.omega_BN_B)))
             self._do(ls.advanced(finite, time.monotonic(), self.param("real_time_factor"), self.param("hold_at")))
         elif action is Action.PACE:

@@ -12,10 +12,9 @@ from __future__ import annotations
 
 from attitude_sil.core.engine import build_wheels
 from attitude_sil.core.lockstep import StepSequencer
-from attitude_sil.ros.contract import STEP_TOPICS, message_class
+from attitude_sil.ros.contract import TORQUE_CMD, VOLTAGE_CMD, WHEEL_MOMENTUM, WHEEL_STATE, WHEEL_TORQUE
 from attitude_sil.ros.convert import joint_state_msg, stamp_to_ns, vector_msg, vector_to_array
 from attitude_sil.ros.node import SchemaNode, run_node
-from attitude_sil.ros.qos import LOCKSTEP_QOS
 
 
 class WheelsNode(SchemaNode):
@@ -25,12 +24,11 @@ class WheelsNode(SchemaNode):
 
     def __init__(self, **kwargs) -> None:
         super().__init__(**kwargs)
-        self.pub_torque, self.pub_momentum, self.pub_state = (
-            self.create_publisher(message_class(STEP_TOPICS[name]), name, LOCKSTEP_QOS)
-            for name in ("wheel_torque", "wheel_momentum", "wheel_state"))
-        for name, torque_mode in (("voltage_cmd", False), ("torque_cmd", True)):
-            self.create_subscription(message_class(STEP_TOPICS[name]), name,
-                                     lambda m, tm=torque_mode: self._on_command(m, tm), LOCKSTEP_QOS)
+        self.pub_torque = self.step_publisher(WHEEL_TORQUE)
+        self.pub_momentum = self.step_publisher(WHEEL_MOMENTUM)
+        self.pub_state = self.step_publisher(WHEEL_STATE)
+        self.step_subscription(VOLTAGE_CMD, lambda m: self._on_command(m, False))
+        self.step_subscription(TORQUE_CMD, lambda m: self._on_command(m, True))
         self.seq = StepSequencer()
         self._rebuild()
 

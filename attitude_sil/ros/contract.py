@@ -13,45 +13,65 @@ import importlib
 
 from attitude_sil.errors import AttitudeSilError
 
-__all__ = ["STEP_TOPICS", "COMMAND_TOPICS", "COMMAND_TOPIC", "CONTROLLER_INPUTS", "MODEL_TOPICS", "RECORDED_TOPICS",
+__all__ = ["CLOCK", "ATTITUDE", "BODY_RATE", "ATTITUDE_SETPOINT", "RATE_SETPOINT", "VOLTAGE_CMD", "TORQUE_CMD",
+           "WHEEL_TORQUE", "WHEEL_MOMENTUM", "WHEEL_STATE", "DISTURBANCE_TORQUE", "ATTITUDE_ERROR", "FLEXIBLE_MODE",
+           "PLANT_INPUTS", "clock_remap",
+           "STEP_TOPICS", "COMMAND_TOPICS", "COMMAND_TOPIC", "CONTROLLER_INPUTS", "MODEL_TOPICS", "RECORDED_TOPICS",
            "GRAPH_SUBSCRIBERS", "PARAMETER_EVENTS", "message_class"]
+
+# -- names (relative, except /clock and /parameter_events) ----------------------------
+CLOCK = "/clock"
+ATTITUDE = "attitude"
+BODY_RATE = "body_rate"
+ATTITUDE_SETPOINT = "attitude_setpoint"
+RATE_SETPOINT = "rate_setpoint"
+VOLTAGE_CMD = "voltage_cmd"
+TORQUE_CMD = "torque_cmd"
+WHEEL_TORQUE = "wheel_torque"
+WHEEL_MOMENTUM = "wheel_momentum"
+WHEEL_STATE = "wheel_state"
+DISTURBANCE_TORQUE = "disturbance_torque"
+ATTITUDE_ERROR = "attitude_error"
+FLEXIBLE_MODE = "flexible_mode"
+PARAMETER_EVENTS = "/parameter_events"
 
 #: topics of the lockstep (relative names, except /clock); one message per step each,
 #: except the command topics, of which exactly one carries each step
 STEP_TOPICS: dict[str, str] = {
-    "/clock": "rosgraph_msgs/msg/Clock",
-    "attitude": "geometry_msgs/msg/QuaternionStamped",
-    "body_rate": "geometry_msgs/msg/Vector3Stamped",
-    "attitude_setpoint": "geometry_msgs/msg/QuaternionStamped",
-    "rate_setpoint": "geometry_msgs/msg/Vector3Stamped",
-    "voltage_cmd": "geometry_msgs/msg/Vector3Stamped",
-    "torque_cmd": "geometry_msgs/msg/Vector3Stamped",
-    "wheel_torque": "geometry_msgs/msg/Vector3Stamped",
-    "wheel_momentum": "geometry_msgs/msg/Vector3Stamped",
-    "wheel_state": "sensor_msgs/msg/JointState",
-    "disturbance_torque": "geometry_msgs/msg/Vector3Stamped",
-    "attitude_error": "geometry_msgs/msg/Vector3Stamped",
+    CLOCK: "rosgraph_msgs/msg/Clock",
+    ATTITUDE: "geometry_msgs/msg/QuaternionStamped",
+    BODY_RATE: "geometry_msgs/msg/Vector3Stamped",
+    ATTITUDE_SETPOINT: "geometry_msgs/msg/QuaternionStamped",
+    RATE_SETPOINT: "geometry_msgs/msg/Vector3Stamped",
+    VOLTAGE_CMD: "geometry_msgs/msg/Vector3Stamped",
+    TORQUE_CMD: "geometry_msgs/msg/Vector3Stamped",
+    WHEEL_TORQUE: "geometry_msgs/msg/Vector3Stamped",
+    WHEEL_MOMENTUM: "geometry_msgs/msg/Vector3Stamped",
+    WHEEL_STATE: "sensor_msgs/msg/JointState",
+    DISTURBANCE_TORQUE: "geometry_msgs/msg/Vector3Stamped",
+    ATTITUDE_ERROR: "geometry_msgs/msg/Vector3Stamped",
 }
 
 #: the controller publishes one of these per step, depending on its law
-COMMAND_TOPICS = ("voltage_cmd", "torque_cmd")
+COMMAND_TOPICS = (VOLTAGE_CMD, TORQUE_CMD)
 
 #: the command topic of each kind of law (:data:`attitude_sil.core.controllers.OUTPUT_KIND`)
-COMMAND_TOPIC = {"voltage": "voltage_cmd", "torque": "torque_cmd"}
+COMMAND_TOPIC = {"voltage": VOLTAGE_CMD, "torque": TORQUE_CMD}
+
+#: what the plant needs, all stamped t_k, before it integrates to t_k+1
+PLANT_INPUTS = (WHEEL_TORQUE, WHEEL_MOMENTUM, DISTURBANCE_TORQUE)
 
 #: what the controller needs, all stamped t_k, before it computes step k's command
-CONTROLLER_INPUTS = ("attitude", "body_rate", "attitude_setpoint", "rate_setpoint")
+CONTROLLER_INPUTS = (ATTITUDE, BODY_RATE, ATTITUDE_SETPOINT, RATE_SETPOINT)
 
 #: how many graph nodes subscribe to each topic (the recorder comes on top)
 GRAPH_SUBSCRIBERS = {
-    "attitude": 2, "body_rate": 1, "attitude_setpoint": 1, "rate_setpoint": 1, "voltage_cmd": 1, "torque_cmd": 1,
-    "wheel_torque": 1, "wheel_momentum": 1, "disturbance_torque": 1, "/clock": 1,
+    ATTITUDE: 2, BODY_RATE: 1, ATTITUDE_SETPOINT: 1, RATE_SETPOINT: 1, VOLTAGE_CMD: 1, TORQUE_CMD: 1,
+    WHEEL_TORQUE: 1, WHEEL_MOMENTUM: 1, DISTURBANCE_TORQUE: 1, CLOCK: 1,
 }
 
-PARAMETER_EVENTS = "/parameter_events"
-
 #: published only by some plant models (paper 002's flexible mode: x = alpha rad, y = d alpha/dt rad/s)
-MODEL_TOPICS: dict[str, str] = {"flexible_mode": "geometry_msgs/msg/Vector3Stamped"}
+MODEL_TOPICS: dict[str, str] = {FLEXIBLE_MODE: "geometry_msgs/msg/Vector3Stamped"}
 
 #: everything a run records
 RECORDED_TOPICS: dict[str, str] = {**STEP_TOPICS, **MODEL_TOPICS,
@@ -63,7 +83,7 @@ def message_class(type_name: str):
 
     Raises
     ------
-    ValueError
+    AttitudeSilError
         If the type cannot be imported.
     """
     parts = type_name.split("/")
@@ -73,3 +93,8 @@ def message_class(type_name: str):
         return getattr(importlib.import_module(f"{parts[0]}.msg"), parts[2])
     except (ImportError, AttributeError):
         raise AttitudeSilError(f"message type {type_name} is not installed") from None
+
+
+def clock_remap(namespace: str | None) -> list[str]:
+    """``--ros-args`` remap rules that move ``/clock`` under ``namespace`` (empty without one)."""
+    return ["-r", f"{CLOCK}:=/{namespace}{CLOCK}"] if namespace else []

@@ -24,7 +24,10 @@ from rclpy.parameter import Parameter
 from attitude_sil.core.params import NODE_PARAMS
 from attitude_sil.core.scenario import Scenario, scenario_from_dict
 from attitude_sil.errors import AttitudeSilError, ScenarioError
+from attitude_sil.ros.contract import RECORDED_TOPICS as TOPIC_TYPES
+from attitude_sil.ros.contract import message_class
 from attitude_sil.ros.parameters import PARAMETER_TYPES, descriptor
+from attitude_sil.ros.qos import LOCKSTEP_QOS
 
 __all__ = ["SchemaNode", "run_node", "steady_clock"]
 
@@ -112,6 +115,15 @@ class SchemaNode(Node):
 
     def on_parameters_set(self, names: list[str]) -> None:
         """Hook: accepted parameters changed."""
+
+    # -- topics of the contract -----------------------------------------------------
+    def step_publisher(self, topic: str):
+        """A publisher on a contract topic, with its message type and the lockstep QoS."""
+        return self.create_publisher(message_class(TOPIC_TYPES[topic]), topic, LOCKSTEP_QOS)
+
+    def step_subscription(self, topic: str, callback: Callable[[Any], None]):
+        """A subscription to a contract topic, with its message type and the lockstep QoS."""
+        return self.create_subscription(message_class(TOPIC_TYPES[topic]), topic, callback, LOCKSTEP_QOS)
 
     # -- helpers ---------------------------------------------------------------
     @staticmethod

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy, qos_profile_parameter_events
 
+from attitude_sil.ros.contract import PARAMETER_EVENTS
 from attitude_sil.storage.writer import qos_profiles_yaml
 
 __all__ = ["LOCKSTEP_QOS", "PARAMETER_EVENTS_QOS", "offered_qos_yaml"]
@@ -29,6 +30,6 @@ PARAMETER_EVENTS_QOS = qos_profile_parameter_events
 
 def offered_qos_yaml(topic: str) -> str:
     """The ``offered_qos_profiles`` string a bag records for ``topic``."""
-    if topic == "/parameter_events":
+    if topic == PARAMETER_EVENTS:
         return qos_profiles_yaml(depth=1000)
     return qos_profiles_yaml(durability="transient_local", depth=LOCKSTEP_QOS.depth)

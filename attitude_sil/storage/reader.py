@@ -47,6 +47,7 @@ from mcap.records import (
     Statistics,
 )
 from mcap.stream_reader import breakup_chunk
+from mcap_ros2.decoder import DecoderFactory
 
 from attitude_sil.errors import BagError
 
@@ -700,8 +701,6 @@ class BagReader:
         BagError
             As for :meth:`iter_raw`, and if a message cannot be decoded.
         """
-        from mcap_ros2.decoder import DecoderFactory
-
         factories = [DecoderFactory() for _ in self._files]  # schema ids are per file
         decoders: dict[tuple[int, int], Callable[[bytes], Any]] = {}
         for raw, file_index, channel_id in self._iter(topics, start_ns, end_ns):

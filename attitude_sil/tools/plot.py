@@ -23,6 +23,17 @@ from matplotlib.transforms import blended_transform_factory
 
 from attitude_sil.core.quaternion import euler_from_quat
 from attitude_sil.errors import BagError
+from attitude_sil.ros.contract import (
+    ATTITUDE,
+    ATTITUDE_ERROR,
+    ATTITUDE_SETPOINT,
+    BODY_RATE,
+    DISTURBANCE_TORQUE,
+    FLEXIBLE_MODE,
+    TORQUE_CMD,
+    VOLTAGE_CMD,
+    WHEEL_STATE,
+)
 from attitude_sil.ros.convert import quaternion_to_array, vector_to_array
 from attitude_sil.storage.reader import BagReader, open_bag
 
@@ -114,21 +125,21 @@ class _Series:
 
 
 _EXTRACT = {
-    'attitude': quaternion_to_array,
-    'attitude_setpoint': quaternion_to_array,
-    'attitude_error': vector_to_array,
-    'body_rate': vector_to_array,
-    'voltage_cmd': vector_to_array,
-    'torque_cmd': vector_to_array,
-    'disturbance_torque': vector_to_array,
-    'flexible_mode': vector_to_array,
+    ATTITUDE: quaternion_to_array,
+    ATTITUDE_SETPOINT: quaternion_to_array,
+    ATTITUDE_ERROR: vector_to_array,
+    BODY_RATE: vector_to_array,
+    VOLTAGE_CMD: vector_to_array,
+    TORQUE_CMD: vector_to_array,
+    DISTURBANCE_TORQUE: vector_to_array,
+    FLEXIBLE_MODE: vector_to_array,
 }
 
 
 def _read_series(reader: BagReader) -> tuple[dict[str, _Series], dict[str, _Series]]:
     """Read the known topics; returns (series by short name, wheel speeds by joint name)."""
     names: dict[str, str] = {}
-    for short in (*_EXTRACT, 'wheel_state'):
+    for short in (*_EXTRACT, WHEEL_STATE):
         topic = reader.find_topic(short)
         if topic is not None and reader.topics[topic].count > 0:
             names[topic] = short
@@ -137,7 +148,7 @@ def _read_series(reader: BagReader) -> tuple[dict[str, _Series], dict[str, _Seri
     for raw, m in reader.iter_decoded(list(names)):
         short = names[raw.topic]
         t = raw.log_time_ns / 1e9
-        if short == 'wheel_state':
+        if short == WHEEL_STATE:
             for i, speed in enumerate(m.velocity):
                 joint = m.name[i] if i < len(m.name) else f'wheel {i}'
                 s = wheels.setdefault(joint, _Series())
@@ -213,39 +224,39 @@ def plot_bag(bag_path: str | Path, out_png: str | Path, title: str | None = None
     bag_path = Path(bag_path)
     out_png = Path(out_png)
     reader = open_bag(bag_path)
-    attitude_topic = reader.find_topic('attitude')
+    attitude_topic = reader.find_topic(ATTITUDE)
     if attitude_topic is None or reader.topics[attitude_topic].count == 0:
         where = bag_path if len(reader.paths) > 1 or bag_path.is_dir() else reader.paths[0]
         raise BagError(f'{where}: no attitude messages (topic .../attitude), nothing to plot')
     initial, swaps = _controller_events(reader)
     series, wheels = _read_series(reader)
 
-    t_att, q_att = series['attitude'].arrays()
+    t_att, q_att = series[ATTITUDE].arrays()
     t0, t1 = float(t_att.min()), float(t_att.max())
     if t1 <= t0:
         t1 = t0 + 1.0
     wheels = {name: s for name, s in wheels.items() if np.any(np.asarray(s.v) != 0.0)}
 
-    panels: list[str] = ['attitude']
-    panels += [p for p in ('attitude_error', 'body_rate') if p in series]
-    if 'voltage_cmd' in series or 'torque_cmd' in series:
+    panels: list[str] = [ATTITUDE]
+    panels += [p for p in (ATTITUDE_ERROR, BODY_RATE) if p in series]
+    if VOLTAGE_CMD in series or TORQUE_CMD in series:
         panels.append('command')
     if wheels:
         panels.append('wheels')
-    panels += [p for p in ('disturbance_torque', 'flexible_mode') if p in series]
+    panels += [p for p in (DISTURBANCE_TORQUE, FLEXIBLE_MODE) if p in series]
 
     fig = Figure(figsize=(_FIG_WIDTH_IN, _PANEL_HEIGHT_IN * len(panels)), dpi=_DPI)
     axes = fig.subplots(len(panels), 1, sharex=True, squeeze=False)
     axes = axes[:, 0]
     try:
         for ax, panel in zip(axes, panels, strict=True):
-            if panel == 'attitude':
+            if panel == ATTITUDE:
                 rpy = _euler_deg(q_att)
                 for k, name in enumerate(('roll', 'pitch', 'yaw')):
                     ax.plot(t_att, rpy[:, k], color=_AXIS_COLOURS[k], lw=1.3, label=name)
                 handles, labels = ax.get_legend_handles_labels()
-                if 'attitude_setpoint' in series:
-                    t_sp, q_sp = series['attitude_setpoint'].arrays()
+                if ATTITUDE_SETPOINT in series:
+                    t_sp, q_sp = series[ATTITUDE_SETPOINT].arrays()
                     sp = _euler_deg(q_sp)
                     for k in range(3):
                         # Above the attitude lines, so a setpoint equal to another axis' angle shows.
@@ -254,10 +265,10 @@ def plot_bag(bag_path: str | Path, out_png: str | Path, title: str | None = None
                     labels.append('setpoint')
                 ax.set_ylabel('attitude (deg)')
                 _legend(ax, handles, labels)
-            elif panel in ('attitude_error', 'body_rate'):
+            elif panel in (ATTITUDE_ERROR, BODY_RATE):
                 t, v = series[panel].arrays()
-                label, axis_names = ({'attitude_error': ('attitude error (deg)', ('roll', 'pitch', 'yaw')),
-                                      'body_rate': ('body rate (deg/s)',
+                label, axis_names = ({ATTITUDE_ERROR: ('attitude error (deg)', ('roll', 'pitch', 'yaw')),
+                                      BODY_RATE: ('body rate (deg/s)',
                                                     (r'$\omega_x$', r'$\omega_y$', r'$\omega_z$'))}[panel])
                 for k in range(3):
                     ax.plot(t, np.degrees(v[:, k]), color=_AXIS_COLOURS[k], lw=1.2, label=axis_names[k])
@@ -273,7 +284,7 @@ def plot_bag(bag_path: str | Path, out_png: str | Path, title: str | None = None
                             label=name)
                 ax.set_ylabel('wheel speed (rpm)')
                 _legend(ax)
-            elif panel == 'disturbance_torque':
+            elif panel == DISTURBANCE_TORQUE:
                 t, v = series[panel].arrays()
                 for k, name in enumerate(('x', 'y', 'z')):
                     ax.plot(t, v[:, k], color=_AXIS_COLOURS[k], lw=1.2, label=rf'$\tau_{{d,{name}}}$')
@@ -285,7 +296,7 @@ def plot_bag(bag_path: str | Path, out_png: str | Path, title: str | None = None
                     ax.text(0.5, 0.75, 'no disturbance torque (all zero)', transform=ax.transAxes,
                             ha='center', va='center', color='0.35')
                 _legend(ax)
-            elif panel == 'flexible_mode':
+            elif panel == FLEXIBLE_MODE:
                 t, v = series[panel].arrays()
                 ax.plot(t, np.degrees(v[:, 0]), color='C4', lw=1.2, label=r'$\alpha$')
                 ax.set_ylabel(r'flex mode $\alpha$ (deg)')
@@ -328,8 +339,8 @@ def _plot_command(ax: Any, series: dict[str, _Series], line_cls: Any) -> None:
     handles: list[Any] = []
     labels: list[str] = []
     primary = True
-    for topic, unit, quantity, symbol in (('voltage_cmd', 'V', 'voltage', 'u'),
-                                          ('torque_cmd', 'N m', 'torque', r'\tau')):
+    for topic, unit, quantity, symbol in ((VOLTAGE_CMD, 'V', 'voltage', 'u'),
+                                          (TORQUE_CMD, 'N m', 'torque', r'\tau')):
         if topic not in series:
             continue
         t, v = series[topic].arrays()
@@ -340,7 +351,7 @@ def _plot_command(ax: Any, series: dict[str, _Series], line_cls: Any) -> None:
             handles.append(line)
             labels.append(f'${symbol}_{name}$ ({unit})')
         target.set_ylabel(f'{quantity} cmd ({unit})')
-        if topic == 'torque_cmd':
+        if topic == TORQUE_CMD:
             _sci(target)
         primary = False
     # With a right-hand axis the legend goes right of its tick labels.

@@ -19,7 +19,7 @@ import rclpy
 from rclpy.node import Node
 
 from attitude_sil.errors import BagError
-from attitude_sil.ros.contract import PARAMETER_EVENTS, message_class
+from attitude_sil.ros.contract import CLOCK, PARAMETER_EVENTS, message_class
 from attitude_sil.ros.environment import localhost_environment
 from attitude_sil.ros.qos import LOCKSTEP_QOS
 from attitude_sil.storage.reader import open_bag
@@ -63,7 +63,7 @@ class ReplayOptions:
 
 def remap_topic(topic: str, namespace: str | None) -> str:
     """``/attitude`` -> ``/<namespace>/attitude``; /clock and /parameter_events stay global."""
-    if not namespace or topic in ("/clock", PARAMETER_EVENTS):
+    if not namespace or topic in (CLOCK, PARAMETER_EVENTS):
         return topic
     return "/" + namespace.strip("/") + "/" + topic.split("/")[-1]
 
