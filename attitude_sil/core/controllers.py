@@ -5,7 +5,7 @@ Every controller maps the state at t_k (attitude, body rate) and the setpoint
 ``[t_k, t_k + dt]``. ``compute`` advances the controller's own state by one
 step, so it is called exactly once per control step.
 
-Types (``controller_type``, DESIGN.md section 3):
+Types (``controller_type``, docs/architecture.md, "Parameters"):
 
 * ``pid`` — per-axis PID on the quaternion error vector (paper 000), volts;
 * ``fuzzy_pid`` — hybrid fuzzy PID (paper 003 section 5), volts;

@@ -2,8 +2,8 @@
 
 The five graph nodes each hold one of the objects below and call exactly the
 methods the batch engine calls, in the same order, so a run through the ROS
-graph and :func:`simulate` with P = 1 produce the same numbers (DESIGN.md
-section 2). One control step k of the lockstep protocol:
+graph and :func:`simulate` with P = 1 produce the same numbers (docs/architecture.md,
+"Lockstep"). One control step k of the lockstep protocol:
 
 1. ``Plant.state`` at t_k (published as ``attitude``, ``body_rate``);
 2. ``Guidance.setpoint(t_k)`` and ``Disturbance.torque(q_BN)``;

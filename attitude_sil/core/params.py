@@ -3,7 +3,7 @@
 One table serves three users: the nodes declare their ROS parameters from it
 (``ParameterDescriptor`` with description and range), the scenario loader
 validates YAML files against it, and the batch engine reads its defaults. A
-name here is a ROS contract (DESIGN.md section 3).
+name here is a ROS contract (docs/architecture.md, "Parameters").
 
 Values whose source paper gives no number are marked ``assumed`` in their
 description, with the reason.
