@@ -1,6 +1,6 @@
 """Fuzzy inference (papers 003, 004): partitions, rule tables against the papers, kernel == reference."""
 
-import re
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -16,33 +16,26 @@ from attitude_sil.core.fuzzy import (
     vertices_from_ratios,
 )
 from attitude_sil.core.kernels import fuzzy_infer
-from conftest import ROOT
 
-PAPERS = ROOT.parent / "shared" / "papers"
+DATA = Path(__file__).parent / "data"
 CODES = {"NL": 1, "NB": 1, "NM": 2, "NS": 3, "ZR": 4, "ZO": 4, "PS": 5, "PM": 6, "PL": 7, "PB": 7}
 
 
-def _table_rows(text: str, start: str, n_cols: int = 7) -> np.ndarray:
-    """The seven rows of labels after ``start`` in a paper's text (row label first)."""
-    body = text[text.index(start):]
-    rows = []
-    for line in body.splitlines():
-        tokens = re.findall(r"\b(NL|NB|NM|NS|ZR|ZO|PS|PM|PL|PB)\b", line)
-        if len(tokens) == n_cols + 1:  # a row label and seven cells
-            rows.append([CODES[t] for t in tokens[1:]])
-        if len(rows) == 7:
-            break
-    return np.array(rows)
+def _table(name: str) -> np.ndarray:
+    """A 7 x 7 rule table copied from a paper (test/data/, source in its header) as set indices 1..7."""
+    rows = [line.split(",") for line in (DATA / name).read_text().splitlines()
+            if line.strip() and not line.startswith("#")]
+    header, body = rows[0], rows[1:]
+    assert [h for h in header[1:]] == [r[0] for r in body]  # the same labels along both axes
+    return np.array([[CODES[c.strip()] for c in r[1:]] for r in body])
 
 
 def test_paper_003_table_3_cell_by_cell():
-    text = (PAPERS / "003_298b2461c914e030.txt").read_text()
-    assert np.array_equal(_table_rows(text, "The base of the fuzzy rules"), PAPER_003_TABLE_3)
+    assert np.array_equal(_table("paper_003_table_3.csv"), PAPER_003_TABLE_3)
 
 
 def test_paper_004_table_2_cell_by_cell():
-    text = (PAPERS / "004_94be58d9fe3d36c0.txt").read_text()
-    assert np.array_equal(_table_rows(text, "Table 2: The best generated rules"), PAPER_004_TABLE_2)
+    assert np.array_equal(_table("paper_004_table_2.csv"), PAPER_004_TABLE_2)
 
 
 def test_default_fuzzy_pid_rules_repair_the_misprint():
