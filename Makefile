@@ -6,7 +6,7 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
-.PHONY: run test lint bench clean
+.PHONY: run test lint bench docs clean
 
 $(STAMP): setup.py package.xml
 	$(PYTHON) -m venv $(VENV)
@@ -27,6 +27,11 @@ test: $(STAMP) lint
 bench: $(STAMP)
 	$(BIN)/python bench/bench_engine.py
 	$(BIN)/python bench/bench_tuner.py
+
+docs: $(STAMP)
+	$(BIN)/python -c "from attitude_sil.core.params import parameters_markdown as p; \
+	head = open('docs/parameters.md').read().split('<!-- generated')[0]; \
+	open('docs/parameters.md', 'w').write(head + p() + '\n')"
 
 clean:
 	rm -rf $(VENV) build *.egg-info

@@ -21,7 +21,7 @@ from attitude_sil.errors import ScenarioError
 
 from .fuzzy import FUZZY_PID_DEFAULT_RULES, PAPER_004_TABLE_2
 
-__all__ = ["ParamSpec", "NODE_PARAMS", "GLOBAL_NODE", "SCENARIO_NODE", "spec_for", "HST_MOTOR"]
+__all__ = ["ParamSpec", "NODE_PARAMS", "GLOBAL_NODE", "SCENARIO_NODE", "spec_for", "HST_MOTOR", "parameters_markdown"]
 
 GLOBAL_NODE = "/**"
 SCENARIO_NODE = "scenario"
@@ -410,3 +410,45 @@ def spec_for(node: str, name: str) -> ParamSpec:
         if spec.name == name:
             return spec
     raise KeyError(f"{node} has no parameter {name!r}")
+
+
+def _range_text(spec: ParamSpec) -> str:
+    parts = []
+    if spec.choices:
+        parts.append(", ".join(f"`{c}`" for c in spec.choices))
+    if spec.min is not None:
+        parts.append(f"{'>' if spec.min_exclusive else '>='} {spec.min:g}")
+    if spec.max is not None:
+        parts.append(f"<= {spec.max:g}")
+    if spec.lengths:
+        parts.append("length " + " or ".join(map(str, spec.lengths)))
+    return "; ".join(parts)
+
+
+def _default_text(value: Any) -> str:
+    if isinstance(value, list) and len(value) > 6:
+        return f"{len(value)} values"
+    return f"`{value}`"
+
+
+def parameters_markdown() -> str:
+    """Every node's parameters as Markdown tables: the source of docs/parameters.md.
+
+    The test suite regenerates this and compares it with the file, so the
+    document cannot drift from the schema.
+    """
+    lines = ["<!-- generated from attitude_sil/core/params.py by parameters_markdown(); "
+             "test/test_docs.py keeps it equal -->", ""]
+    for node, specs in NODE_PARAMS.items():
+        if node == GLOBAL_NODE:
+            continue
+        title = "scenario (read by the runner and the metrics, not a node)" if node == SCENARIO_NODE else node
+        lines += [f"## `{node}`" if node != SCENARIO_NODE else f"## `{node}`: {title}", "",
+                  "| name | type | default | range / choices | set at runtime | meaning |",
+                  "| --- | --- | --- | --- | --- | --- |"]
+        for spec in specs:
+            desc = spec.description.replace("|", "\\|")
+            lines.append(f"| `{spec.name}` | {spec.kind} | {_default_text(spec.default)} | {_range_text(spec)} | "
+                         f"{'yes' if spec.runtime else 'no'} | {desc} |")
+        lines.append("")
+    return "\n".join(lines)

@@ -1,0 +1,30 @@
+"""The docs stay true: the parameter tables equal the schema; the contract names every topic and subcommand."""
+
+import argparse
+
+from attitude_sil.cli import build_parser
+from attitude_sil.core.params import parameters_markdown
+from attitude_sil.ros.contract import RECORDED_TOPICS
+from conftest import ROOT
+
+DOCS = ROOT / "docs"
+
+
+def test_parameters_doc_is_generated_from_the_schema():
+    # after a schema change: make docs
+    assert parameters_markdown() in (DOCS / "parameters.md").read_text()
+
+
+def test_architecture_names_every_topic_and_subcommand():
+    text = (DOCS / "architecture.md").read_text()
+    for topic in RECORDED_TOPICS:
+        assert f"`{topic}`" in text, topic
+    sub = next(a for a in build_parser()._actions if isinstance(a, argparse._SubParsersAction))
+    for name in sub.choices:
+        assert f"`{name}" in text, name
+
+
+def test_readme_and_docs_point_inside_the_repository():
+    for path in [ROOT / "README.md", *DOCS.glob("*.md")]:
+        text = path.read_text()
+        assert "../shared" not in text and "DESIGN.md" not in text, path
