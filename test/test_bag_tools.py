@@ -3,7 +3,6 @@
 import subprocess
 import sys
 import threading
-import time
 
 import numpy as np
 import pytest
@@ -63,8 +62,14 @@ def test_replay_drives_a_live_controller_like_the_recorded_run(tmp_path):
                      if v != []]
         ctrl = ControllerNode(context=context, parameter_overrides=overrides)
         listener = rclpy.create_node("listener", context=context)
-        listener.create_subscription(Vector3Stamped, "voltage_cmd", lambda m: got.__setitem__(
-            stamp_to_ns(m.header.stamp), vector_to_array(m)), LOCKSTEP_QOS)
+        all_in = threading.Event()
+
+        def on_command(m):
+            got[stamp_to_ns(m.header.stamp)] = vector_to_array(m)
+            if len(got) >= len(recorded):
+                all_in.set()
+
+        listener.create_subscription(Vector3Stamped, "voltage_cmd", on_command, LOCKSTEP_QOS)
         executor = EventsExecutor(context=context)
         executor.add_node(ctrl)
         executor.add_node(listener)
@@ -75,9 +80,7 @@ def test_replay_drives_a_live_controller_like_the_recorded_run(tmp_path):
                                                                 "rate_setpoint"], wait_for_subscribers=1),
                           context=context)
         assert sent == 4 * 301
-        deadline = time.monotonic() + 20
-        while len(got) < len(recorded) and time.monotonic() < deadline:
-            time.sleep(0.01)  # the spinner thread collects the commands
+        all_in.wait(timeout=120)  # the spinner thread collects the commands; woken by the last one
     finally:
         stop.set()
         spinner.join()

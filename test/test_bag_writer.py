@@ -423,7 +423,8 @@ def test_writes_from_two_threads_and_close_from_a_third(tmp_path: Path) -> None:
 
 
 _CHILD = textwrap.dedent('''
-    import sys
+    import faulthandler, signal, sys
+    faulthandler.register(signal.SIGUSR1, all_threads=True)  # a hung child shows where it hangs
     from builtin_interfaces.msg import Time
     from rclpy.serialization import serialize_message
     from rosgraph_msgs.msg import Clock
@@ -442,6 +443,9 @@ _CHILD = textwrap.dedent('''
                 writer.write('/clock', blobs[i], 10**9 + i)
             import os, signal
             os.kill(os.getpid(), signal.SIGKILL)
+        for written in range(1000):  # something to keep before the signal can come
+            writer.write('/clock', blobs[written], 10**9 + written)
+        written += 1
         print('ready', flush=True)
         while True:  # as fast as possible, so the signal lands inside write()
             writer.write('/clock', blobs[written % 1000], 10**9 + written)
@@ -454,11 +458,28 @@ _CHILD = textwrap.dedent('''
 ''')
 
 
+def _default_sigint() -> None:
+    # the child must not inherit an ignored or blocked SIGINT from whatever ran in this process
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+    signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})
+
+
 def _run_child(run_dir: Path, mode: str) -> subprocess.Popen:
     env = dict(os.environ, PYTHONPATH=os.pathsep.join(
         [str(REPO), *filter(None, [os.environ.get('PYTHONPATH')])]))
     return subprocess.Popen([sys.executable, '-c', _CHILD, str(run_dir), mode],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env,
+                            preexec_fn=_default_sigint)
+
+
+def _communicate(child: subprocess.Popen, timeout: float = 60.0) -> tuple[str, str]:
+    try:
+        return child.communicate(timeout=timeout)
+    except subprocess.TimeoutExpired:
+        child.send_signal(signal.SIGUSR1)  # faulthandler: every thread's stack on stderr
+        child.kill()
+        out, err = child.communicate()
+        raise AssertionError(f'the writer child did not finish within {timeout:g} s; its stacks:\n{err}') from None
 
 
 def test_ctrl_c_leaves_a_readable_bag(tmp_path: Path) -> None:
@@ -468,14 +489,13 @@ def test_ctrl_c_leaves_a_readable_bag(tmp_path: Path) -> None:
     child = _run_child(run_dir, 'sigint')
     try:
         assert child.stdout.readline().strip() == 'ready', child.stderr.read()
-        threading.Event().wait(0.3)
-        child.send_signal(signal.SIGINT)
-        out, err = child.communicate(timeout=60)
+        child.send_signal(signal.SIGINT)  # 1000 messages are in; the writing loop runs
+        out, err = _communicate(child)
     finally:
         child.kill()
     assert child.returncode == 0, err
     recorded = int(out.strip())
-    assert recorded > 0
+    assert recorded >= 1000
     with (run_dir / 'interrupted_0.mcap').open('rb') as f:
         reader = make_reader(f, decoder_factories=[DecoderFactory()])
         assert reader.get_summary().statistics.message_count == recorded
@@ -490,7 +510,7 @@ def test_ctrl_c_leaves_a_readable_bag(tmp_path: Path) -> None:
 def test_killed_writer_keeps_flushed_chunks(tmp_path: Path) -> None:
     run_dir = tmp_path / 'killed'
     child = _run_child(run_dir, 'kill')
-    _, err = child.communicate(timeout=60)
+    _, err = _communicate(child)
     assert child.returncode == -signal.SIGKILL, err
     # No summary or footer: scan the records as far as the file goes.
     schemas, channels, secs = {}, {}, []
