@@ -21,6 +21,7 @@ import numpy as np
 from attitude_sil.errors import ScenarioError
 
 from .actuators import SpeedLoopWheels, TorqueActuator
+from .batch import COMPILED_DISTURBANCES, COMPILED_LAWS, run_compiled
 from .controllers import ControllerBank
 from .disturbance import DisturbanceModel, lvlh_attitude, orbit_rate
 from .linear import LinearizedPlant
@@ -274,6 +275,29 @@ def schedule_from_scenario(scn: Scenario) -> list[tuple[int, str]]:
                   for t, kind in zip(s["schedule.times"], s["schedule.controller_types"], strict=True))
 
 
+def compiled_plan(plant, wheels, dist: DisturbanceModel, guide: Guidance, ctrl: ControllerBank,
+                  swaps: dict) -> str:
+    """'' if built models fit the compiled driver (:mod:`attitude_sil.core.batch`), else why not."""
+    if type(plant) is not Plant:
+        return f"plant model {type(plant).__name__}"
+    if type(wheels) is not Wheels:
+        return f"actuator {type(wheels).__name__}"
+    if guide.mode != "step":
+        return f"guidance {guide.mode}"
+    extra = sorted(set(dist.models) - COMPILED_DISTURBANCES)
+    if extra:
+        return f"disturbance {', '.join(extra)}"
+    if swaps:
+        return "scheduled swaps"
+    if ctrl.active not in COMPILED_LAWS:
+        return f"controller {ctrl.active}"
+    return ""
+
+
+#: ``simulate(driver=...)``: ``auto`` takes the compiled driver where the run fits it
+DRIVERS = ("auto", "compiled", "stepwise")
+
+
 def simulate(
     scn: Scenario,
     n_episodes: int = 1,
@@ -284,6 +308,9 @@ def simulate(
     controller: str | None = None,
     schedule: list[tuple[int, str]] | None = None,
     setpoints_rpy_deg=None,
+    driver: str = "auto",
+    stride: int = 1,
+    threads: int | None = None,
 ) -> Trajectory:
     """Run P episodes of the scenario in lockstep, vectorised over episodes.
 
@@ -307,11 +334,26 @@ def simulate(
         scenario's ``schedule.*``).
     setpoints_rpy_deg : array_like, optional
         Per-episode step targets, (P, 3) deg.
+    driver : str
+        ``auto`` (default): whole episodes in compiled code
+        (:mod:`attitude_sil.core.batch`) where the run fits it, else the
+        stepwise loop; ``compiled`` insists (ScenarioError naming why a run
+        does not fit); ``stepwise`` always calls the step objects from Python,
+        as the nodes do. Both give the same numbers.
+    stride : int
+        Keep every ``stride``-th step of the trajectory (k = 0, stride, ...).
+    threads : int, optional
+        Threads of the compiled driver (default one per core); any count gives
+        the same numbers.
 
     Returns
     -------
     Trajectory
     """
+    if driver not in DRIVERS:
+        raise ScenarioError(f"driver must be one of {', '.join(DRIVERS)}, got {driver!r}")
+    if int(stride) < 1:
+        raise ScenarioError(f"stride must be >= 1, got {stride!r}")
     P = n_episodes
     K = scn.steps(duration)
     dt = scn.dt
@@ -323,6 +365,24 @@ def simulate(
     if controller is not None:
         ctrl.active = controller
     swaps = dict(schedule_from_scenario(scn) if schedule is None else schedule)
+    if driver != "stepwise":
+        why = compiled_plan(plant, wheels, dist, guide, ctrl, swaps)
+        if not why:
+            return run_compiled(plant, wheels, dist, guide, ctrl, K, dt, stride=int(stride), threads=threads)
+        if driver == "compiled":
+            raise ScenarioError(f"the compiled driver does not run this scenario ({why}); use driver='auto'")
+    tr = _simulate_stepwise(plant, wheels, dist, guide, ctrl, swaps, K, dt)
+    if stride == 1:
+        return tr
+    keep = slice(None, None, int(stride))
+    return Trajectory(t=tr.t[keep], q_BN=tr.q_BN[:, keep], omega_BN_B=tr.omega_BN_B[:, keep], q_RN=tr.q_RN[:, keep],
+                      h_wheels_B=tr.h_wheels_B[:, keep], u_cmd=tr.u_cmd[:, keep], tau_c_B=tr.tau_c_B[:, keep],
+                      tau_ext_B=tr.tau_ext_B[:, keep], wheel_speed=tr.wheel_speed[:, keep], kind=tr.kind[keep])
+
+
+def _simulate_stepwise(plant, wheels, dist, guide, ctrl, swaps: dict, K: int, dt: float) -> Trajectory:
+    """The stepwise driver: the step objects called from Python, step by step, as the nodes call them."""
+    P = plant.n_episodes
     nw = len(wheels.names)
     tr = Trajectory(
         t=np.arange(K + 1) * dt,

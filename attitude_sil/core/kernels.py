@@ -60,10 +60,17 @@ def rk4_body(q, w, h, inertia, inertia_inv, tau_c, tau_e, dt, substeps):
     Shapes: q (P, 4), w and h (P, 3), inertia and inertia_inv (P, 3, 3),
     tau_c and tau_e (P, 3). The quaternion is renormalised at the end.
     """
-    n = q.shape[0]
     qo = np.empty_like(q)
     wo = np.empty_like(w)
     ho = np.empty_like(h)
+    rk4_body_into(q, w, h, inertia, inertia_inv, tau_c, tau_e, dt, substeps, qo, wo, ho)
+    return qo, wo, ho
+
+
+@njit(cache=True)
+def rk4_body_into(q, w, h, inertia, inertia_inv, tau_c, tau_e, dt, substeps, qo, wo, ho):
+    """:func:`rk4_body` into given arrays; ``qo``, ``wo``, ``ho`` may be ``q``, ``w``, ``h`` (in place)."""
+    n = q.shape[0]
     step = dt / substeps
     half = 0.5 * step
     sixth = step / 6.0
@@ -93,9 +100,9 @@ def rk4_body(q, w, h, inertia, inertia_inv, tau_c, tau_e, dt, substeps):
         norm = np.sqrt(cq[0] * cq[0] + cq[1] * cq[1] + cq[2] * cq[2] + cq[3] * cq[3])
         for i in range(4):
             qo[p, i] = cq[i] / norm
-        wo[p] = cw
-        ho[p] = ch
-    return qo, wo, ho
+        for i in range(3):
+            wo[p, i] = cw[i]
+            ho[p, i] = ch[i]
 
 
 @njit(cache=True, inline="always")
@@ -150,8 +157,15 @@ def pid_step(q_BN, q_RN, kp, ki, kd, n, a, integral, filt, dt, u_max, angle_mode
     non-negative; with ``angle_mode`` each component becomes ``2 asin(e_i)``,
     the rotation angle about that axis. Returns the saturated command (P, 3).
     """
+    u = np.empty((q_BN.shape[0], 3))
+    pid_step_into(q_BN, q_RN, kp, ki, kd, n, a, integral, filt, dt, u_max, angle_mode, u)
+    return u
+
+
+@njit(cache=True)
+def pid_step_into(q_BN, q_RN, kp, ki, kd, n, a, integral, filt, dt, u_max, angle_mode, u):
+    """:func:`pid_step` writing the command into ``u`` (P, 3)."""
     m = q_BN.shape[0]
-    u = np.empty((m, 3))
     for p in range(m):
         e = _error3(q_BN, q_RN, p, angle_mode)
         for i in range(3):
@@ -162,7 +176,6 @@ def pid_step(q_BN, q_RN, kp, ki, kd, n, a, integral, filt, dt, u_max, angle_mode
                 integral[p, i] += e[i] * dt
             filt[p, i] = a[p, i] * filt[p, i] + (1.0 - a[p, i]) * e[i]
             u[p, i] = out
-    return u
 
 
 @njit(cache=True)
@@ -176,11 +189,24 @@ def wheel_step(x, v_cmd, allocation, axes, phi_T, gamma, j_m, k_b, headroom, spe
     one-step transition. Returns (x_next, tau_c (P, 3), h_start (P, 3)); see
     ``wheels.WheelAssembly`` for the rules.
     """
-    m, nw = x.shape[0], x.shape[1]
+    m = x.shape[0]
     x_next = np.empty_like(x)
-    tau_c = np.zeros((m, 3))
-    h0 = np.zeros((m, 3))
+    tau_c = np.empty((m, 3))
+    h0 = np.empty((m, 3))
+    wheel_step_into(x, v_cmd, allocation, axes, phi_T, gamma, j_m, k_b, headroom, speed_max, v_max, dt,
+                    torque_mode, k_i, r_a, b_m, x_next, tau_c, h0)
+    return x_next, tau_c, h0
+
+
+@njit(cache=True)
+def wheel_step_into(x, v_cmd, allocation, axes, phi_T, gamma, j_m, k_b, headroom, speed_max, v_max, dt,
+                    torque_mode, k_i, r_a, b_m, x_next, tau_c, h0):
+    """:func:`wheel_step` into given arrays (``x_next`` must not be ``x``)."""
+    m, nw = x.shape[0], x.shape[1]
     for p in range(m):
+        for i in range(3):
+            tau_c[p, i] = 0.0
+            h0[p, i] = 0.0
         for j in range(nw):
             speed = x[p, j, 2]
             e = -(allocation[j, 0] * v_cmd[p, 0] + allocation[j, 1] * v_cmd[p, 1] + allocation[j, 2] * v_cmd[p, 2])
@@ -200,7 +226,6 @@ def wheel_step(x, v_cmd, allocation, axes, phi_T, gamma, j_m, k_b, headroom, spe
                 tau_c[p, i] += axes[i, j] * (x_next[p, j, 2] * j_m)
         for i in range(3):
             tau_c[p, i] = -(tau_c[p, i] - h0[p, i]) / dt
-    return x_next, tau_c, h0
 
 
 @njit(cache=True, inline="always")
@@ -258,8 +283,17 @@ def fuzzy_pid_step(q_BN, q_RN, e_prev, has_prev, kp, ki, kd, n, a, integral, fil
     ones (``v``, kept in the signature for the record: -1, -2/3, ..., 1), which
     lets the segment of an input be computed rather than searched.
     """
+    out = np.empty((q_BN.shape[0], 3))
+    fuzzy_pid_step_into(q_BN, q_RN, e_prev, has_prev, kp, ki, kd, n, a, integral, filt, e_scale, de_scale, u_scale,
+                        rules, v, dt, u_max, angle_mode, out)
+    return out
+
+
+@njit(cache=True)
+def fuzzy_pid_step_into(q_BN, q_RN, e_prev, has_prev, kp, ki, kd, n, a, integral, filt, e_scale, de_scale,
+                        u_scale, rules, v, dt, u_max, angle_mode, out):
+    """:func:`fuzzy_pid_step` writing the mixed command into ``out`` (P, 3)."""
     m = q_BN.shape[0]
-    out = np.empty((m, 3))
     for p in range(m):
         e3 = _error3(q_BN, q_RN, p, angle_mode)
         r = rules[p]
@@ -285,7 +319,6 @@ def fuzzy_pid_step(q_BN, q_RN, e_prev, has_prev, kp, ki, kd, n, a, integral, fil
             else:
                 out[p, i] = u_p
             e_prev[p, i] = e
-    return out
 
 
 @njit(cache=True)
@@ -295,8 +328,15 @@ def ga_flc_step(q_BN, omega, q_RN, omega_RN_R, rules, vertices, scales, u_max):
     ``vertices`` (P, 3, 7): angle, rate and output vertices; ``scales`` (P, 3):
     K_theta, K_q, K_e.
     """
+    out = np.empty((q_BN.shape[0], 3))
+    ga_flc_step_into(q_BN, omega, q_RN, omega_RN_R, rules, vertices, scales, u_max, out)
+    return out
+
+
+@njit(cache=True)
+def ga_flc_step_into(q_BN, omega, q_RN, omega_RN_R, rules, vertices, scales, u_max, out):
+    """:func:`ga_flc_step` writing the saturated command into ``out`` (P, 3)."""
     m = q_BN.shape[0]
-    out = np.empty((m, 3))
     for p in range(m):
         x, y, z, w = _error_quat(q_BN, q_RN, p)
         vx, vy, vz = omega_RN_R[p, 0], omega_RN_R[p, 1], omega_RN_R[p, 2]
@@ -317,7 +357,6 @@ def ga_flc_step(q_BN, omega, q_RN, omega_RN_R, rules, vertices, scales, u_max):
             u = scales[p, 2] * _infer1(scales[p, 0] * theta, scales[p, 1] * rate, vertices[p, 0], vertices[p, 1],
                                        r, vertices[p, 2])
             out[p, i] = min(max(u, -u_max), u_max)
-    return out
 
 
 @njit(cache=True)

@@ -1,0 +1,85 @@
+"""The compiled episode driver (core/batch.py) gives the stepwise driver's numbers, bit for bit.
+
+The stepwise driver calls the step objects once per step from Python, exactly
+as the nodes do per message (graph == stepwise is tested at 1e-9 in
+test_graph.py and test_controllers_graph.py); the compiled driver calls the
+same kernels in one compiled loop. Equality is exact (no tolerance): the same
+arithmetic in the same order, whatever the chunking or the thread count.
+"""
+
+import numpy as np
+import pytest
+
+from attitude_sil.core.engine import simulate
+from attitude_sil.core.scenario import load_scenario
+from attitude_sil.errors import ScenarioError
+from conftest import CONFIG
+
+FIELDS = ("q_BN", "omega_BN_B", "q_RN", "h_wheels_B", "u_cmd", "tau_c_B", "tau_ext_B", "wheel_speed")
+P = 4
+
+
+def _assert_same(a, b):
+    assert a.kind == b.kind
+    assert np.array_equal(a.t, b.t)
+    for f in FIELDS:
+        assert np.array_equal(getattr(a, f), getattr(b, f)), f
+
+
+@pytest.fixture(scope="module")
+def hst():
+    # a setpoint step at 0.5 s (the guidance switch happens inside the loop), a constant and a step
+    # disturbance, four different designs and inertias in one batch
+    scn = load_scenario(CONFIG / "hst_roll_step.yaml")
+    scn = scn.with_values("guidance", step_time=0.5, setpoint_rpy_deg=[2.0, -1.0, 0.5])
+    return scn.with_values("disturbance", models=["constant", "step"], **{
+        "constant.torque": [1e-3, -2e-3, 5e-4], "step.torque": [0.0, 0.01, 0.0], "step.time": 1.0})
+
+
+def _per_episode():
+    rng = np.random.default_rng(7)
+    return {"pid.kp": rng.uniform(20, 80, (P, 3)), "pid.kd": rng.uniform(60, 150, (P, 3)),
+            "fuzzy_pid.kp": rng.uniform(20, 80, (P, 3)), "ga_flc.scales": np.column_stack(
+                [rng.uniform(40, 70, P), rng.uniform(30, 60, P), rng.uniform(1.5, 2.5, P)])}
+
+
+@pytest.mark.parametrize("law", ["pid", "fuzzy_pid", "ga_flc"])
+def test_compiled_equals_stepwise_for_each_law(hst, law):
+    params = {k: v for k, v in _per_episode().items() if k.startswith(law.split("_")[0])}
+    inertia = np.array([[31.046, 77.217, 78.754]]) * np.linspace(0.9, 1.1, P)[:, None]
+    kw = dict(duration=4.0, controller=law, controller_params=params, inertia=inertia)
+    stepwise = simulate(hst, P, driver="stepwise", **kw)
+    compiled = simulate(hst, P, driver="compiled", **kw)
+    _assert_same(stepwise, compiled)
+    assert np.max(np.abs(compiled.omega_BN_B)) > 1e-4  # the run moved: agreement is not trivial
+    assert np.ptp(compiled.u_cmd[:, -1, 0]) > 0  # and the episodes differ from each other
+
+
+def test_any_thread_count_and_chunking_gives_the_same_numbers(hst):
+    kw = dict(duration=2.0, controller_params={"pid.kp": np.linspace(20, 80, 3 * 37).reshape(37, 3)})
+    one = simulate(hst, 37, driver="compiled", threads=1, **kw)
+    two = simulate(hst, 37, driver="compiled", threads=2, **kw)
+    _assert_same(one, two)
+
+
+def test_every_nth_step(hst):
+    full = simulate(hst, 2, duration=1.0, driver="compiled")
+    thin = simulate(hst, 2, duration=1.0, driver="compiled", stride=7)
+    assert np.array_equal(thin.t, full.t[::7])
+    for f in FIELDS:
+        assert np.array_equal(getattr(thin, f), getattr(full, f)[:, ::7]), f
+    stepwise = simulate(hst, 2, duration=1.0, driver="stepwise", stride=7)
+    _assert_same(thin, stepwise)
+
+
+def test_runs_outside_the_compiled_set_fall_back_or_are_refused_by_name(hst):
+    flexible = load_scenario(CONFIG / "flexible_axis.yaml")
+    _assert_same(simulate(flexible, 1, duration=1.0), simulate(flexible, 1, duration=1.0, driver="stepwise"))
+    with pytest.raises(ScenarioError, match="FlexibleAxisPlant"):
+        simulate(flexible, 1, duration=1.0, driver="compiled")
+    with pytest.raises(ScenarioError, match="controller geometric"):
+        simulate(hst, 1, duration=1.0, controller="geometric", driver="compiled")
+    with pytest.raises(ScenarioError, match="scheduled swaps"):
+        simulate(hst, 1, duration=1.0, schedule=[(10, "fuzzy_pid")], driver="compiled")
+    with pytest.raises(ScenarioError, match="driver must be one of"):
+        simulate(hst, 1, driver="fast")
