@@ -27,7 +27,7 @@ import numpy as np
 from numba import njit, prange
 
 from .fuzzy import UNIFORM_VERTICES
-from .kernels import fuzzy_pid_step_into, ga_flc_step_into, pid_step_into, rk4_body_into, wheel_step_into
+from .kernels import fuzzy_pid_step_into, ga_flc_step_into, pid_step_into, rk4_body_scratch, wheel_step_into
 from .trajectory import Trajectory
 
 __all__ = ["COMPILED_LAWS", "COMPILED_DISTURBANCES", "run_compiled"]
@@ -63,6 +63,10 @@ def _chunk(law, lo, hi, n_steps, stride, dt, dt_ns, substeps, step_time,
     e_prev = np.zeros((m, 3))
     es, ds, us, fr = e_scale[lo:hi].copy(), de_scale[lo:hi].copy(), u_scale[lo:hi].copy(), fz_rules[lo:hi].copy()
     gr, gv, gs = g_rules[lo:hi].copy(), g_vertices[lo:hi].copy(), g_scales[lo:hi].copy()
+    # private copies of the shared read-only arrays: kernel calls touch their reference counts,
+    # which threads sharing one array would fight over (measured: no speed-up on two cores without)
+    allocation, axes, phi_T, gamma = allocation.copy(), axes.copy(), phi_T.copy(), gamma.copy()
+    tau_constant, tau_step, v_uniform = tau_constant.copy(), tau_step.copy(), v_uniform.copy()
     omega_r = np.zeros((m, 3))
     tau_e = np.zeros((m, 3))
     u = np.empty((m, 3))
@@ -70,6 +74,7 @@ def _chunk(law, lo, hi, n_steps, stride, dt, dt_ns, substeps, step_time,
     h0 = np.empty((m, 3))
     x_next = np.empty_like(x)
     h_out = np.empty((m, 3))
+    scratch = np.empty((18, 4))
     nw = x.shape[1]
     for k in range(n_steps + 1):
         t_ns = k * dt_ns
@@ -97,19 +102,39 @@ def _chunk(law, lo, hi, n_steps, stride, dt, dt_ns, substeps, step_time,
             for p in range(m):
                 e = lo + p
                 for i in range(4):
-                    o_q[e, r, i] = q[p, i]
-                    o_qr[e, r, i] = q_r[p, i]
+                    o_q[r, e, i] = q[p, i]
+                    o_qr[r, e, i] = q_r[p, i]
                 for i in range(3):
-                    o_w[e, r, i] = w[p, i]
-                    o_h[e, r, i] = h0[p, i]
-                    o_u[e, r, i] = u[p, i]
-                    o_tc[e, r, i] = tau_c[p, i]
-                    o_te[e, r, i] = tau_e[p, i]
+                    o_w[r, e, i] = w[p, i]
+                    o_h[r, e, i] = h0[p, i]
+                    o_u[r, e, i] = u[p, i]
+                    o_tc[r, e, i] = tau_c[p, i]
+                    o_te[r, e, i] = tau_e[p, i]
                 for j in range(nw):
-                    o_ws[e, r, j] = x[p, j, 2]
+                    o_ws[r, e, j] = x[p, j, 2]
         if k < n_steps:
-            rk4_body_into(q, w, h0, ii, iv, tau_c, tau_e, dt, substeps, q, w, h_out)
+            rk4_body_scratch(q, w, h0, ii, iv, tau_c, tau_e, dt, substeps, q, w, h_out, scratch)
         x, x_next = x_next, x
+
+
+@njit(cache=True)
+def _chunks_serial(bounds, law, n_steps, stride, dt, dt_ns, substeps, step_time,
+                   q0, w0, x0, q_initial, q_final, inertia, inertia_inv,
+                   kp, ki, kd, nf, af, u_max, angle_mode,
+                   e_scale, de_scale, u_scale, fz_rules, v_uniform,
+                   g_rules, g_vertices, g_scales,
+                   allocation, axes, phi_T, gamma, j_m, k_b, headroom, speed_max, v_max, torque_mode, k_i, r_a, b_m,
+                   tau_constant, tau_step, step_ns,
+                   o_q, o_w, o_qr, o_h, o_u, o_tc, o_te, o_ws):
+    for c in range(bounds.shape[0] - 1):
+        _chunk(law, bounds[c], bounds[c + 1], n_steps, stride, dt, dt_ns, substeps, step_time,
+               q0, w0, x0, q_initial, q_final, inertia, inertia_inv,
+               kp, ki, kd, nf, af, u_max, angle_mode,
+               e_scale, de_scale, u_scale, fz_rules, v_uniform,
+               g_rules, g_vertices, g_scales,
+               allocation, axes, phi_T, gamma, j_m, k_b, headroom, speed_max, v_max, torque_mode, k_i, r_a, b_m,
+               tau_constant, tau_step, step_ns,
+               o_q, o_w, o_qr, o_h, o_u, o_tc, o_te, o_ws)
 
 
 @njit(cache=True, parallel=True)
@@ -181,8 +206,9 @@ def run_compiled(plant, wheels, dist, guide, ctrl, n_steps: int, dt: float, stri
     tau_constant = _c(v["constant.torque"]) if "constant" in models else np.zeros(3)
     tau_step = _c(v["step.torque"]) if "step" in models else np.zeros(3)
     step_ns = int(round(v["step.time"] * 1e9)) if "step" in models else np.iinfo(np.int64).max
-    out = [np.empty((P, kept, 4)), np.empty((P, kept, 3)), np.empty((P, kept, 4))] + \
-        [np.empty((P, kept, 3)) for _ in range(4)] + [np.empty((P, kept, nw))]
+    # time-major (step, episode, .): a step's rows of a chunk are contiguous; returned as (P, K+1, .) views
+    out = [np.empty((kept, P, 4)), np.empty((kept, P, 3)), np.empty((kept, P, 4))] + \
+        [np.empty((kept, P, 3)) for _ in range(4)] + [np.empty((kept, P, nw))]
     previous = numba.get_num_threads()
     n_threads = previous if threads is None else max(1, min(int(threads), numba.config.NUMBA_NUM_THREADS))
     size = max(1, min(int(chunk), -(-P // n_threads)))  # every thread gets work, chunks stay cache-sized
@@ -191,7 +217,8 @@ def run_compiled(plant, wheels, dist, guide, ctrl, n_steps: int, dt: float, stri
     if threads is not None:
         numba.set_num_threads(n_threads)
     try:
-        _chunks(bounds, law, int(n_steps), int(stride), float(dt), dt_ns, int(plant.substeps), float(guide.step_time),
+        run = _chunks if n_threads > 1 and bounds.shape[0] > 2 else _chunks_serial  # no thread launch for one chunk
+        run(bounds, law, int(n_steps), int(stride), float(dt), dt_ns, int(plant.substeps), float(guide.step_time),
                 _c(plant.q0), _c(plant.omega0), np.ascontiguousarray(wheels.x), _c(guide.q_initial),
                 _c(guide.q_final), _c(plant.inertia), _c(plant.inertia_inv),
                 kp, ki, kd, nf, af, float(ga.u_max if law == 2 else pid.u_max), bool(pid.angle_mode),
@@ -205,6 +232,6 @@ def run_compiled(plant, wheels, dist, guide, ctrl, n_steps: int, dt: float, stri
                 mot.viscous_friction, tau_constant, tau_step, step_ns, *out)
     finally:
         numba.set_num_threads(previous)
-    q, w, qr, h, u, tc, te, ws = out
+    q, w, qr, h, u, tc, te, ws = (a.transpose(1, 0, 2) for a in out)
     return Trajectory(t=np.arange(0, n_steps + 1, stride) * dt, q_BN=q, omega_BN_B=w, q_RN=qr, h_wheels_B=h,
                       u_cmd=u, tau_c_B=tc, tau_ext_B=te, wheel_speed=ws, kind=[ctrl.kind] * kept)

@@ -70,15 +70,21 @@ def rk4_body(q, w, h, inertia, inertia_inv, tau_c, tau_e, dt, substeps):
 @njit(cache=True)
 def rk4_body_into(q, w, h, inertia, inertia_inv, tau_c, tau_e, dt, substeps, qo, wo, ho):
     """:func:`rk4_body` into given arrays; ``qo``, ``wo``, ``ho`` may be ``q``, ``w``, ``h`` (in place)."""
+    rk4_body_scratch(q, w, h, inertia, inertia_inv, tau_c, tau_e, dt, substeps, qo, wo, ho, np.empty((18, 4)))
+
+
+@njit(cache=True)
+def rk4_body_scratch(q, w, h, inertia, inertia_inv, tau_c, tau_e, dt, substeps, qo, wo, ho, scratch):
+    """:func:`rk4_body_into` with its stage vectors in ``scratch`` (18, 4): no allocation, for step loops."""
     n = q.shape[0]
     step = dt / substeps
     half = 0.5 * step
     sixth = step / 6.0
-    k1q, k2q, k3q, k4q = np.empty(4), np.empty(4), np.empty(4), np.empty(4)
-    k1w, k2w, k3w, k4w = np.empty(3), np.empty(3), np.empty(3), np.empty(3)
-    k1h, k2h, k3h, k4h = np.empty(3), np.empty(3), np.empty(3), np.empty(3)
-    tq, tw, th = np.empty(4), np.empty(3), np.empty(3)
-    cq, cw, ch = np.empty(4), np.empty(3), np.empty(3)
+    k1q, k2q, k3q, k4q = scratch[0], scratch[1], scratch[2], scratch[3]
+    k1w, k2w, k3w, k4w = scratch[4, :3], scratch[5, :3], scratch[6, :3], scratch[7, :3]
+    k1h, k2h, k3h, k4h = scratch[8, :3], scratch[9, :3], scratch[10, :3], scratch[11, :3]
+    tq, tw, th = scratch[12], scratch[13, :3], scratch[14, :3]
+    cq, cw, ch = scratch[15], scratch[16, :3], scratch[17, :3]
     for p in range(n):
         cq[:] = q[p]
         cw[:] = w[p]
