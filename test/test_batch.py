@@ -15,7 +15,8 @@ from attitude_sil.core.scenario import load_scenario
 from attitude_sil.errors import ScenarioError
 from conftest import CONFIG
 
-FIELDS = ("q_BN", "omega_BN_B", "q_RN", "h_wheels_B", "u_cmd", "tau_c_B", "tau_ext_B", "wheel_speed")
+FIELDS = ("q_BN", "omega_BN_B", "q_RN", "h_wheels_B", "u_cmd", "tau_c_B", "tau_ext_B", "wheel_speed", "wheel_angle",
+          "wheel_effort", "omega_RN_R")
 P = 4
 
 

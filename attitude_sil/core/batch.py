@@ -47,7 +47,7 @@ def _chunk(law, lo, hi, n_steps, stride, dt, dt_ns, substeps, step_time,
            g_rules, g_vertices, g_scales,
            allocation, axes, phi_T, gamma, j_m, k_b, headroom, speed_max, v_max, torque_mode, k_i, r_a, b_m,
            tau_constant, tau_step, step_ns,
-           o_q, o_w, o_qr, o_h, o_u, o_tc, o_te, o_ws):
+           o_q, o_w, o_qr, o_h, o_u, o_tc, o_te, o_ws, o_wa, o_we):
     """Episodes ``lo..hi-1`` from step 0 to K, the stepwise driver's order of calls, kept every ``stride``."""
     q = q0[lo:hi].copy()
     w = w0[lo:hi].copy()
@@ -111,7 +111,9 @@ def _chunk(law, lo, hi, n_steps, stride, dt, dt_ns, substeps, step_time,
                     o_tc[r, e, i] = tau_c[p, i]
                     o_te[r, e, i] = tau_e[p, i]
                 for j in range(nw):
+                    o_wa[r, e, j] = x[p, j, 0]
                     o_ws[r, e, j] = x[p, j, 2]
+                    o_we[r, e, j] = k_i * x[p, j, 1]
         if k < n_steps:
             rk4_body_scratch(q, w, h0, ii, iv, tau_c, tau_e, dt, substeps, q, w, h_out, scratch)
         x, x_next = x_next, x
@@ -125,7 +127,7 @@ def _chunks_serial(bounds, law, n_steps, stride, dt, dt_ns, substeps, step_time,
                    g_rules, g_vertices, g_scales,
                    allocation, axes, phi_T, gamma, j_m, k_b, headroom, speed_max, v_max, torque_mode, k_i, r_a, b_m,
                    tau_constant, tau_step, step_ns,
-                   o_q, o_w, o_qr, o_h, o_u, o_tc, o_te, o_ws):
+                   o_q, o_w, o_qr, o_h, o_u, o_tc, o_te, o_ws, o_wa, o_we):
     for c in range(bounds.shape[0] - 1):
         _chunk(law, bounds[c], bounds[c + 1], n_steps, stride, dt, dt_ns, substeps, step_time,
                q0, w0, x0, q_initial, q_final, inertia, inertia_inv,
@@ -134,7 +136,7 @@ def _chunks_serial(bounds, law, n_steps, stride, dt, dt_ns, substeps, step_time,
                g_rules, g_vertices, g_scales,
                allocation, axes, phi_T, gamma, j_m, k_b, headroom, speed_max, v_max, torque_mode, k_i, r_a, b_m,
                tau_constant, tau_step, step_ns,
-               o_q, o_w, o_qr, o_h, o_u, o_tc, o_te, o_ws)
+               o_q, o_w, o_qr, o_h, o_u, o_tc, o_te, o_ws, o_wa, o_we)
 
 
 @njit(cache=True, parallel=True)
@@ -145,7 +147,7 @@ def _chunks(bounds, law, n_steps, stride, dt, dt_ns, substeps, step_time,
             g_rules, g_vertices, g_scales,
             allocation, axes, phi_T, gamma, j_m, k_b, headroom, speed_max, v_max, torque_mode, k_i, r_a, b_m,
             tau_constant, tau_step, step_ns,
-            o_q, o_w, o_qr, o_h, o_u, o_tc, o_te, o_ws):
+            o_q, o_w, o_qr, o_h, o_u, o_tc, o_te, o_ws, o_wa, o_we):
     for c in prange(bounds.shape[0] - 1):
         _chunk(law, bounds[c], bounds[c + 1], n_steps, stride, dt, dt_ns, substeps, step_time,
                q0, w0, x0, q_initial, q_final, inertia, inertia_inv,
@@ -154,7 +156,7 @@ def _chunks(bounds, law, n_steps, stride, dt, dt_ns, substeps, step_time,
                g_rules, g_vertices, g_scales,
                allocation, axes, phi_T, gamma, j_m, k_b, headroom, speed_max, v_max, torque_mode, k_i, r_a, b_m,
                tau_constant, tau_step, step_ns,
-               o_q, o_w, o_qr, o_h, o_u, o_tc, o_te, o_ws)
+               o_q, o_w, o_qr, o_h, o_u, o_tc, o_te, o_ws, o_wa, o_we)
 
 
 def _c(a, shape=None) -> np.ndarray:
@@ -208,7 +210,7 @@ def run_compiled(plant, wheels, dist, guide, ctrl, n_steps: int, dt: float, stri
     step_ns = int(round(v["step.time"] * 1e9)) if "step" in models else np.iinfo(np.int64).max
     # time-major (step, episode, .): a step's rows of a chunk are contiguous; returned as (P, K+1, .) views
     out = [np.empty((kept, P, 4)), np.empty((kept, P, 3)), np.empty((kept, P, 4))] + \
-        [np.empty((kept, P, 3)) for _ in range(4)] + [np.empty((kept, P, nw))]
+        [np.empty((kept, P, 3)) for _ in range(4)] + [np.empty((kept, P, nw)) for _ in range(3)]
     previous = numba.get_num_threads()
     n_threads = previous if threads is None else max(1, min(int(threads), numba.config.NUMBA_NUM_THREADS))
     size = max(1, min(int(chunk), -(-P // n_threads)))  # every thread gets work, chunks stay cache-sized
@@ -232,6 +234,7 @@ def run_compiled(plant, wheels, dist, guide, ctrl, n_steps: int, dt: float, stri
                 mot.viscous_friction, tau_constant, tau_step, step_ns, *out)
     finally:
         numba.set_num_threads(previous)
-    q, w, qr, h, u, tc, te, ws = (a.transpose(1, 0, 2) for a in out)
+    q, w, qr, h, u, tc, te, ws, wa, we = (a.transpose(1, 0, 2) for a in out)
     return Trajectory(t=np.arange(0, n_steps + 1, stride) * dt, q_BN=q, omega_BN_B=w, q_RN=qr, h_wheels_B=h,
-                      u_cmd=u, tau_c_B=tc, tau_ext_B=te, wheel_speed=ws, kind=[ctrl.kind] * kept)
+                      u_cmd=u, tau_c_B=tc, tau_ext_B=te, wheel_speed=ws, kind=[ctrl.kind] * kept,
+                      wheel_angle=wa, wheel_effort=we, omega_RN_R=np.zeros((P, kept, 3)))

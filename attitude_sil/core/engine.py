@@ -372,12 +372,7 @@ def simulate(
         if driver == "compiled":
             raise ScenarioError(f"the compiled driver does not run this scenario ({why}); use driver='auto'")
     tr = _simulate_stepwise(plant, wheels, dist, guide, ctrl, swaps, K, dt)
-    if stride == 1:
-        return tr
-    keep = slice(None, None, int(stride))
-    return Trajectory(t=tr.t[keep], q_BN=tr.q_BN[:, keep], omega_BN_B=tr.omega_BN_B[:, keep], q_RN=tr.q_RN[:, keep],
-                      h_wheels_B=tr.h_wheels_B[:, keep], u_cmd=tr.u_cmd[:, keep], tau_c_B=tr.tau_c_B[:, keep],
-                      tau_ext_B=tr.tau_ext_B[:, keep], wheel_speed=tr.wheel_speed[:, keep], kind=tr.kind[keep])
+    return tr if stride == 1 else tr.every(int(stride))
 
 
 def _simulate_stepwise(plant, wheels, dist, guide, ctrl, swaps: dict, K: int, dt: float) -> Trajectory:
@@ -395,6 +390,9 @@ def _simulate_stepwise(plant, wheels, dist, guide, ctrl, swaps: dict, K: int, dt
         tau_ext_B=np.empty((P, K + 1, 3)),
         wheel_speed=np.empty((P, K + 1, nw)),
         kind=[],
+        wheel_angle=np.empty((P, K + 1, nw)),
+        wheel_effort=np.empty((P, K + 1, nw)),
+        omega_RN_R=np.empty((P, K + 1, 3)),
     )
     dt_ns = int(round(dt * 1e9))
     for k in range(K + 1):
@@ -415,6 +413,9 @@ def _simulate_stepwise(plant, wheels, dist, guide, ctrl, swaps: dict, K: int, dt
         tr.tau_c_B[:, k] = ws.tau_c_B
         tr.tau_ext_B[:, k] = tau_ext
         tr.wheel_speed[:, k] = ws.velocity
+        tr.wheel_angle[:, k] = ws.position
+        tr.wheel_effort[:, k] = ws.effort
+        tr.omega_RN_R[:, k] = w_RN
         if k < K:
             plant.advance(ws.tau_c_B, ws.h_wheels_B, tau_ext)
     return tr

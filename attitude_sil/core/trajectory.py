@@ -43,6 +43,9 @@ class Trajectory:
     tau_c_B : (P, K+1, 3) mean wheel torque on the body over [t_k, t_k+1], N m
     tau_ext_B : (P, K+1, 3) disturbance torque, N m
     wheel_speed : (P, K+1, n) rad/s
+    wheel_angle : (P, K+1, n) rad, or None
+    wheel_effort : (P, K+1, n) motor torque, N m, or None
+    omega_RN_R : (P, K+1, 3) rate setpoint, rad/s, or None
 
     The batch engine (:func:`attitude_sil.core.engine.simulate`) and a graph
     run (:func:`attitude_sil.graph.trajectory.trajectory_from_messages`, P = 1)
@@ -59,3 +62,19 @@ class Trajectory:
     tau_ext_B: np.ndarray
     wheel_speed: np.ndarray
     kind: list
+    wheel_angle: np.ndarray | None = None
+    wheel_effort: np.ndarray | None = None
+    omega_RN_R: np.ndarray | None = None
+
+    def every(self, stride: int) -> Trajectory:
+        """Every ``stride``-th step (k = 0, stride, 2 stride, ...), as views."""
+        keep = slice(None, None, int(stride))
+
+        def cut(a):
+            return None if a is None else a[:, keep]
+
+        return Trajectory(t=self.t[keep], q_BN=cut(self.q_BN), omega_BN_B=cut(self.omega_BN_B), q_RN=cut(self.q_RN),
+                          h_wheels_B=cut(self.h_wheels_B), u_cmd=cut(self.u_cmd), tau_c_B=cut(self.tau_c_B),
+                          tau_ext_B=cut(self.tau_ext_B), wheel_speed=cut(self.wheel_speed), kind=self.kind[keep],
+                          wheel_angle=cut(self.wheel_angle), wheel_effort=cut(self.wheel_effort),
+                          omega_RN_R=cut(self.omega_RN_R))

@@ -50,7 +50,7 @@ from attitude_sil.ros.environment import localhost_environment
 from attitude_sil.ros.services import call_reset, set_remote_parameters
 from attitude_sil.storage.writer import PARAMETERS_KEY, BagWriter
 
-__all__ = ["RunError", "RunResult", "GraphSession", "run_graph"]
+__all__ = ["RunError", "RunResult", "GraphSession", "run_graph", "extra_parameters"]
 
 
 class _Interrupt:
@@ -112,7 +112,8 @@ def _schedule(scn: Scenario, duration: float) -> list[tuple[float, int, str]]:
     return [(k * scn.dt, k, kind) for k, kind in schedule_from_scenario(scn) if k <= k_end]
 
 
-def _extra_params(scn: Scenario, duration: float | None, controller: str | None, real_time: bool) -> dict:
+def extra_parameters(scn: Scenario, duration: float | None, controller: str | None, real_time: bool) -> dict:
+    """What a graph episode sets on top of the scenario: no autostart, the first hold, duration, law, pacing."""
     extra: dict[str, Any] = {"autostart": False}
     sched = _schedule(scn, scn.duration if duration is None else duration)
     if sched:
@@ -170,7 +171,7 @@ class GraphSession:
         if controller is not None:
             spec_for("controller", "controller_type").validate(controller, "controller")
         self.scn = scn
-        self.extra = _extra_params(scn, duration, controller, real_time)
+        self.extra = extra_parameters(scn, duration, controller, real_time)
         self.duration = scn.duration if duration is None else float(duration)
         if self.duration <= 0.0:
             raise RunError("the runner needs a finite episode: give plant.duration or --duration > 0")

@@ -17,6 +17,7 @@ from attitude_sil.ros.contract import (
     BODY_RATE,
     COMMAND_TOPIC,
     DISTURBANCE_TORQUE,
+    RATE_SETPOINT,
     STEP_TOPICS,
     WHEEL_MOMENTUM,
     WHEEL_STATE,
@@ -28,23 +29,25 @@ from attitude_sil.ros.convert import decode_step_messages
 __all__ = ["KEPT_TOPICS", "trajectory_from_messages"]
 
 #: the topics an episode keeps in memory to build its trajectory
-KEPT_TOPICS = (ATTITUDE, BODY_RATE, ATTITUDE_SETPOINT, WHEEL_TORQUE, WHEEL_MOMENTUM, DISTURBANCE_TORQUE,
-               WHEEL_STATE, *COMMAND_TOPIC.values())
+KEPT_TOPICS = (ATTITUDE, BODY_RATE, ATTITUDE_SETPOINT, RATE_SETPOINT, WHEEL_TORQUE, WHEEL_MOMENTUM,
+               DISTURBANCE_TORQUE, WHEEL_STATE, *COMMAND_TOPIC.values())
 
 #: Trajectory field <- topic
 _FIELDS = {"q_BN": ATTITUDE, "omega_BN_B": BODY_RATE, "q_RN": ATTITUDE_SETPOINT, "tau_c_B": WHEEL_TORQUE,
-           "h_wheels_B": WHEEL_MOMENTUM, "tau_ext_B": DISTURBANCE_TORQUE}
+           "h_wheels_B": WHEEL_MOMENTUM, "tau_ext_B": DISTURBANCE_TORQUE, "omega_RN_R": RATE_SETPOINT}
 
 
-def _wheel_speeds(items: list[tuple[int, bytes]]) -> tuple[np.ndarray, np.ndarray]:
+def _wheel_states(items: list[tuple[int, bytes]]) -> tuple[np.ndarray, list[np.ndarray]]:
+    """Stamps (n,) and [angle, speed, effort], each (n, wheels), of the ``wheel_state`` messages."""
     by_t = dict(items)
     cls = message_class(STEP_TOPICS[WHEEL_STATE])
     times = sorted(by_t)
-    rows = [list(deserialize_message(by_t[t], cls).velocity) for t in times]
-    speeds = np.array(rows, dtype=float)
-    if speeds.ndim != 2:  # no messages, or wheels without names (a torque actuator)
-        speeds = np.zeros((len(rows), 0))
-    return np.array(times, dtype=np.int64), speeds
+    msgs = [deserialize_message(by_t[t], cls) for t in times]
+    out = []
+    for field in ("position", "velocity", "effort"):
+        a = np.array([list(getattr(m, field)) for m in msgs], dtype=float)
+        out.append(a if a.ndim == 2 else np.zeros((len(msgs), 0)))  # wheels without names: a torque actuator
+    return np.array(times, dtype=np.int64), out
 
 
 def trajectory_from_messages(kept: dict[str, list[tuple[int, bytes]]]) -> Trajectory:
@@ -71,8 +74,8 @@ def trajectory_from_messages(kept: dict[str, list[tuple[int, bytes]]]) -> Trajec
     for kind, topic in COMMAND_TOPIC.items():
         times, values = decode_step_messages(topic, kept.get(topic, []))
         commands.update({int(t): (kind, v) for t, v in zip(times, values, strict=True)})
-    speeds = _wheel_speeds(kept.get(WHEEL_STATE, []))
-    n = min([len(t) for t, _ in arrays.values()] + [len(commands), len(speeds[0])])
+    wheel_t, (angle, speed, effort) = _wheel_states(kept.get(WHEEL_STATE, []))
+    n = min([len(t) for t, _ in arrays.values()] + [len(commands), len(wheel_t)])
     times = arrays["q_BN"][0][:n]
     cmd_times = sorted(commands)[:n]
     return Trajectory(
@@ -84,6 +87,9 @@ def trajectory_from_messages(kept: dict[str, list[tuple[int, bytes]]]) -> Trajec
         u_cmd=np.array([commands[t][1] for t in cmd_times]).reshape(1, n, 3),
         tau_c_B=arrays["tau_c_B"][1][None, :n],
         tau_ext_B=arrays["tau_ext_B"][1][None, :n],
-        wheel_speed=speeds[1][None, :n],
+        wheel_speed=speed[None, :n],
         kind=[commands[t][0] for t in cmd_times],
+        wheel_angle=angle[None, :n],
+        wheel_effort=effort[None, :n],
+        omega_RN_R=arrays["omega_RN_R"][1][None, :n],
     )

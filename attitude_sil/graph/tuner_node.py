@@ -7,8 +7,10 @@ console script and ``attitude-sil tune``:
 
 * ``evaluation.mode: batch`` (default) scores whole populations in the batch
   engine (:mod:`attitude_sil.tuning`); the best candidate of every generation
-  whose genome changed, and the final best, are re-run through the graph and
-  recorded (``<output>/bags/``);
+  whose genome changed is written straight from the engine's trajectory as the
+  bag the graph would record (:mod:`attitude_sil.graph.engine_bag`; the
+  flexible plant's are re-run through the graph), and the final best is re-run
+  through the graph and recorded, a true SIL record (``<output>/bags/``);
 * ``evaluation.mode: graph`` runs every candidate through the live graph
   (:mod:`attitude_sil.graph.evaluator`); every episode is recorded.
 
@@ -31,12 +33,15 @@ from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 
+from attitude_sil.core.engine import simulate
 from attitude_sil.errors import AttitudeSilError, SpecError
+from attitude_sil.graph.engine_bag import record_episode
 from attitude_sil.graph.evaluator import GraphEpisodes, GraphEvaluator, best_parameters
 from attitude_sil.ros.environment import localhost_environment
+from attitude_sil.tuning.evaluate import scenario_for
 from attitude_sil.tuning.optimize import run_tuning
 from attitude_sil.tuning.results import TuningResult
-from attitude_sil.tuning.spec import TuningSpec, apply_overrides, load_spec
+from attitude_sil.tuning.spec import TuningSpec, apply_overrides, decode, load_spec
 
 __all__ = ["TunerNode", "TuneOutcome", "tune", "main"]
 
@@ -71,6 +76,20 @@ class TuneOutcome:
     wall_time_s: float
 
 
+def _record_from_engine(spec: TuningSpec, x: np.ndarray, path: Path) -> bool:
+    """Write a generation's best straight from the batch engine (graph/engine_bag.py); False where it cannot."""
+    if len(spec.scenarios) != 1 or len(spec.conditions) != 1:
+        raise SpecError(f"{spec.path}: recording takes one scenario and one condition")
+    scn = scenario_for(spec, spec.scenarios[0], spec.conditions[0])
+    if scn.param("plant", "model") == "flexible_axis":
+        return False  # the flexible mode is not in the trajectory: the graph records it
+    params, _ = decode(spec, x[None])
+    params.pop("final_time", None)
+    tr = simulate(scn, 1, controller_params=params, controller=spec.controller, schedule=[])
+    record_episode(scn, tr, path, controller_params=best_parameters(spec, x), controller=spec.controller)
+    return True
+
+
 def tune(spec_path: str | Path, *, resume: bool = False, overrides: dict | None = None, record: bool = True,
          on_progress: Callable[[dict], None] | None = None,
          should_stop: Callable[[], bool] | None = None) -> TuneOutcome:
@@ -95,9 +114,11 @@ def tune(spec_path: str | Path, *, resume: bool = False, overrides: dict | None 
             return
         if last_recorded[0] is not None and np.array_equal(last_recorded[0], x):
             return
-        if recorder is None:
-            recorder = GraphEpisodes(spec, None, bags)
-        recorder.run(best_parameters(spec, x), bags / f"best_g{gen:03d}")
+        path = bags / f"best_g{gen:03d}"
+        if not _record_from_engine(spec, x, path):
+            if recorder is None:
+                recorder = GraphEpisodes(spec, None, bags)
+            recorder.run(best_parameters(spec, x), path)
         last_recorded[0] = x.copy()
 
     evaluator = None

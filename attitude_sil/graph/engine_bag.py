@@ -1,0 +1,138 @@
+"""Write a batch-engine episode as the bag the node graph would have recorded.
+
+A tuning run keeps the best design of every generation. Re-running each one
+through the node graph to record it cost minutes; the engine computes the same
+episode (graph == batch to 1e-9, tested), so :func:`record_episode` writes its
+:class:`~attitude_sil.core.trajectory.Trajectory` straight to a rosbag2 MCAP bag
+with the graph's topics, types, frames, stamps (sim time t_k = k dt), QoS
+profiles, the controller's parameter change as a ``/parameter_events`` entry,
+and the same parameter snapshot in ``metadata.yaml``. test_engine_bag.py checks
+it against a graph-recorded bag of the same design, message for message. The
+final best of a tuning run is still recorded through the graph: a true SIL
+record.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from rcl_interfaces.msg import ParameterEvent
+from rclpy.parameter import Parameter
+from rclpy.serialization import serialize_message
+from rosgraph_msgs.msg import Clock
+
+from attitude_sil.core.quaternion import euler_from_quat, quat_conjugate, quat_error
+from attitude_sil.core.scenario import Scenario
+from attitude_sil.core.trajectory import Trajectory
+from attitude_sil.errors import RunError
+from attitude_sil.graph.session import extra_parameters
+from attitude_sil.ros.contract import (
+    ATTITUDE,
+    ATTITUDE_ERROR,
+    ATTITUDE_SETPOINT,
+    BODY_RATE,
+    CLOCK,
+    COMMAND_TOPIC,
+    DISTURBANCE_TORQUE,
+    PARAMETER_EVENTS,
+    RATE_SETPOINT,
+    RECORDED_TOPICS,
+    WHEEL_MOMENTUM,
+    WHEEL_STATE,
+    WHEEL_TORQUE,
+)
+from attitude_sil.ros.convert import joint_state_msg, ns_to_stamp, quaternion_msg, vector_msg
+from attitude_sil.ros.qos import offered_qos_yaml
+from attitude_sil.storage.writer import PARAMETERS_KEY, BagWriter
+
+__all__ = ["record_episode"]
+
+
+def _absolute(topic: str) -> str:
+    return topic if topic.startswith("/") else "/" + topic
+
+
+def record_episode(scn: Scenario, tr: Trajectory, run_dir: str | Path, *, episode: int = 0,
+                   controller_params: dict[str, Any] | None = None, controller: str | None = None,
+                   duration: float | None = None) -> Path:
+    """Write episode ``episode`` of an engine trajectory as a graph-recorded bag.
+
+    Parameters
+    ----------
+    scn : Scenario
+        The scenario the trajectory ran (its parameters go into the snapshot).
+    tr : Trajectory
+        Every step kept (stride 1) and the wheel angle and effort recorded
+        (both drivers of :func:`attitude_sil.core.engine.simulate` do).
+    run_dir : path
+        The bag directory to create.
+    episode : int
+        Which episode of the batch.
+    controller_params : dict, optional
+        The design's controller parameters (ROS values), as a graph episode
+        would have set them through the parameter service.
+    controller : str, optional
+        ``controller_type`` the run started with.
+    duration : float, optional
+        The episode length the graph run was given (None: the scenario's), s.
+
+    Returns
+    -------
+    Path
+        The bag directory.
+
+    Raises
+    ------
+    RunError
+        A trajectory the graph would not have produced this way (a flexible
+        plant's mode, thinned steps), or a bag that cannot be created.
+    """
+    if scn.param("plant", "model") == "flexible_axis":
+        raise RunError("record_episode: the flexible plant's mode is not in the trajectory; record through the graph")
+    if tr.wheel_angle is None or tr.wheel_effort is None or tr.omega_RN_R is None:
+        raise RunError("record_episode: the trajectory lacks wheel angles, efforts or rate setpoints")
+    dt_ns = int(round(scn.dt * 1e9))
+    stamps = np.round(tr.t * 1e9).astype(np.int64)
+    if not np.array_equal(stamps, np.arange(stamps.size) * dt_ns):
+        raise RunError("record_episode: the trajectory must keep every step (stride 1)")
+    params = dict(controller_params or {})
+    extra = extra_parameters(scn, duration, controller, False)
+    try:
+        writer = BagWriter(run_dir, custom_data={PARAMETERS_KEY: scn.parameters_yaml({**extra, **params})})
+    except (FileExistsError, ValueError, OSError) as exc:
+        raise RunError(str(exc)) from None
+    p = int(episode)
+    names = [f"wheel_{i + 1}" for i in range(tr.wheel_speed.shape[2])]
+    q, q_r = tr.q_BN[p], tr.q_RN[p]
+    err = euler_from_quat(quat_conjugate(quat_error(q, q_r)))
+    try:
+        for topic, type_name in RECORDED_TOPICS.items():  # every topic, as the recorder registers them
+            writer.add_topic(_absolute(topic), type_name, offered_qos_yaml(topic))
+        if params:
+            event = ParameterEvent(stamp=ns_to_stamp(0), node="/controller",
+                                   changed_parameters=[Parameter(k, value=v).to_parameter_msg()
+                                                       for k, v in params.items()])
+            writer.write(PARAMETER_EVENTS, serialize_message(event), 0)
+        for k, t in enumerate(stamps.tolist()):
+            cmd_topic = COMMAND_TOPIC[tr.kind[k]]
+            messages = (
+                (CLOCK, Clock(clock=ns_to_stamp(t))),
+                (ATTITUDE, quaternion_msg(q[k], t, "inertial")),
+                (BODY_RATE, vector_msg(tr.omega_BN_B[p, k], t, "body")),
+                (ATTITUDE_SETPOINT, quaternion_msg(q_r[k], t, "inertial")),
+                (RATE_SETPOINT, vector_msg(tr.omega_RN_R[p, k], t, "reference")),
+                (DISTURBANCE_TORQUE, vector_msg(tr.tau_ext_B[p, k], t, "body")),
+                (cmd_topic, vector_msg(tr.u_cmd[p, k], t, "body")),
+                (ATTITUDE_ERROR, vector_msg(err[k], t, "body")),
+                (WHEEL_TORQUE, vector_msg(tr.tau_c_B[p, k], t, "body")),
+                (WHEEL_MOMENTUM, vector_msg(tr.h_wheels_B[p, k], t, "body")),
+                (WHEEL_STATE, joint_state_msg(names, tr.wheel_angle[p, k], tr.wheel_speed[p, k],
+                                              tr.wheel_effort[p, k], t)),
+            )
+            for topic, msg in messages:
+                writer.write(_absolute(topic), serialize_message(msg), t)
+    finally:
+        writer.close()
+    return writer.run_dir
