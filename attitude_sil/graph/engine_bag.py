@@ -21,7 +21,6 @@ import numpy as np
 from rcl_interfaces.msg import ParameterEvent
 from rclpy.parameter import Parameter
 from rclpy.serialization import serialize_message
-from rosgraph_msgs.msg import Clock
 
 from attitude_sil.core.quaternion import euler_from_quat, quat_conjugate, quat_error
 from attitude_sil.core.scenario import Scenario
@@ -43,8 +42,9 @@ from attitude_sil.ros.contract import (
     WHEEL_STATE,
     WHEEL_TORQUE,
 )
-from attitude_sil.ros.convert import joint_state_msg, ns_to_stamp, quaternion_msg, vector_msg
+from attitude_sil.ros.convert import ns_to_stamp
 from attitude_sil.ros.qos import offered_qos_yaml
+from attitude_sil.storage.cdr import encode_clocks, encode_joint_states, encode_stamped_vectors
 from attitude_sil.storage.writer import PARAMETERS_KEY, BagWriter
 
 __all__ = ["record_episode"]
@@ -115,24 +115,26 @@ def record_episode(scn: Scenario, tr: Trajectory, run_dir: str | Path, *, episod
                                    changed_parameters=[Parameter(k, value=v).to_parameter_msg()
                                                        for k, v in params.items()])
             writer.write(PARAMETER_EVENTS, serialize_message(event), 0)
-        for k, t in enumerate(stamps.tolist()):
-            cmd_topic = COMMAND_TOPIC[tr.kind[k]]
-            messages = (
-                (CLOCK, Clock(clock=ns_to_stamp(t))),
-                (ATTITUDE, quaternion_msg(q[k], t, "inertial")),
-                (BODY_RATE, vector_msg(tr.omega_BN_B[p, k], t, "body")),
-                (ATTITUDE_SETPOINT, quaternion_msg(q_r[k], t, "inertial")),
-                (RATE_SETPOINT, vector_msg(tr.omega_RN_R[p, k], t, "reference")),
-                (DISTURBANCE_TORQUE, vector_msg(tr.tau_ext_B[p, k], t, "body")),
-                (cmd_topic, vector_msg(tr.u_cmd[p, k], t, "body")),
-                (ATTITUDE_ERROR, vector_msg(err[k], t, "body")),
-                (WHEEL_TORQUE, vector_msg(tr.tau_c_B[p, k], t, "body")),
-                (WHEEL_MOMENTUM, vector_msg(tr.h_wheels_B[p, k], t, "body")),
-                (WHEEL_STATE, joint_state_msg(names, tr.wheel_angle[p, k], tr.wheel_speed[p, k],
-                                              tr.wheel_effort[p, k], t)),
-            )
-            for topic, msg in messages:
-                writer.write(_absolute(topic), serialize_message(msg), t)
+        # each topic's whole series encoded at once (storage/cdr.py, equal to rclpy's messages, tested)
+        series = {
+            CLOCK: encode_clocks(stamps),
+            ATTITUDE: encode_stamped_vectors(stamps, "inertial", q),
+            BODY_RATE: encode_stamped_vectors(stamps, "body", tr.omega_BN_B[p]),
+            ATTITUDE_SETPOINT: encode_stamped_vectors(stamps, "inertial", q_r),
+            RATE_SETPOINT: encode_stamped_vectors(stamps, "reference", tr.omega_RN_R[p]),
+            DISTURBANCE_TORQUE: encode_stamped_vectors(stamps, "body", tr.tau_ext_B[p]),
+            "command": encode_stamped_vectors(stamps, "body", tr.u_cmd[p]),
+            ATTITUDE_ERROR: encode_stamped_vectors(stamps, "body", err),
+            WHEEL_TORQUE: encode_stamped_vectors(stamps, "body", tr.tau_c_B[p]),
+            WHEEL_MOMENTUM: encode_stamped_vectors(stamps, "body", tr.h_wheels_B[p]),
+            WHEEL_STATE: encode_joint_states(stamps, "", names, tr.wheel_angle[p], tr.wheel_speed[p],
+                                             tr.wheel_effort[p]),
+        }
+        topics = {name: _absolute(name) for name in series if name != "command"}
+        commands = [_absolute(COMMAND_TOPIC[kind]) for kind in tr.kind]
+        for k, t in enumerate(stamps.tolist()):  # step by step, in the order the graph publishes
+            for name, data in series.items():
+                writer.write(commands[k] if name == "command" else topics[name], data[k], t)
     finally:
         writer.close()
     return writer.run_dir

@@ -1,10 +1,17 @@
-"""Reading the few bytes of a CDR message the storage needs without decoding it (no rclpy)."""
+"""CDR without rclpy: the stamp at the start of a message, and series of fixed-layout messages encoded at once.
+
+The recorder reads stamps with :func:`stamp_from_cdr`; bags written from the
+batch engine encode a whole episode's messages per topic with the
+``encode_*`` functions (byte-identical to ``rclpy.serialization``, tested).
+"""
 
 from __future__ import annotations
 
 import struct
 
-__all__ = ["stamp_from_cdr"]
+import numpy as np
+
+__all__ = ["stamp_from_cdr", "encode_stamped_vectors", "encode_clocks", "encode_joint_states"]
 
 _STAMP = struct.Struct("<iI")
 
@@ -19,3 +26,100 @@ def stamp_from_cdr(data: bytes) -> int | None:
         return None
     sec, nsec = _STAMP.unpack_from(data, 4) if data[1] == 1 else struct.unpack_from(">iI", data, 4)
     return sec * 1_000_000_000 + nsec
+
+
+# -- encoding whole series of fixed-layout messages (little-endian CDR, XCDR1) ------------------------
+# A series of messages that differ only in their stamp and float64 fields has one byte layout:
+# it is built once and the varying fields are written for all messages at once with numpy.
+
+_ENCAPSULATION = b"\x00\x01\x00\x00"  # CDR, little endian
+
+
+class _Layout:
+    """Byte layout of a message body: constant bytes plus the offsets of float64 runs."""
+
+    def __init__(self) -> None:
+        self.parts: list[bytes] = []
+        self.size = 0  # bytes after the encapsulation header
+        self.stamp_at: int | None = None
+        self.doubles: list[tuple[int, int]] = []  # (offset, count)
+
+    def _align(self, n: int) -> None:
+        pad = (-self.size) % n
+        if pad:
+            self._raw(b"\x00" * pad)
+
+    def _raw(self, data: bytes) -> None:
+        self.parts.append(data)
+        self.size += len(data)
+
+    def stamp(self) -> None:
+        self._align(4)
+        self.stamp_at = self.size
+        self._raw(b"\x00" * 8)
+
+    def string(self, text: str) -> None:
+        data = text.encode("utf-8") + b"\x00"
+        self._align(4)
+        self._raw(struct.pack("<I", len(data)) + data)
+
+    def strings(self, texts: list[str]) -> None:
+        self._align(4)
+        self._raw(struct.pack("<I", len(texts)))
+        for text in texts:
+            self.string(text)
+
+    def float64s(self, count: int, sequence: bool = False) -> None:
+        if sequence:
+            self._align(4)
+            self._raw(struct.pack("<I", count))
+        self._align(8)  # Fast CDR aligns an empty run too
+        if count:
+            self.doubles.append((self.size, count))
+            self._raw(b"\x00" * (8 * count))
+
+    def encode(self, stamps_ns: np.ndarray, columns: list[np.ndarray]) -> list[bytes]:
+        """Messages with these stamps (n,) ns and float64 runs, each (n, count)."""
+        n = len(stamps_ns)
+        buf = np.empty((n, 4 + self.size), dtype=np.uint8)
+        buf[:] = np.frombuffer(_ENCAPSULATION + b"".join(self.parts), dtype=np.uint8)
+        if self.stamp_at is not None:
+            t = np.asarray(stamps_ns, dtype=np.int64)
+            stamp = np.empty((n, 2), dtype="<u4")
+            stamp[:, 0] = (t // 1_000_000_000).astype("<i4").view("<u4")
+            stamp[:, 1] = t % 1_000_000_000
+            buf[:, 4 + self.stamp_at:12 + self.stamp_at] = stamp.view(np.uint8).reshape(n, 8)
+        for (offset, count), values in zip(self.doubles, columns, strict=True):
+            v = np.ascontiguousarray(np.asarray(values, dtype="<f8").reshape(n, count))
+            buf[:, 4 + offset:4 + offset + 8 * count] = v.view(np.uint8).reshape(n, 8 * count)
+        return [row.tobytes() for row in buf]
+
+
+def encode_stamped_vectors(stamps_ns: np.ndarray, frame_id: str, values: np.ndarray) -> list[bytes]:
+    """``geometry_msgs/Vector3Stamped`` (values (n, 3)) or ``QuaternionStamped`` ((n, 4), x y z w) as CDR."""
+    layout = _Layout()
+    layout.stamp()
+    layout.string(frame_id)
+    layout.float64s(np.asarray(values).shape[1])
+    return layout.encode(stamps_ns, [values])
+
+
+def encode_clocks(stamps_ns: np.ndarray) -> list[bytes]:
+    """``rosgraph_msgs/Clock`` messages as CDR."""
+    layout = _Layout()
+    layout.stamp()
+    return layout.encode(stamps_ns, [])
+
+
+def encode_joint_states(stamps_ns: np.ndarray, frame_id: str, names: list[str], position: np.ndarray,
+                        velocity: np.ndarray, effort: np.ndarray) -> list[bytes]:
+    """``sensor_msgs/JointState`` messages (each array (n, joints)) as CDR."""
+    layout = _Layout()
+    layout.stamp()
+    layout.string(frame_id)
+    layout.strings(list(names))
+    joints = len(names)
+    for _ in range(3):
+        layout.float64s(joints, sequence=True)
+    columns = [np.asarray(a, dtype=float).reshape(len(stamps_ns), joints) for a in (position, velocity, effort)]
+    return layout.encode(stamps_ns, [c for c in columns if joints])
