@@ -109,7 +109,7 @@ def record_episode(scn: Scenario, tr: Trajectory, run_dir: str | Path, *, episod
     err = euler_from_quat(quat_conjugate(quat_error(q, q_r)))
     try:
         for topic, type_name in RECORDED_TOPICS.items():  # every topic, as the recorder registers them
-            writer.add_topic(_absolute(topic), type_name, offered_qos_yaml(topic))
+            writer.add_topic(_absolute(topic), type_name, offered_qos_yaml(topic), wait=False)
         if params:
             event = ParameterEvent(stamp=ns_to_stamp(0), node="/controller",
                                    changed_parameters=[Parameter(k, value=v).to_parameter_msg()
@@ -132,9 +132,9 @@ def record_episode(scn: Scenario, tr: Trajectory, run_dir: str | Path, *, episod
         }
         topics = {name: _absolute(name) for name in series if name != "command"}
         commands = [_absolute(COMMAND_TOPIC[kind]) for kind in tr.kind]
-        for k, t in enumerate(stamps.tolist()):  # step by step, in the order the graph publishes
-            for name, data in series.items():
-                writer.write(commands[k] if name == "command" else topics[name], data[k], t)
+        writer.write_many([(commands[k] if name == "command" else topics[name], data[k], t)
+                           for k, t in enumerate(stamps.tolist())  # step by step, as the graph publishes
+                           for name, data in series.items()])
     finally:
         writer.close()
     return writer.run_dir

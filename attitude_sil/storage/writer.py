@@ -35,6 +35,7 @@ from __future__ import annotations
 
 import atexit
 import collections
+import functools
 import importlib.metadata
 import importlib.util
 import io
@@ -110,6 +111,7 @@ class BagClosedError(RuntimeError):
     """Raised when using a :class:`BagWriter` that is closed or closing."""
 
 
+@functools.lru_cache(maxsize=64)
 def qos_profiles_yaml(*, reliability: str = 'reliable', durability: str = 'volatile',
                       history: str = 'keep_last', depth: int = 10) -> str:
     """Return an ``offered_qos_profiles`` YAML string holding one profile.
@@ -157,10 +159,26 @@ def _default_qos_profile() -> dict[str, Any]:
 
 
 def _dump_qos(profiles: list[dict[str, Any]]) -> str:
-    return yaml.safe_dump(profiles, sort_keys=False, default_flow_style=False).rstrip('\n')
+    return _dump_qos_cached(tuple(tuple(p.items()) for p in profiles))
+
+
+@functools.lru_cache(maxsize=64)
+def _dump_qos_cached(profiles: tuple[tuple[tuple[str, Any], ...], ...]) -> str:
+    # a bag writes the same few profiles for every topic, and tuning writes many bags
+    return yaml.safe_dump([dict(p) for p in profiles], sort_keys=False, default_flow_style=False).rstrip('\n')
 
 
 def _parse_qos(text: str) -> list[dict[str, Any]]:
+    """:func:`_parse_qos_uncached`, remembered per text (fresh dicts each call)."""
+    return [dict(p) for p in _parse_qos_cached(text)]
+
+
+@functools.lru_cache(maxsize=64)
+def _parse_qos_cached(text: str) -> tuple[tuple[tuple[str, Any], ...], ...]:
+    return tuple(tuple(p.items()) for p in _parse_qos_uncached(text))
+
+
+def _parse_qos_uncached(text: str) -> list[dict[str, Any]]:
     """Parse and complete an ``offered_qos_profiles`` YAML string.
 
     Keys missing from a profile take the default profile's values; policies
@@ -448,7 +466,7 @@ class BagWriter:
         return sum(self.message_counts.values())
 
     # --------------------------------------------------------------------- writing
-    def add_topic(self, topic: str, type_name: str, qos_profiles_yaml: str = '') -> int:
+    def add_topic(self, topic: str, type_name: str, qos_profiles_yaml: str = '', wait: bool = True) -> int | None:
         """Register a topic (its schema and channel); idempotent.
 
         Parameters
@@ -462,11 +480,14 @@ class BagWriter:
             :func:`qos_profiles_yaml`); missing keys are filled in. Empty
             means :data:`DEFAULT_QOS_PROFILES_YAML`.  Ignored when the topic
             is already registered.
+        wait : bool
+            Wait until the writer thread has registered the channel (False:
+            return at once; messages written next still follow it).
 
         Returns
         -------
-        int
-            The MCAP channel id of the topic.
+        int or None
+            The MCAP channel id of the topic (None with ``wait=False``).
 
         Raises
         ------
@@ -498,6 +519,8 @@ class BagWriter:
                     f'{entry.type_name!r}, not {full_type!r}'
                 )
         assert entry.registration is not None
+        if not wait:
+            return None
         self._wait(entry.registration)
         return entry.channel_id
 
@@ -541,6 +564,38 @@ class BagWriter:
                 raise ValueError(f'topic {topic!r} was not registered with add_topic()')
             self._pending.append((entry, data, log_time, publish_time))
             entry.accepted += 1
+        while len(self._pending) > _MAX_PENDING and not self._finished:
+            time.sleep(0.001)
+
+    def write_many(self, messages: list[tuple[str, bytes, int]]) -> None:
+        """Queue many ``(topic, CDR bytes, log time ns)`` at once, in order (publish time = log time).
+
+        The checks of :meth:`write`, under one lock: what a bag written from a
+        computed episode (hundreds of thousands of messages) needs.
+
+        Raises
+        ------
+        ValueError, TypeError, BagClosedError, BagWriteError
+            As :meth:`write`; nothing of the batch is queued then.
+        """
+        items = []
+        for topic, data, log_time_ns in messages:
+            t = _timestamp(log_time_ns, 'log time')
+            if not isinstance(data, bytes):
+                raise TypeError(f'message data must be bytes, got {type(data).__name__}')
+            items.append((topic, data, t))
+        with self._accept_lock:
+            self._check_open()
+            topics = self._topics
+            queued = []
+            for topic, data, t in items:
+                entry = topics.get(topic)
+                if entry is None:
+                    raise ValueError(f'topic {topic!r} was not registered with add_topic()')
+                queued.append((entry, data, t, t))
+            for entry, *_ in queued:
+                entry.accepted += 1
+            self._pending.extend(queued)
         while len(self._pending) > _MAX_PENDING and not self._finished:
             time.sleep(0.001)
 
