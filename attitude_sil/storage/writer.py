@@ -35,10 +35,12 @@ from __future__ import annotations
 
 import atexit
 import collections
+import copy
 import functools
 import importlib.metadata
 import importlib.util
 import io
+import json
 import operator
 import os
 import sys
@@ -159,23 +161,23 @@ def _default_qos_profile() -> dict[str, Any]:
 
 
 def _dump_qos(profiles: list[dict[str, Any]]) -> str:
-    return _dump_qos_cached(tuple(tuple(p.items()) for p in profiles))
+    # a bag writes the same few profiles for every topic, and tuning writes many bags: dump each once
+    return _dump_qos_cached(json.dumps(profiles))
 
 
 @functools.lru_cache(maxsize=64)
-def _dump_qos_cached(profiles: tuple[tuple[tuple[str, Any], ...], ...]) -> str:
-    # a bag writes the same few profiles for every topic, and tuning writes many bags
-    return yaml.safe_dump([dict(p) for p in profiles], sort_keys=False, default_flow_style=False).rstrip('\n')
+def _dump_qos_cached(profiles_json: str) -> str:
+    return yaml.safe_dump(json.loads(profiles_json), sort_keys=False, default_flow_style=False).rstrip('\n')
 
 
 def _parse_qos(text: str) -> list[dict[str, Any]]:
-    """:func:`_parse_qos_uncached`, remembered per text (fresh dicts each call)."""
-    return [dict(p) for p in _parse_qos_cached(text)]
+    """:func:`_parse_qos_uncached`, remembered per text (a fresh copy each call)."""
+    return copy.deepcopy(_parse_qos_cached(text))
 
 
 @functools.lru_cache(maxsize=64)
-def _parse_qos_cached(text: str) -> tuple[tuple[tuple[str, Any], ...], ...]:
-    return tuple(tuple(p.items()) for p in _parse_qos_uncached(text))
+def _parse_qos_cached(text: str) -> list[dict[str, Any]]:
+    return _parse_qos_uncached(text)
 
 
 def _parse_qos_uncached(text: str) -> list[dict[str, Any]]:
