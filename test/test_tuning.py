@@ -188,3 +188,23 @@ def test_tuner_node_publishes_progress():
     values = {kv.key: kv.value for kv in got[0].values}
     assert got[0].name == "tuner" and got[0].message == "generation 3/40"
     assert values["best"] == "0.5" and values["median"] == "1.25" and values["failed"] == "2"
+
+
+def test_a_population_scores_the_same_whole_in_slices_and_over_workers(tmp_path, monkeypatch):
+    # noise makes every candidate's result depend on its seed: the seeds must follow the candidate,
+    # not its position in a slice or a worker's share
+    from attitude_sil.tuning import evaluate as ev
+
+    spec = small("tune_hst_pid_ga.yaml", tmp_path, 9, 1, duration=2.0)
+    spec.scenarios = [s.with_values("disturbance", models=["noise"], **{"noise.power": [5e-2, 5e-2, 5e-2]})
+                      for s in spec.scenarios]
+    x = np.random.default_rng(5).uniform([10, 0, 50, 1], [100, 1, 200, 10], (9, 4))
+    whole = evaluate(spec, x)
+    monkeypatch.setattr(ev, "EPISODES_PER_SLICE", 4)
+    sliced = evaluate(spec, x)
+    with ev.Evaluator(spec, workers=2) as workers:
+        split = workers(x)
+    assert np.array_equal(whole.F, sliced.F) and np.array_equal(whole.F, split.F)
+    # and the noise matters: the same design under other seeds scores differently
+    shifted = evaluate(spec, x, first=100)
+    assert not np.array_equal(whole.F, shifted.F)

@@ -78,8 +78,29 @@ def _add(terms: dict, key: str, value: np.ndarray) -> None:
     terms[key] = terms.get(key, 0.0) + value
 
 
-def evaluate(spec: TuningSpec, x: np.ndarray) -> Evaluation:
-    """Run and score the candidates ``x`` (P, n_var) in this process."""
+#: candidates simulated at once: a population is run in slices of this many episodes, so an
+#: evaluation holds O(P) results plus one slice's trajectories, not O(P x K) (bench_tuner.py measures it)
+EPISODES_PER_SLICE = 256
+
+
+def evaluate(spec: TuningSpec, x: np.ndarray, first: int = 0, threads: int | None = None) -> Evaluation:
+    """Run and score the candidates ``x`` (P, n_var) in this process.
+
+    Parameters
+    ----------
+    spec : TuningSpec
+    x : (P, n_var)
+    first : int
+        Index of ``x[0]`` in the whole population: candidate i gets noise seed
+        ``disturbance.noise.seed + first + i``, so results do not depend on how
+        a population is split between workers or slices.
+    threads : int, optional
+        Threads of the compiled engine (1 inside worker processes).
+    """
+    x = np.atleast_2d(x)
+    if x.shape[0] > EPISODES_PER_SLICE:
+        return Evaluation.concat([evaluate(spec, x[i:i + EPISODES_PER_SLICE], first + i, threads)
+                                  for i in range(0, x.shape[0], EPISODES_PER_SLICE)])
     params, values = decode(spec, x)
     final_time = params.pop("final_time", None)
     n = values.shape[0]
@@ -102,7 +123,9 @@ def evaluate(spec: TuningSpec, x: np.ndarray) -> Evaluation:
     for base in spec.scenarios:
         for cond in spec.conditions:
             scn = scenario_for(spec, base, cond)
-            tr = simulate(scn, n, controller_params=params, controller=spec.controller, schedule=[])
+            seeds = scn.param("disturbance", "noise.seed") + first + np.arange(n)
+            tr = simulate(scn, n, controller_params=params, controller=spec.controller, schedule=[], seeds=seeds,
+                          threads=threads)
             score(spec, scn, tr, final_time, F, terms, fail)
     for p, why in enumerate(reasons):
         if why:
@@ -217,4 +240,8 @@ class Evaluator:
         if self.pool is None or x.shape[0] < 2 * self.workers:
             return evaluate(self.spec, x)
         chunks = np.array_split(x, self.workers)
-        return Evaluation.concat(list(self.pool.map(evaluate, [self.spec] * len(chunks), chunks)))
+        firsts = np.cumsum([0] + [len(c) for c in chunks[:-1]]).tolist()
+        # one thread per worker process: the processes are the parallelism (and a forked
+        # child must not start the parent's OpenMP runtime)
+        return Evaluation.concat(list(self.pool.map(evaluate, [self.spec] * len(chunks), chunks, firsts,
+                                                    [1] * len(chunks))))
