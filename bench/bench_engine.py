@@ -1,9 +1,14 @@
-"""Benchmark: graph real-time factor and batch-engine throughput (not a test).
+"""Benchmark: graph real-time factor and batch-engine throughput against its ceiling (not a test).
 
 Prints, for the HST roll step at 100 Hz control:
 * the ROS graph's real-time factor in one process and in one process per node,
   recording on;
-* the batch engine's simulated seconds per wall second at P = 1, 50 and 500.
+* the batch engine's simulated seconds per wall second at P = 1, 50, 500 and
+  5,000 on one core and on both, each as a ratio of the ceiling measured in
+  the same run: a hand-fused compiled loop of the same episode
+  (``fused_reference.py``, checked to give the engine's numbers first), and
+  of the stepwise driver (the previous engine) where it is not too slow;
+* the cost of each control law per step and episode.
 
 Figures from one run are comparable with each other (the machine is shared);
 quote ratios. Run with ``make bench``.
@@ -22,6 +27,8 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 os.environ.setdefault("ROS_DOMAIN_ID", str(150 + os.getpid() % 50))
+
+from fused_reference import fused_parallel, fused_serial, fused_setup  # noqa: E402
 
 from attitude_sil.core.controllers import CONTROLLER_TYPES  # noqa: E402
 from attitude_sil.core.engine import build_controller, simulate  # noqa: E402
@@ -42,20 +49,49 @@ def main() -> None:
             m = result.metrics
             print(f"{label:<32} real-time factor {m['real_time_factor']:7.1f}x  (wall {m['wall_time_s']:.2f} s, "
                   f"recording on)")
-    for p in (1, 50, 500):
-        reps = 5 if p < 500 else 2
-        best = float("inf")
-        for _ in range(reps):
-            t0 = time.perf_counter()
-            simulate(scn, p)
-            best = min(best, time.perf_counter() - t0)
-        print(f"batch engine, P = {p:<4}            {p * duration / best:10.0f} simulated s per wall s "
-              f"({best * 1e3:.0f} ms per call, best of {reps})")
+    ceiling(scn)
     costs = {p: controller_cost(scn, p) for p in (1, 50)}
     print("controller cost, us per step per episode (ratio to pid at the same P):")
     for kind in CONTROLLER_TYPES:
         cells = "   ".join(f"P={p:<3} {costs[p][kind]:7.2f} ({costs[p][kind] / costs[p]['pid']:4.1f}x)" for p in costs)
         print(f"  {kind:<10} {cells}")
+
+
+def _best(fn, reps: int) -> float:
+    best = float("inf")
+    for _ in range(reps):
+        t0 = time.perf_counter()
+        fn()
+        best = min(best, time.perf_counter() - t0)
+    return best
+
+
+def ceiling(scn) -> None:
+    """Engine throughput as a ratio of the hand-fused loop, on one core and on two."""
+    duration = scn.duration
+    kp = np.linspace(30.0, 60.0, 3 * 50).reshape(50, 3)
+    ref = fused_setup(scn, 50, kp)
+    fused_serial(*ref[0])
+    tr = simulate(scn, 50, controller_params={"pid.kp": kp})
+    diff = max(np.max(np.abs(a - b)) for a, b in zip(ref[1], (tr.q_BN, tr.omega_BN_B, tr.u_cmd, tr.tau_c_B),
+                                                      strict=True))
+    print(f"hand-fused reference == engine: max |difference| {diff:.1e} over 50 designs (equal work)")
+    print(f"{'P':>6} {'cores':>5} {'fused ceiling':>15} {'engine':>15} {'ratio':>6} {'stepwise (v1)':>15}"
+          "  (simulated s per wall s)")
+    for p in (1, 50, 500, 5000):
+        stride = 10 if p == 5000 else 1  # 5,000 whole trajectories would not fit: both keep every 10th step
+        reps = 5 if p <= 50 else 2
+        args, _ = fused_setup(scn, p, stride=stride)
+        for cores, fused, threads in ((1, fused_serial, 1), (2, fused_parallel, 2)):
+            fused(*args)  # compile / load
+            f = _best(lambda fused=fused, args=args: fused(*args), reps)
+            e = _best(lambda p=p, stride=stride, threads=threads: simulate(scn, p, stride=stride, threads=threads),
+                      reps)
+            step = ""
+            if cores == 1 and p <= 50:
+                w = _best(lambda p=p: simulate(scn, p, driver="stepwise"), 2)
+                step = f"{p * duration / w:15,.0f}"
+            print(f"{p:>6} {cores:>5} {p * duration / f:15,.0f} {p * duration / e:15,.0f} {f / e:6.2f} {step:>15}")
 
 
 def controller_cost(scn, n_episodes: int, steps: int = 2000) -> dict[str, float]:

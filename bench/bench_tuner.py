@@ -1,14 +1,18 @@
 """Benchmark of the tuner (not a test).
 
-Prints the wall time of paper 000's 50 x 40 GA on the HST roll step (20 s
-episodes, 100 Hz, batch mode, both cores), the resident memory of the tuning
-process after the first and the last generation (it must stay flat), and the
-graph-mode throughput in episodes per second with one and two replicas.
+Prints the wall time of the README's tuning example as a user runs it
+(``attitude-sil tune config/tune_hst_pid_ga.yaml``: paper 000's 50 x 40 GA on
+the HST roll step, each generation's best written as a bag, the final best
+recorded through the node graph), the optimisation alone, the resident memory
+of the tuning process after the first and the last generation (it must stay
+flat), the peak memory of one 10,000-episode evaluation, and the graph-mode
+throughput in episodes per second with one and two replicas.
 """
 
 from __future__ import annotations
 
 import os
+import subprocess
 import sys
 import tempfile
 import time
@@ -32,8 +36,33 @@ def rss_mib() -> float:
     return float("nan")
 
 
+_EVALUATE_10K = """
+import resource, numpy as np
+from attitude_sil.tuning.evaluate import evaluate
+from attitude_sil.tuning.spec import load_spec
+spec = load_spec("config/tune_hst_pid_ga.yaml")
+evaluate(spec, np.tile([[48.894, 0.071, 106.046, 1.427]], (2, 1)))  # load the kernels
+before = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+x = np.random.default_rng(0).uniform([10, 0, 50, 1], [100, 1, 200, 10], (10_000, 4))
+ev = evaluate(spec, x)
+after = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+print(before / 1024, after / 1024, int(np.sum(ev.F[:, 0] < 1e6)))
+"""
+
+
 def main() -> None:
     with tempfile.TemporaryDirectory() as tmp:
+        cli = [sys.executable, "-m", "attitude_sil.cli", "tune", "config/tune_hst_pid_ga.yaml", "--quiet",
+               "--set", f"output={tmp}/example"]
+        t0 = time.perf_counter()
+        subprocess.run(cli, cwd=ROOT, check=True, stdout=subprocess.DEVNULL)
+        bags = len(list(Path(tmp, "example", "bags").iterdir()))
+        print(f"attitude-sil tune config/tune_hst_pid_ga.yaml (the README's example, {bags} bags): "
+              f"{time.perf_counter() - t0:.1f} s wall, process start included")
+        out = subprocess.run([sys.executable, "-c", _EVALUATE_10K], cwd=ROOT, check=True, capture_output=True,
+                             text=True).stdout.split()
+        print(f"one evaluation of 10,000 candidates: peak resident memory {float(out[1]):.0f} MiB "
+              f"({float(out[1]) - float(out[0]):.0f} MiB above the loaded process), {out[2]} scored")
         spec = load_spec(ROOT / "config" / "tune_hst_pid_ga.yaml")
         spec.output = Path(tmp) / "ga"
         memory = []

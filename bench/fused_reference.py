@@ -14,13 +14,14 @@ from __future__ import annotations
 import numpy as np
 from numba import njit, prange
 
+from attitude_sil.core.engine import build_controller, build_guidance, build_plant, build_wheels
 from attitude_sil.core.kernels import _deriv, _error3, _stage
 
 
 @njit(cache=True)
 def _episode(p, n_steps, dt, q0, q_r, inertia, inertia_inv, kp, ki, kd, nf, af, u_max,
              alloc, axes, phi_T, gamma, j_m, k_b, headroom, speed_max, v_max,
-             o_q, o_w, o_u, o_tc):
+             o_q, o_w, o_u, o_tc, stride):
     nw = axes.shape[1]
     q = q0[p].copy()
     w = np.zeros(3)
@@ -71,10 +72,12 @@ def _episode(p, n_steps, dt, q0, q_r, inertia, inertia_inv, kp, ki, kd, nf, af, 
                 tc[i] += axes[i, j] * (xn[j, 2] * j_m)
         for i in range(3):
             tc[i] = -(tc[i] - h[i]) / dt
-        o_q[p, k] = q
-        o_w[p, k] = w
-        o_u[p, k] = u
-        o_tc[p, k] = tc
+        if k % stride == 0:
+            r = k // stride
+            o_q[p, r] = q
+            o_w[p, r] = w
+            o_u[p, r] = u
+            o_tc[p, r] = tc
         if k < n_steps:
             _deriv(q, w, h, inertia, inertia_inv, tc, te, k1q, k1w, k1h)
             _stage(q, w, h, k1q, k1w, k1h, half, tq, tw, th)
@@ -97,24 +100,22 @@ def _episode(p, n_steps, dt, q0, q_r, inertia, inertia_inv, kp, ki, kd, nf, af, 
 
 @njit(cache=True)
 def fused_serial(n_steps, dt, q0, q_r, inertia, inertia_inv, kp, ki, kd, nf, af, u_max,
-                 alloc, axes, phi_T, gamma, j_m, k_b, headroom, speed_max, v_max, o_q, o_w, o_u, o_tc):
+                 alloc, axes, phi_T, gamma, j_m, k_b, headroom, speed_max, v_max, o_q, o_w, o_u, o_tc, stride):
     for p in range(q0.shape[0]):
         _episode(p, n_steps, dt, q0, q_r, inertia, inertia_inv, kp, ki, kd, nf, af, u_max,
-                 alloc, axes, phi_T, gamma, j_m, k_b, headroom, speed_max, v_max, o_q, o_w, o_u, o_tc)
+                 alloc, axes, phi_T, gamma, j_m, k_b, headroom, speed_max, v_max, o_q, o_w, o_u, o_tc, stride)
 
 
 @njit(cache=True, parallel=True)
 def fused_parallel(n_steps, dt, q0, q_r, inertia, inertia_inv, kp, ki, kd, nf, af, u_max,
-                   alloc, axes, phi_T, gamma, j_m, k_b, headroom, speed_max, v_max, o_q, o_w, o_u, o_tc):
+                   alloc, axes, phi_T, gamma, j_m, k_b, headroom, speed_max, v_max, o_q, o_w, o_u, o_tc, stride):
     for p in prange(q0.shape[0]):
         _episode(p, n_steps, dt, q0, q_r, inertia, inertia_inv, kp, ki, kd, nf, af, u_max,
-                 alloc, axes, phi_T, gamma, j_m, k_b, headroom, speed_max, v_max, o_q, o_w, o_u, o_tc)
+                 alloc, axes, phi_T, gamma, j_m, k_b, headroom, speed_max, v_max, o_q, o_w, o_u, o_tc, stride)
 
 
-def fused_hst(scn, n_episodes: int, kp=None, parallel: bool = False):
-    """Run the fused loop on the scenario's HST set-up; returns (q_BN, omega_BN_B, u_cmd, tau_c_B)."""
-    from attitude_sil.core.engine import build_controller, build_guidance, build_plant, build_wheels
-
+def fused_setup(scn, n_episodes: int, kp=None, stride: int = 1):
+    """The arrays the fused loop takes, for the scenario's HST set-up (built as the engine builds them)."""
     P = n_episodes
     plant = build_plant(scn, P)
     wheels = build_wheels(scn, P)
@@ -125,9 +126,15 @@ def fused_hst(scn, n_episodes: int, kp=None, parallel: bool = False):
     gains = pid._kernel_gains()
     asm, mot = wheels.assembly, wheels.assembly.motor
     K = scn.steps()
-    out = [np.empty((P, K + 1, 4)), np.empty((P, K + 1, 3)), np.empty((P, K + 1, 3)), np.empty((P, K + 1, 3))]
-    run = fused_parallel if parallel else fused_serial
-    run(K, scn.dt, plant.q0, np.ascontiguousarray(guide.q_final), plant.inertia[0], plant.inertia_inv[0], *gains,
-        pid.u_max, asm.allocation, asm.axes_B, asm.phi_T, asm.gamma, mot.rotor_inertia, mot.back_emf_constant,
-        mot.resistance * mot.current_max, mot.speed_max, mot.v_max, *out)
+    kept = K // stride + 1
+    out = [np.empty((P, kept, 4)), np.empty((P, kept, 3)), np.empty((P, kept, 3)), np.empty((P, kept, 3))]
+    return (K, scn.dt, plant.q0, np.ascontiguousarray(guide.q_final), plant.inertia[0], plant.inertia_inv[0], *gains,
+            pid.u_max, asm.allocation, asm.axes_B, asm.phi_T, asm.gamma, mot.rotor_inertia, mot.back_emf_constant,
+            mot.resistance * mot.current_max, mot.speed_max, mot.v_max, *out, stride), out
+
+
+def fused_hst(scn, n_episodes: int, kp=None, parallel: bool = False, stride: int = 1):
+    """Run the fused loop on the scenario's HST set-up; returns (q_BN, omega_BN_B, u_cmd, tau_c_B)."""
+    args, out = fused_setup(scn, n_episodes, kp, stride)
+    (fused_parallel if parallel else fused_serial)(*args)
     return out

@@ -80,7 +80,7 @@ def _add(terms: dict, key: str, value: np.ndarray) -> None:
 
 #: candidates simulated at once: a population is run in slices of this many episodes, so an
 #: evaluation holds O(P) results plus one slice's trajectories, not O(P x K) (bench_tuner.py measures it)
-EPISODES_PER_SLICE = 256
+EPISODES_PER_SLICE = 128
 
 
 def evaluate(spec: TuningSpec, x: np.ndarray, first: int = 0, threads: int | None = None) -> Evaluation:
