@@ -87,3 +87,51 @@ def test_run_json_is_last_stdout_line(tmp_path):
     assert metrics["sim_time_s"] == 3.0 and metrics["controller_type"] == "pid"
     assert metrics["bag"] == str(tmp_path / "b")
     assert "real time" in proc.stderr  # the progress line
+
+
+@pytest.mark.parametrize("name,content,needle", [
+    ("list.yaml", "- [1, 2]\n", "got a list"),
+    ("broken.yaml", "controller: {ros__parameters: [1\n", "not valid YAML"),
+    ("flat.yaml", "controller: 3\n", "ros__parameters"),
+    ("badvalue.yaml", "controller:\n  ros__parameters:\n    pid.kp: [1.0, .nan, 1.0]\n", "pid.kp"),
+])
+def test_bad_parameter_files(tmp_path, name, content, needle):
+    path = tmp_path / name
+    path.write_text(content)
+    assert_one_line_error(run_cli("run", "config/hst_roll_step.yaml", "--params", str(path), "--no-record"),
+                          str(path), needle)
+
+
+@pytest.mark.parametrize("args,needle", [
+    (("run", "config/hst_roll_step.yaml", "--duration", "inf", "--no-record"), "finite"),
+    (("run", "config/hst_roll_step.yaml", "--duration", "nan", "--no-record"), "finite"),
+    (("tune", "config/tune_hst_pid_ga.yaml", "--set", "algorithm.generations=0"), "algorithm.generations"),
+    (("tune", "config/tune_hst_pid_ga.yaml", "--set", "algorithm.pop_size=1.5"), "algorithm.pop_size"),
+    (("tune", "config/tune_hst_pid_ga.yaml", "--set", "seed=[1"), "not a YAML value"),
+    (("tune", "config/tune_hst_pid_ga.yaml", "--set", "output=config/hst_roll_step.yaml/out", "--no-record"),
+     "Not a directory"),
+])
+def test_bad_values_on_the_command_line(args, needle):
+    assert_one_line_error(run_cli(*args), needle)
+
+
+def test_tuning_genes_must_lie_inside_the_parameters_range(tmp_path):
+    from attitude_sil.tuning.spec import SpecError, load_spec
+
+    spec = (CONFIG / "tune_pitch_flc_ga.yaml").read_text()
+    for old, new, needle in (("low: 1, high: 7", "low: 1, high: 100", "<= 7"),
+                             ):
+        assert old in spec, old
+        path = tmp_path / "bad_rules.yaml"
+        path.write_text(spec.replace(old, new).replace("scenarios: [", f"scenarios: [{CONFIG}/"))
+        with pytest.raises(SpecError, match=needle):
+            load_spec(path)
+    hst = (CONFIG / "tune_hst_pid_ga.yaml").read_text().replace("scenarios: [", f"scenarios: [{CONFIG}/")
+    for old, new, needle in (("{param: pid.kp, low: 1.0, high: 200.0}", "{param: pid.kp, low: 1.0, high: .inf}",
+                              "finite"),
+                             ("{param: pid.ki, low: 0.0, high: 5.0}", "{param: pid.ki, low: -1.0, high: 5.0}",
+                              "outside pid.ki's range")):
+        path = tmp_path / "bad_gain.yaml"
+        path.write_text(hst.replace(old, new))
+        with pytest.raises(SpecError, match=needle):
+            load_spec(path)

@@ -125,6 +125,14 @@ def test_live_param_set_from_a_second_process(tmp_path):
         assert ok.returncode == 0, ok.stderr
         got = _param("get", "controller", "controller_type")
         assert got.stdout.strip() == "ga_flc", got.stderr
+        # YAML 1.2 numbers, as the scenario files take them
+        assert _param("set", "controller", "pid.kp", "[1e2, 1e2, 1e2]").returncode == 0
+        assert _param("get", "controller", "pid.kp").stdout.strip() == "[100.0, 100.0, 100.0]"
+        # what the schema marks not changeable at runtime is refused, naming the parameter
+        for name, value in (("command", "torque"), ("control_period", "0.02")):
+            refused = _param("set", "controller", name, value)
+            assert refused.returncode == 2 and name in refused.stderr and "read-only" in refused.stderr, \
+                refused.stderr
         assert run.poll() is None, "the run ended during the test"
         missing = _param("get", "nosuchnode", "x", "--timeout", "1")
         assert missing.returncode == 2 and "not found" in missing.stderr
@@ -138,3 +146,49 @@ def test_live_param_set_from_a_second_process(tmp_path):
             if channel.topic == "/parameter_events" and msg.node == "/controller":
                 changed += [(p.name, p.value.string_value) for p in msg.changed_parameters]
     assert ("controller_type", "ga_flc") in changed
+
+
+def _children(pid: int) -> list[int]:
+    out = []
+    for status in __import__("pathlib").Path("/proc").glob("[0-9]*/status"):
+        try:
+            fields = dict(line.split(":\t", 1) for line in status.read_text().splitlines() if ":\t" in line)
+        except OSError:
+            continue
+        if int(fields.get("PPid", "0").strip()) == pid:
+            out.append(int(status.parent.name))
+    return out
+
+
+def _alive(pid: int) -> bool:
+    try:
+        state = open(f"/proc/{pid}/status").read().split("State:\t", 1)[1][0]
+    except (OSError, IndexError):
+        return False
+    return state != "Z"
+
+
+@pytest.mark.parametrize("sig,code", [(signal.SIGTERM, 143), (signal.SIGHUP, 129)])
+@pytest.mark.parametrize("processes", [False, True], ids=["one-process", "processes"])
+def test_sigterm_and_sighup_close_the_bag_and_end_every_node(tmp_path, sig, code, processes):
+    bag = tmp_path / "stopped"
+    cmd = [sys.executable, "-m", "attitude_sil.cli", "run", "config/hst_roll_step.yaml", "--real-time",
+           "--duration", "3600", "--record", str(bag)] + (["--processes"] if processes else [])
+    run = subprocess.Popen(cmd, cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                           stdin=subprocess.DEVNULL, preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
+    try:
+        assert "real time" in run.stderr.readline()  # the episode runs
+        nodes = _children(run.pid)
+        assert len(nodes) == (5 if processes else 0)
+        run.send_signal(sig)
+        _, err = run.communicate(timeout=60)
+    finally:
+        run.kill()
+    assert run.returncode == code, err
+    assert "Traceback" not in err and signal.Signals(sig).name in err
+    assert not [pid for pid in nodes if _alive(pid)]  # no node process left behind
+    info = yaml.safe_load((bag / "metadata.yaml").read_text())["rosbag2_bagfile_information"]
+    assert info["message_count"] > 0
+    with open(bag / "stopped_0.mcap", "rb") as f:
+        summary = make_reader(f, decoder_factories=[DecoderFactory()]).get_summary()
+    assert summary.statistics.message_count == info["message_count"]

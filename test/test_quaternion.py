@@ -65,3 +65,12 @@ def test_error_vector_points_towards_setpoint():
 def test_normalize_rejects_zero():
     with pytest.raises(ValueError):
         qm.quat_normalize(np.zeros(4))
+
+
+def test_received_quaternions_are_renormalised_within_tolerance_and_refused_beyond():
+    q = qm.quat_from_euler(np.radians([[10.0, -20.0, 30.0]]))
+    assert qm.unit_or_none(q) is q  # already unit: untouched, bit for bit
+    scaled = qm.unit_or_none(q * (1.0 + 5e-4))
+    assert scaled is not None and np.allclose(scaled, q, atol=1e-15)
+    assert qm.unit_or_none(q * 10.0) is None  # the (7.071, 0, 0, 7.071) case: not an attitude
+    assert qm.unit_or_none(np.zeros((1, 4))) is None

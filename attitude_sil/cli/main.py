@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import signal
 import sys
 from datetime import datetime
@@ -21,6 +22,7 @@ import yaml
 from rclpy.signals import SignalHandlerOptions
 
 from attitude_sil.cli.format import format_bar, format_segments, format_table
+from attitude_sil.core import yaml12
 from attitude_sil.core.linearize import PAPER_000_COMPARISON_GAINS, rmse_table
 from attitude_sil.core.linearize import format_table as format_rmse_table
 from attitude_sil.core.scenario import load_scenario
@@ -41,10 +43,9 @@ __all__ = ["build_parser", "main"]
 
 
 def _cmd_run(args: argparse.Namespace) -> int:
-
     scn = _load_with_params(args.scenario, args.params)
-    if args.duration is not None and args.duration <= 0:
-        raise AttitudeSilError(f"--duration must be > 0, got {args.duration}")
+    if args.duration is not None and not (math.isfinite(args.duration) and args.duration > 0):
+        raise AttitudeSilError(f"--duration must be a finite number of seconds > 0, got {args.duration}")
     if args.swap:
         times = list(scn.param("scenario", "schedule.times"))
         kinds = list(scn.param("scenario", "schedule.controller_types"))
@@ -88,15 +89,23 @@ def _cmd_linearize(args: argparse.Namespace) -> int:
 
 def _load_with_params(scenario: str, params: str | None):
     """A scenario with a controller parameter file (e.g. a tuner's best.yaml) laid over it."""
-
     scn = load_scenario(scenario)
     if params:
         path = Path(params)
         if not path.is_file():
             raise AttitudeSilError(f"{path}: no such parameter file")
-        data = yaml.safe_load(path.read_text()) or {}
+        try:
+            data = yaml12.load(path.read_text()) or {}
+        except yaml.YAMLError as exc:
+            first = str(exc).splitlines()[0] if str(exc) else "syntax error"
+            raise AttitudeSilError(f"{path}: not valid YAML ({first})") from None
+        if not isinstance(data, dict):
+            raise AttitudeSilError(f"{path}: a parameter file maps node names to ros__parameters, "
+                                   f"got a {type(data).__name__}")
         for node, section in data.items():
-            values = (section or {}).get("ros__parameters", {})
+            values = (section or {}).get("ros__parameters", {}) if isinstance(section, dict) else None
+            if not isinstance(values, dict):
+                raise AttitudeSilError(f"{path}: {node}: expected 'ros__parameters:' with a mapping of values")
             try:
                 scn = scn.with_values(str(node).lstrip("/"), **values)
             except (ScenarioError, KeyError) as exc:
@@ -177,7 +186,10 @@ def _cmd_tune(args: argparse.Namespace) -> int:
         key, sep, value = item.partition("=")
         if not sep:
             raise AttitudeSilError(f"--set takes KEY=VALUE, got {item!r}")
-        overrides[key] = yaml.safe_load(value)
+        try:
+            overrides[key] = yaml12.load(value)
+        except yaml.YAMLError:
+            raise AttitudeSilError(f"--set {key}: {value!r} is not a YAML value") from None
     stop = {"flag": False}
 
     def on_sigint(signum, frame):
@@ -301,9 +313,10 @@ def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     try:
         return args.func(args)
-    except KeyboardInterrupt:
-        print("interrupted; everything recorded so far is kept", file=sys.stderr)
-        return 130
-    except (AttitudeSilError, ValueError, FileNotFoundError) as exc:
+    except KeyboardInterrupt as exc:
+        signum = getattr(exc, "signum", signal.SIGINT)
+        print(f"interrupted ({signal.Signals(signum).name}); everything recorded so far is kept", file=sys.stderr)
+        return 128 + int(signum)
+    except (AttitudeSilError, ValueError, OSError) as exc:
         print(f"attitude-sil: error: {exc}", file=sys.stderr)
         return 2

@@ -196,3 +196,21 @@ def quat_derivative(q: np.ndarray, omega_B: np.ndarray) -> np.ndarray:
         ),
         axis=-1,
     )
+
+
+#: how far from unit norm a received quaternion may be and still be renormalised (beyond: refused)
+UNIT_NORM_TOLERANCE = 1e-3
+
+
+def unit_or_none(q: np.ndarray, tolerance: float = UNIT_NORM_TOLERANCE) -> np.ndarray | None:
+    """A received quaternion (..., 4) renormalised if its norm is within ``tolerance`` of 1, else None.
+
+    Quaternions that come over a topic carry rounding (renormalised here, so a
+    law never sees a scaled attitude: a norm of 10 scales the error vector and
+    the command tenfold); one further off is not an attitude and is refused.
+    Norms within 1e-12 of 1 pass unchanged.
+    """
+    norm = np.linalg.norm(q, axis=-1, keepdims=True)
+    if not np.all(np.abs(norm - 1.0) <= tolerance):
+        return None
+    return q if np.all(np.abs(norm - 1.0) <= 1e-12) else q / norm

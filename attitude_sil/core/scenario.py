@@ -24,6 +24,7 @@ import yaml
 
 from attitude_sil.errors import ScenarioError
 
+from . import yaml12
 from .params import GLOBAL_NODE, NODE_PARAMS, SCENARIO_NODE
 
 __all__ = ["ScenarioError", "Scenario", "load_scenario", "scenario_from_dict", "GRAPH_NODES"]
@@ -220,7 +221,7 @@ def load_scenario(path: str | Path) -> Scenario:
     if not p.is_file():
         raise ScenarioError(f"{p}: no such scenario file")
     try:
-        data = yaml.safe_load(p.read_text())
+        data = yaml12.load(p.read_text())
     except yaml.YAMLError as exc:
         mark = getattr(exc, "problem_mark", None)
         where = f" at line {mark.line + 1}" if mark is not None else ""

@@ -50,38 +50,58 @@ from attitude_sil.ros.environment import localhost_environment
 from attitude_sil.ros.services import call_reset, set_remote_parameters
 from attitude_sil.storage.writer import PARAMETERS_KEY, BagWriter
 
-__all__ = ["RunError", "RunResult", "GraphSession", "run_graph", "extra_parameters"]
+__all__ = ["RunError", "RunResult", "GraphSession", "Interrupted", "STOP_SIGNALS", "run_graph", "extra_parameters"]
+
+
+class Interrupted(KeyboardInterrupt):
+    """A run stopped by a signal; ``signum`` is the signal (the exit code is 128 + signum)."""
+
+    def __init__(self, signum: int) -> None:
+        super().__init__(f"stopped by {signal.Signals(signum).name}")
+        self.signum = signum
+
+
+#: the signals that stop a run cleanly: Ctrl-C, ``kill``/``timeout``/``docker stop``, a closed terminal
+STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
 
 
 class _Interrupt:
-    """Turns Ctrl-C into a flag the spin loops check between callbacks.
+    """Turns Ctrl-C, SIGTERM and SIGHUP into a flag the spin loops check between callbacks.
 
     A ``KeyboardInterrupt`` raised inside a node callback would tear a step in
     half (and the executor logs it as a fatal callback error); checking a flag
-    between ``spin_once`` calls stops the run at a clean point instead.
+    between ``spin_once`` calls stops the run at a clean point instead, where
+    the bag is closed and every node process ended, as rosbag2 does.
     """
 
     def __init__(self) -> None:
-        self.requested = False
-        self._old = None
+        self.signum: int | None = None
+        self._old: dict[int, object] = {}
+
+    @property
+    def requested(self) -> bool:
+        return self.signum is not None
 
     def __enter__(self) -> _Interrupt:
-        try:
-            self._old = signal.signal(signal.SIGINT, self._on_signal)
-        except ValueError:  # not the main thread: leave signals alone
-            self._old = None
+        for sig in STOP_SIGNALS:
+            try:
+                self._old[sig] = signal.signal(sig, self._on_signal)
+            except ValueError:  # not the main thread: leave signals alone
+                break
         return self
 
     def _on_signal(self, signum, frame) -> None:
-        self.requested = True
+        if self.signum is None:
+            self.signum = signum
 
     def check(self) -> None:
-        if self.requested:
-            raise KeyboardInterrupt
+        if self.signum is not None:
+            raise Interrupted(self.signum)
 
     def __exit__(self, *exc) -> None:
-        if self._old is not None:
-            signal.signal(signal.SIGINT, self._old)
+        for sig, old in self._old.items():
+            signal.signal(sig, old if old is not None else signal.SIG_DFL)
+        self._old = {}
 
 
 @dataclass

@@ -20,7 +20,7 @@ import numpy as np
 
 from attitude_sil.core.engine import build_controller
 from attitude_sil.core.lockstep import StepSequencer
-from attitude_sil.core.quaternion import euler_from_quat, quat_conjugate, quat_error
+from attitude_sil.core.quaternion import euler_from_quat, quat_conjugate, quat_error, unit_or_none
 from attitude_sil.ros.contract import ATTITUDE, ATTITUDE_ERROR, ATTITUDE_SETPOINT, COMMAND_TOPIC, CONTROLLER_INPUTS
 from attitude_sil.ros.convert import message_to_array, stamp_to_ns, vector_msg
 from attitude_sil.ros.node import SchemaNode, run_node
@@ -60,6 +60,13 @@ class ControllerNode(SchemaNode):
         if not self.finite(value):
             self.get_logger().error(f"{name} at t={t * 1e-9:.6f} s is not finite: {value[0].tolist()}; ignored")
             return
+        if value.shape[-1] == 4:
+            unit = unit_or_none(value)
+            if unit is None:
+                self.get_logger().error(f"{name} at t={t * 1e-9:.6f} s is not a unit quaternion (norm "
+                                        f"{np.linalg.norm(value):.6g}); ignored")
+                return
+            value = unit
         slot = self._pending.setdefault(t, {})
         slot[name] = value
         if len(slot) < len(INPUTS):

@@ -40,6 +40,9 @@ def descriptor(spec: ParamSpec) -> ParameterDescriptor:
         name=spec.name,
         type=PARAMETER_TYPES[spec.kind][0],
         description=spec.description,
+        # what the schema marks not changeable at runtime is read-only: rclpy refuses a set
+        # after declaration, naming the parameter (a parameter file or override still sets it)
+        read_only=not spec.runtime,
     )
     if spec.choices:
         desc.additional_constraints = "one of: " + ", ".join(spec.choices)

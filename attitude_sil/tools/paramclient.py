@@ -18,6 +18,7 @@ from rclpy.executors import SingleThreadedExecutor
 from rclpy.parameter import Parameter, parameter_value_to_python
 from rclpy.parameter_client import AsyncParameterClient
 
+from attitude_sil.core import yaml12
 from attitude_sil.errors import ParamClientError
 from attitude_sil.ros.environment import localhost_environment
 
@@ -96,7 +97,7 @@ def param_command(action: str, node_name: str, name: str | None = None, value: s
             return _format(parameter_value_to_python(values[0]))
         if action == "set":
             try:
-                parsed = yaml.safe_load(value) if value is not None else None
+                parsed = yaml12.load(value) if value is not None else None
             except yaml.YAMLError:
                 raise ParamClientError(f"value {value!r} is not valid YAML") from None
             try:

@@ -34,6 +34,7 @@ from typing import Any
 import numpy as np
 import yaml
 
+from attitude_sil.core import yaml12
 from attitude_sil.core.params import NODE_PARAMS
 from attitude_sil.core.scenario import Scenario, load_scenario
 from attitude_sil.errors import ScenarioError, SpecError
@@ -138,6 +139,8 @@ def _gene(path: Path, i: int, raw: Any, controller: str) -> Gene:
         low, high = float(raw["low"]), float(raw["high"])
     except (TypeError, ValueError):
         raise _fail(path, f"{where}: low and high must be numbers") from None
+    if not (np.isfinite(low) and np.isfinite(high)):
+        raise _fail(path, f"{where}: low and high must be finite, got {low} and {high}")
     if not low < high:
         raise _fail(path, f"{where}: low {low} must be below high {high}")
     kind = str(raw.get("kind", "real"))
@@ -155,8 +158,13 @@ def _gene(path: Path, i: int, raw: Any, controller: str) -> Gene:
         raise _fail(path, f"{where}: elements {index or 0}..{(index or 0) + count - 1} exceed {param}'s {length}")
     if count > 1 and index is None:
         index = 0
-    if spec.min is not None and low < spec.min:
-        raise _fail(path, f"{where}: low {low} is below {param}'s minimum {spec.min}")
+    # the search range must lie inside what the parameter itself accepts, so every candidate
+    # (and the best.yaml written from it) is a design the controller node takes
+    if spec.min is not None and (low < spec.min or (spec.min_exclusive and low <= spec.min)):
+        rel = ">" if spec.min_exclusive else ">="
+        raise _fail(path, f"{where}: low {low} is outside {param}'s range ({rel} {spec.min:g})")
+    if spec.max is not None and high > spec.max:
+        raise _fail(path, f"{where}: high {high} is outside {param}'s range (<= {spec.max:g})")
     return Gene(param, low, high, kind, index, count, bits)
 
 
@@ -172,7 +180,7 @@ def load_spec(path: str | Path) -> TuningSpec:
     if not p.is_file():
         raise SpecError(f"{p}: no such tuning spec")
     try:
-        data = yaml.safe_load(p.read_text())
+        data = yaml12.load(p.read_text())
     except yaml.YAMLError:
         raise SpecError(f"{p}: not valid YAML") from None
     if not isinstance(data, dict):
@@ -287,4 +295,12 @@ def apply_overrides(spec: TuningSpec, overrides: dict[str, Any]) -> TuningSpec:
             getattr(spec, section)[name] = value
         else:
             raise SpecError(f"--set {key}: only seed, output, algorithm.*, cost.*, evaluation.*, record.* can be set")
+    for key, least in (("generations", 1), ("pop_size", 2)):
+        value = spec.algorithm.get(key)
+        if value is not None and (isinstance(value, bool) or not isinstance(value, int) or value < least):
+            raise SpecError(f"algorithm.{key} must be an integer >= {least}, got {value!r}")
+    for key, least in (("workers", 1), ("replicas", 1)):
+        value = spec.evaluation.get(key)
+        if value is not None and (isinstance(value, bool) or not isinstance(value, int) or value < least):
+            raise SpecError(f"evaluation.{key} must be an integer >= {least}, got {value!r}")
     return spec
