@@ -135,3 +135,29 @@ def test_tuning_genes_must_lie_inside_the_parameters_range(tmp_path):
         path.write_text(hst.replace(old, new))
         with pytest.raises(SpecError, match=needle):
             load_spec(path)
+
+
+def test_a_full_disk_stops_the_run_with_one_line_and_a_readable_bag(tmp_path):
+    import resource
+    import signal
+
+    from attitude_sil.storage.reader import open_bag
+
+    def small_disk():  # a 200 kB file-size limit stands in for a full filesystem
+        signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
+        resource.setrlimit(resource.RLIMIT_FSIZE, (200_000, 200_000))
+
+    bag = tmp_path / "full"
+    proc = subprocess.run([sys.executable, "-m", "attitude_sil.cli", "run", "config/hst_roll_step.yaml", "--record",
+                           str(bag), "--quiet"], cwd=ROOT, capture_output=True, text=True, timeout=120,
+                          stdin=subprocess.DEVNULL, preexec_fn=small_disk)
+    assert_one_line_error(proc, "recording stopped at t=", "File too large", "readable up to there")
+    reader = open_bag(bag)  # what was written before the disk filled is a valid bag, metadata included
+    assert 0 < reader.end_ns * 1e-9 < 20.0
+    assert sum(t.count for t in reader.topics.values()) > 1000
+    assert not list(bag.glob("*.tmp"))
+
+
+def test_an_unwritable_bag_directory_is_found_at_start(tmp_path):
+    assert_one_line_error(run_cli("run", "config/hst_roll_step.yaml", "--record", "config/hst_roll_step.yaml/bag",
+                                  "--quiet"), "hst_roll_step.yaml")

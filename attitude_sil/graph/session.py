@@ -34,7 +34,7 @@ from attitude_sil.core.metrics import episode_report
 from attitude_sil.core.params import spec_for
 from attitude_sil.core.scenario import Scenario
 from attitude_sil.core.trajectory import Trajectory
-from attitude_sil.errors import AttitudeSilError, RunError
+from attitude_sil.errors import AttitudeSilError, BagWriteError, RunError
 from attitude_sil.graph.launcher import (
     check_children,
     namespace_kwargs,
@@ -277,7 +277,11 @@ class GraphSession:
         finally:
             self.recorder.writer = None  # stop recording; the kept messages stay for the metrics
             if writer is not None:
-                writer.close()
+                try:
+                    writer.close()
+                except BagWriteError:
+                    if not self.recorder.error:  # else the error is on its way up already
+                        raise
         traj = trajectory_from_messages(self.recorder.kept)
         metrics = episode_report(self.scn, traj, self.controller, self.duration, wall,
                                  schedule if schedule else None)
@@ -385,6 +389,8 @@ def _spin_episode(recorder: Recorder, spin, plant, children, k_steps: int, scn: 
             return
         if plant is not None and plant.error:
             raise RunError(plant.error)
+        if recorder.error:
+            raise RunError(f"{recorder.error}; the bag is readable up to there")
         now = time.monotonic()
         if n != last_count:
             last_count, last_change = n, now

@@ -16,6 +16,7 @@ from collections import defaultdict
 
 from rclpy.node import Node
 
+from attitude_sil.errors import BagWriteError
 from attitude_sil.ros.contract import PARAMETER_EVENTS, RECORDED_TOPICS, message_class
 from attitude_sil.ros.qos import LOCKSTEP_QOS, PARAMETER_EVENTS_QOS, offered_qos_yaml
 from attitude_sil.storage.cdr import stamp_from_cdr
@@ -39,6 +40,7 @@ class Recorder(Node):
     def __init__(self, writer: BagWriter | None, keep=(), topics: dict[str, str] | None = None, **kwargs) -> None:
         super().__init__("recorder", **kwargs)
         self.writer = writer
+        self.error = ""  # why recording stopped, if it did
         self.counts: dict[str, int] = defaultdict(int)
         self.sim_now = 0  # latest lockstep stamp seen, ns
         self.kept: dict[str, list[tuple[int, bytes]]] = {name: [] for name in keep}
@@ -58,6 +60,7 @@ class Recorder(Node):
         """Clear counts and kept messages and record to ``writer`` (None: stop recording)."""
         self.counts.clear()
         self.sim_now = 0
+        self.error = ""
         for kept in self.kept.values():
             kept.clear()
         self.writer = writer
@@ -77,7 +80,11 @@ class Recorder(Node):
             self.sim_now = max(self.sim_now, t)
         self.counts[name] += 1
         if self.writer is not None:
-            self.writer.write(self.resolved[name], data, t)
+            try:
+                self.writer.write(self.resolved[name], data, t)
+            except BagWriteError as exc:  # disk full, file too large: stop recording, keep what is written
+                self.error = f"recording stopped at t={t * 1e-9:.3f} s: {exc}"
+                self.writer = None
         kept = self.kept.get(name)
         if kept is not None:
             kept.append((t, data))
