@@ -1,16 +1,22 @@
 """Test session set-up: a ROS domain of its own and discovery kept on this machine.
 
-Set before anything imports rclpy, so no test hears another session's graph.
+Set before anything imports rclpy, so no test hears another session's graph: the
+domain is claimed with the lock files every attitude-sil run uses
+(:func:`attitude_sil.ros.environment.isolated_domain`).
 """
 
 import os
 import sys
 from pathlib import Path
 
-os.environ["ROS_DOMAIN_ID"] = str(1 + os.getpid() % 100)
-os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
-os.environ.pop("ROS_STATIC_PEERS", None)
-
 ROOT = Path(__file__).resolve().parents[1]
 CONFIG = ROOT / "config"
 sys.path.insert(0, str(ROOT))
+
+from attitude_sil.ros.environment import isolated_domain  # noqa: E402 - ROS-free, imports no rclpy
+
+# a domain no other attitude-sil process holds (runs started without ROS_DOMAIN_ID take free ones too)
+os.environ.pop("ROS_DOMAIN_ID", None)
+isolated_domain()
+os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
+os.environ.pop("ROS_STATIC_PEERS", None)

@@ -111,3 +111,40 @@ def test_ctrl_c_keeps_a_readable_bag(tmp_path):
             counts[channel.topic] = counts.get(channel.topic, 0) + 1
     assert counts["/attitude"] >= 100  # at least the first second at 100 Hz
     assert counts["/attitude"] < 2001  # and it stopped before the end
+
+
+def test_three_runs_at_once_with_default_settings_do_not_see_each_other(tmp_path):
+    import json
+    import os
+    import subprocess
+    import sys
+
+    from attitude_sil.storage.reader import open_bag
+    from conftest import ROOT
+
+    env = {k: v for k, v in os.environ.items() if k not in ("ROS_DOMAIN_ID", "ROS_AUTOMATIC_DISCOVERY_RANGE")}
+
+    def start(name):
+        return subprocess.Popen([sys.executable, "-m", "attitude_sil.cli", "run", "config/hst_roll_step.yaml",
+                                 "--duration", "3", "--json", "--quiet", "--record", str(tmp_path / name)],
+                                cwd=ROOT, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                                stdin=subprocess.DEVNULL)
+
+    runs = [start(f"run{i}") for i in range(3)]
+    outs = [r.communicate(timeout=240) for r in runs]
+    solo = start("solo")
+    outs.append(solo.communicate(timeout=240))
+    domains = set()
+    metrics = []
+    for (out, err), run in zip(outs, runs + [solo], strict=True):
+        assert run.returncode == 0, err
+        domains.add(err.split("ROS_DOMAIN_ID=")[1].split()[0])  # the run says where it is
+        m = json.loads(out.strip().splitlines()[-1])
+        metrics.append({k: v for k, v in m.items() if k not in ("wall_time_s", "real_time_factor", "bag")})
+    assert len(domains) >= 3  # the three concurrent runs had a domain each
+    assert metrics[0] == metrics[1] == metrics[2] == metrics[3]
+    for name in ("run0", "run1", "run2", "solo"):
+        reader = open_bag(tmp_path / name)
+        counts = {t: info.count for t, info in reader.topics.items() if t not in ("/parameter_events",
+                                                                                 "/flexible_mode", "/torque_cmd")}
+        assert set(counts.values()) == {301}, counts  # exactly one message per step on every topic

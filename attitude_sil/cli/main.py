@@ -29,7 +29,7 @@ from attitude_sil.core.scenario import load_scenario
 from attitude_sil.errors import AttitudeSilError, ScenarioError
 from attitude_sil.graph.session import run_graph
 from attitude_sil.graph.tuner_node import TunerNode, tune
-from attitude_sil.ros.environment import localhost_environment
+from attitude_sil.ros.environment import isolated_domain, localhost_environment
 from attitude_sil.storage.info import format_info
 from attitude_sil.storage.reader import open_bag
 from attitude_sil.tools.paramclient import param_command
@@ -42,8 +42,17 @@ from attitude_sil.tuning.robustness import format_robustness, robustness
 __all__ = ["build_parser", "main"]
 
 
+def _announce_domain() -> None:
+    """Take a ROS domain of the run's own (unless the user set one) and say which, so tools can reach it."""
+    domain, chosen = isolated_domain()
+    if chosen:
+        print(f"graph on ROS_DOMAIN_ID={domain} (its own; reach it with ROS_DOMAIN_ID={domain} attitude-sil param ...)",
+              file=sys.stderr, flush=True)
+
+
 def _cmd_run(args: argparse.Namespace) -> int:
     scn = _load_with_params(args.scenario, args.params)
+    _announce_domain()
     if args.duration is not None and not (math.isfinite(args.duration) and args.duration > 0):
         raise AttitudeSilError(f"--duration must be a finite number of seconds > 0, got {args.duration}")
     if args.swap:
@@ -198,6 +207,7 @@ def _cmd_tune(args: argparse.Namespace) -> int:
         stop["flag"] = True
         print("\nstopping after this generation (Ctrl-C again to stop now)", file=sys.stderr)
 
+    _announce_domain()
     localhost_environment()
     context = rclpy.Context()
     rclpy.init(args=[], context=context, signal_handler_options=SignalHandlerOptions.NO)

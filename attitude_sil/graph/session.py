@@ -46,7 +46,7 @@ from attitude_sil.graph.launcher import (
 from attitude_sil.graph.trajectory import KEPT_TOPICS, trajectory_from_messages
 from attitude_sil.nodes.recorder_node import Recorder
 from attitude_sil.ros.contract import ATTITUDE, COMMAND_TOPICS, STEP_TOPICS, WHEEL_TORQUE
-from attitude_sil.ros.environment import localhost_environment
+from attitude_sil.ros.environment import isolated_domain, localhost_environment
 from attitude_sil.ros.services import call_reset, set_remote_parameters
 from attitude_sil.storage.writer import PARAMETERS_KEY, BagWriter
 
@@ -201,6 +201,7 @@ class GraphSession:
         self.controller = controller or scn.param("controller", "controller_type")
 
     def __enter__(self) -> GraphSession:
+        isolated_domain()  # a graph of its own unless the user chose a domain
         localhost_environment()
         # compile (or load from numba's cache) every law's kernels before the clock
         # starts, so no node compiles mid-episode and node processes find the cache

@@ -4,14 +4,65 @@ DDS discovery spans every process on a machine. rmw reads these variables at
 ``rclpy.init``; :func:`localhost_environment` sets
 ``ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST`` when none of them is set, so a run
 never talks to another machine by accident. ``ROS_DOMAIN_ID`` separates runs
-on one machine (docs/architecture.md, "Environment").
+on one machine: :func:`isolated_domain` gives a run a domain of its own unless
+the user chose one (docs/architecture.md, "Environment").
 """
 
 from __future__ import annotations
 
+import fcntl
 import os
+import tempfile
+from pathlib import Path
+from typing import IO
 
-__all__ = ["DISCOVERY_VARS", "localhost_environment"]
+from attitude_sil.errors import RunError
+
+__all__ = ["DISCOVERY_VARS", "DOMAIN_RANGE", "isolated_domain", "localhost_environment"]
+
+#: domains handed out, in this order: clear of 0 (ROS's default) and of the small numbers labs give robots;
+#: 101 is the highest Fast DDS maps to ports safely on Linux
+DOMAIN_RANGE = tuple(range(60, 102)) + tuple(range(1, 60))
+
+_held: list[IO] = []  # the lock files of the domains this process holds (released when it exits)
+
+
+def isolated_domain(env: dict[str, str] | None = None) -> tuple[int, bool]:
+    """Give this process a ROS domain no other attitude-sil process on the machine holds.
+
+    A user who set ``ROS_DOMAIN_ID`` gets exactly that (returned with
+    ``False``). Otherwise the first domain of :data:`DOMAIN_RANGE` whose lock
+    file (``<tmp>/attitude_sil_domains/<id>.lock``) can be locked is taken and
+    written to the environment, where rmw and child processes read it;
+    the lock lasts as long as this process, whatever way it ends.
+
+    Returns
+    -------
+    (int, bool)
+        The domain, and whether it was chosen here.
+
+    Raises
+    ------
+    RunError
+        Every domain of the range is held.
+    """
+    target = os.environ if env is None else env
+    if "ROS_DOMAIN_ID" in target:
+        return int(target["ROS_DOMAIN_ID"]), False
+    folder = Path(tempfile.gettempdir()) / "attitude_sil_domains"
+    folder.mkdir(exist_ok=True)
+    for domain in DOMAIN_RANGE:
+        handle = open(folder / f"{domain}.lock", "a+")  # noqa: SIM115 - held open on purpose
+        try:
+            fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except OSError:
+            handle.close()
+            continue
+        _held.append(handle)
+        target["ROS_DOMAIN_ID"] = str(domain)
+        return domain, True
+    raise RunError(f"every ROS domain of {DOMAIN_RANGE[0]}..{DOMAIN_RANGE[-1]} is held by another run; "
+                   "set ROS_DOMAIN_ID")
 
 #: the variables that choose who a process discovers
 DISCOVERY_VARS = ("ROS_DOMAIN_ID", "ROS_AUTOMATIC_DISCOVERY_RANGE", "ROS_STATIC_PEERS", "ROS_LOCALHOST_ONLY")
