@@ -63,3 +63,19 @@ def test_joint_states(names):
         m.name = list(names)
         m.position, m.velocity, m.effort = pos[k].tolist(), vel[k].tolist(), eff[k].tolist()
         _same(data, m)
+
+
+@pytest.mark.parametrize("frame", ["", "body", "inertial", "reference"])
+def test_stamped_values_reads_the_vector_without_decoding(frame):
+    from attitude_sil.storage.cdr import stamped_values
+
+    v3 = RNG.normal(size=(len(STAMPS), 3))
+    q4 = RNG.normal(size=(len(STAMPS), 4))
+    for values, width in ((v3, 3), (q4, 4)):
+        for data, row in zip(encode_stamped_vectors(STAMPS, frame, values), values, strict=True):
+            assert np.array_equal(stamped_values(data, width), row)
+    m = Vector3Stamped()
+    m.header.frame_id = frame
+    m.vector.x = float("nan")
+    assert np.isnan(stamped_values(serialize_message(m), 3)[0])  # rclpy's own bytes read the same way
+    assert stamped_values(b"\x00\x01\x00\x00", 3) is None

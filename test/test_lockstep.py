@@ -22,13 +22,17 @@ def _feed_all(ls: PlantLockstep, t_ns: int) -> Action:
 
 def test_sequencer_accepts_next_refuses_skips_and_restarts_on_reset():
     seq = StepSequencer()
+    assert seq.classify(DT, DT) == StepSequencer.MISMATCH  # a stray message before the episode starts
+    assert seq.last_ns is None
     assert seq.classify(0, DT) == StepSequencer.NEW
     assert seq.classify(DT, DT) == StepSequencer.NEXT
     assert seq.classify(DT, DT) == StepSequencer.DUPLICATE
     assert seq.classify(3 * DT, DT) == StepSequencer.MISMATCH  # a skipped step is refused ...
     assert seq.last_ns == DT  # ... and not taken as the new position
     assert seq.classify(2 * DT, DT) == StepSequencer.NEXT
-    assert seq.classify(0, DT) == StepSequencer.NEW  # a reset starts over
+    assert seq.classify(DT, DT) == StepSequencer.STALE  # a late or foreign old stamp cannot reset it
+    assert seq.last_ns == 2 * DT
+    assert seq.classify(0, DT) == StepSequencer.NEW  # a reset starts over at 0
 
 
 def test_a_step_advances_only_when_every_input_of_that_step_is_in():
@@ -37,28 +41,33 @@ def test_a_step_advances_only_when_every_input_of_that_step_is_in():
     assert ls.published(0.0) is False
     assert ls.offer("wheel_torque", 0, ZERO) is Action.NONE
     assert ls.offer("wheel_momentum", 0, ZERO) is Action.NONE
-    assert ls.offer("wheel_torque", 0, ZERO) is Action.NONE  # a repeat does not complete the step
+    assert ls.offer("wheel_torque", 0, ZERO) is Action.REFUSED  # a repeat does not complete the step
     assert ls.offer("disturbance_torque", 0, ZERO) is Action.ADVANCE
     assert ls.advanced(True, now=0.0, real_time_factor=0.0, hold_at=-1.0) is Action.PUBLISH
     assert ls.k == 1 and ls.t_ns == DT and ls.inputs == {}
 
 
-def test_stale_inputs_are_dropped_and_future_or_nonfinite_ones_stop_the_episode():
+def test_stale_inputs_are_dropped_and_future_nonfinite_or_second_ones_refused():
     ls = PlantLockstep(PLANT_INPUTS)
     ls.start(10, DT, 0.0, -1.0)
     ls.published(0.0)
     _feed_all(ls, 0)
     ls.advanced(True, 0.0, 0.0, -1.0)
     ls.published(0.0)
-    assert ls.offer("wheel_torque", 0, ZERO) is Action.NONE  # from step 0: stale
-    assert ls.running
-    assert ls.offer("wheel_torque", 2 * DT, ZERO) is Action.FAIL
-    assert "stamped 0.020000 s while waiting for step 0.010000 s" in ls.error and not ls.running
-    ls.start(10, DT, 0.0, -1.0)
-    assert ls.offer("disturbance_torque", 0, np.array([[np.nan, 0.0, 0.0]])) is Action.FAIL
-    assert "not finite" in ls.error
-    assert ls.offer("wheel_torque", 0, ZERO) is Action.NONE  # nothing after a failure
-    assert ls.fail("second reason") is Action.NONE and "not finite" in ls.error  # the first reason stays
+    assert ls.offer("wheel_torque", 0, ZERO) is Action.NONE  # from step 0: stale, dropped
+    assert ls.offer("wheel_torque", 2 * DT, ZERO) is Action.REFUSED  # a future stamp: refused, the run goes on
+    assert "stamped 0.020000 s while waiting for step 0.010000 s" in ls.refusal and ls.running
+    assert ls.offer("disturbance_torque", DT, np.array([[np.nan, 0.0, 0.0]])) is Action.REFUSED
+    assert "not finite" in ls.refusal and "disturbance_torque" not in ls.inputs
+    assert ls.offer("wheel_torque", DT, np.ones((1, 3))) is Action.NONE
+    assert ls.offer("wheel_torque", DT, 1e9 * np.ones((1, 3))) is Action.REFUSED  # a second one: the first stays
+    assert np.array_equal(ls.inputs["wheel_torque"], np.ones((1, 3)))
+    # the producers' messages still complete the step
+    assert ls.offer("wheel_momentum", DT, ZERO) is Action.NONE
+    assert ls.offer("disturbance_torque", DT, ZERO) is Action.ADVANCE
+    assert not ls.error
+    assert ls.fail("first reason") is Action.FAIL
+    assert ls.fail("second reason") is Action.NONE and ls.error == "first reason"  # the first reason stays
 
 
 def test_episode_ends_after_the_last_step_and_takes_no_more_inputs():

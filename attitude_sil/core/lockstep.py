@@ -28,13 +28,15 @@ __all__ = ["StepSequencer", "PlantLockstep", "Action"]
 class StepSequencer:
     """Tracks the step stamps a downstream node has handled.
 
-    A stamp of 0, or one earlier than the last, starts a new episode (the
-    plant was reset); the next stamp must be the last plus ``dt``; a repeat
-    of the last stamp is a duplicate. Anything else is a mismatch the node
-    refuses, so it never integrates with a stale or skipped input.
+    A stamp of 0 starts a new episode (a reset restarts the lockstep at 0;
+    nothing else is taken before the first 0);
+    the next stamp must be the last plus ``dt``; a repeat of the last stamp is
+    a duplicate; an earlier stamp is stale (a late or foreign message). Stale
+    and skipped stamps are mismatches the node refuses, so it never integrates
+    with a stale or skipped input, and a stray old message cannot reset it.
     """
 
-    NEW, NEXT, DUPLICATE, MISMATCH = "new", "next", "duplicate", "mismatch"
+    NEW, NEXT, DUPLICATE, STALE, MISMATCH = "new", "next", "duplicate", "stale", "mismatch"
 
     def __init__(self) -> None:
         self.last_ns: int | None = None
@@ -42,8 +44,12 @@ class StepSequencer:
     def classify(self, t_ns: int, dt_ns: int) -> str:
         """Classify stamp ``t_ns`` (ns) for a step of ``dt_ns`` (ns); NEW and NEXT are accepted."""
         last = self.last_ns
-        if last is None or t_ns == 0 or t_ns < last:
+        if t_ns == 0:
             kind = self.NEW
+        elif last is None:
+            return self.MISMATCH  # an episode starts at stamp 0; anything else first is stray
+        elif t_ns < last:
+            return self.STALE
         elif t_ns == last:
             return self.DUPLICATE
         elif t_ns == last + dt_ns:
@@ -63,6 +69,7 @@ class Action(Enum):
     HOLD = "hold"  #: stopped before step k at ``hold_at``
     PACE = "pace"  #: publish at :attr:`PlantLockstep.publish_at` (wall s), then call :meth:`PlantLockstep.paced`
     START = "start"  #: autostart: the graph is wired, start an episode
+    REFUSED = "refused"  #: an input was refused (:attr:`PlantLockstep.refusal` says why); the step waits on
     FAIL = "fail"  #: the episode stopped; :attr:`PlantLockstep.error` says why
 
 
@@ -100,6 +107,7 @@ class PlantLockstep:
     holding: bool = False
     error: str = ""
     publish_at: float | None = None
+    refusal: str = ""
     episode_wall0: float = 0.0
     step_wall0: float = 0.0
 
@@ -126,19 +134,27 @@ class PlantLockstep:
         return Action.NONE
 
     def offer(self, name: str, t_ns: int, value: np.ndarray) -> Action:
-        """An input message arrived; returns ADVANCE when it completes step k, FAIL or NONE.
+        """An input message arrived; returns ADVANCE when it completes step k, REFUSED or NONE.
 
-        Stale stamps (earlier steps or episodes) are dropped; a stamp ahead of
-        step k, or a non-finite value, stops the episode: the plant never
-        integrates with a mismatched input.
+        Stale stamps (earlier steps or episodes) are dropped quietly; a stamp
+        ahead of step k, a non-finite value, or a second message for an input
+        already held is refused (:attr:`refusal` says why) and the step waits
+        for its producer's message: the plant never integrates with a
+        mismatched input, and a stray message does not stop the run (a missing
+        one does, at ``input_timeout``).
         """
         if not self.running or t_ns < self.t_ns:
             return Action.NONE
         if t_ns > self.t_ns:
-            return self.fail(f"plant: {name} stamped {t_ns * 1e-9:.6f} s while waiting for step "
-                             f"{self.t_ns * 1e-9:.6f} s")
+            self.refusal = (f"plant: {name} stamped {t_ns * 1e-9:.6f} s while waiting for step "
+                            f"{self.t_ns * 1e-9:.6f} s; refused")
+            return Action.REFUSED
         if not np.all(np.isfinite(value)):
-            return self.fail(f"plant: {name} at t={t_ns * 1e-9:.6f} s is not finite: {np.ravel(value).tolist()}")
+            self.refusal = f"plant: {name} at t={t_ns * 1e-9:.6f} s is not finite: {np.ravel(value).tolist()}; refused"
+            return Action.REFUSED
+        if name in self.inputs:
+            self.refusal = f"plant: a second {name} for step t={t_ns * 1e-9:.6f} s; refused (the first is kept)"
+            return Action.REFUSED
         self.inputs[name] = value
         if len(self.inputs) == len(self.inputs_needed) and self.k < self.n_steps:
             return Action.ADVANCE

@@ -39,7 +39,9 @@ _FIELDS = {"q_BN": ATTITUDE, "omega_BN_B": BODY_RATE, "q_RN": ATTITUDE_SETPOINT,
 
 def _wheel_states(items: list[tuple[int, bytes]]) -> tuple[np.ndarray, list[np.ndarray]]:
     """Stamps (n,) and [angle, speed, effort], each (n, wheels), of the ``wheel_state`` messages."""
-    by_t = dict(items)
+    by_t: dict[int, bytes] = {}
+    for t, data in items:
+        by_t.setdefault(t, data)  # the first copy of a stamp, as in the nodes
     cls = message_class(STEP_TOPICS[WHEEL_STATE])
     times = sorted(by_t)
     msgs = [deserialize_message(by_t[t], cls) for t in times]
@@ -58,7 +60,7 @@ def trajectory_from_messages(kept: dict[str, list[tuple[int, bytes]]]) -> Trajec
     kept : dict
         ``topic -> [(stamp ns, CDR bytes), ...]`` for the topics of
         :data:`KEPT_TOPICS` (the recorder's in-memory copies). A stamp received
-        twice keeps its last copy.
+        twice keeps its first copy.
 
     Returns
     -------
@@ -73,7 +75,8 @@ def trajectory_from_messages(kept: dict[str, list[tuple[int, bytes]]]) -> Trajec
     commands: dict[int, tuple[str, np.ndarray]] = {}
     for kind, topic in COMMAND_TOPIC.items():
         times, values = decode_step_messages(topic, kept.get(topic, []))
-        commands.update({int(t): (kind, v) for t, v in zip(times, values, strict=True)})
+        for t, v in zip(times, values, strict=True):
+            commands.setdefault(int(t), (kind, v))
     wheel_t, (angle, speed, effort) = _wheel_states(kept.get(WHEEL_STATE, []))
     n = min([len(t) for t, _ in arrays.values()] + [len(commands), len(wheel_t)])
     times = arrays["q_BN"][0][:n]

@@ -58,29 +58,31 @@ class ControllerNode(SchemaNode):
     def _on_input(self, name: str, value: np.ndarray, msg) -> None:
         t = stamp_to_ns(msg.header.stamp)
         if not self.finite(value):
-            self.get_logger().error(f"{name} at t={t * 1e-9:.6f} s is not finite: {value[0].tolist()}; ignored")
+            self.get_logger().error(f"{name} at t={t * 1e-9:.6f} s is not finite: {value[0].tolist()}; ignored",
+                                    throttle_duration_sec=1.0)
             return
         if value.shape[-1] == 4:
             unit = unit_or_none(value)
             if unit is None:
                 self.get_logger().error(f"{name} at t={t * 1e-9:.6f} s is not a unit quaternion (norm "
-                                        f"{np.linalg.norm(value):.6g}); ignored")
+                                        f"{np.linalg.norm(value):.6g}); ignored", throttle_duration_sec=1.0)
                 return
             value = unit
         slot = self._pending.setdefault(t, {})
-        slot[name] = value
+        slot.setdefault(name, value)  # the first valid message of a step counts, as in the plant
         if len(slot) < len(INPUTS):
             return
         del self._pending[t]
-        # anything older than a complete step can never complete
-        for stale in [s for s in self._pending if s < t]:
-            del self._pending[stale]
         kind = self.seq.classify(t, self.dt_ns)
         if kind == StepSequencer.NEW:
             self._rebuild()
         elif kind != StepSequencer.NEXT:
-            self.get_logger().error(f"inputs stamped {t * 1e-9:.6f} s out of sequence ({kind}); ignored")
+            self.get_logger().error(f"inputs stamped {t * 1e-9:.6f} s out of sequence ({kind}); ignored",
+                                    throttle_duration_sec=1.0)
             return
+        # a step went through: anything older can never complete (a stray stamp completes nothing here)
+        for stale in [s for s in self._pending if s < t]:
+            del self._pending[stale]
         u = self.core.compute(*(slot[name] for name in INPUTS))
         err = euler_from_quat(quat_conjugate(quat_error(slot[ATTITUDE], slot[ATTITUDE_SETPOINT])))
         self.pub_cmd[self.core.kind].publish(vector_msg(u[0], t, "body"))

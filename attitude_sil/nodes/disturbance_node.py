@@ -8,8 +8,11 @@ every input whatever the scenario.
 
 from __future__ import annotations
 
+import numpy as np
+
 from attitude_sil.core.engine import build_disturbance
 from attitude_sil.core.lockstep import StepSequencer
+from attitude_sil.core.quaternion import unit_or_none
 from attitude_sil.ros.contract import ATTITUDE, DISTURBANCE_TORQUE
 from attitude_sil.ros.convert import quaternion_to_array, stamp_to_ns, vector_msg
 from attitude_sil.ros.node import SchemaNode, run_node
@@ -34,12 +37,17 @@ class DisturbanceNode(SchemaNode):
 
     def _on_attitude(self, msg) -> None:
         t = stamp_to_ns(msg.header.stamp)
+        q = unit_or_none(quaternion_to_array(msg)[None]) if np.all(np.isfinite(quaternion_to_array(msg))) else None
+        if q is None:  # before sequencing: a refused message must not take the step's place
+            self.get_logger().error(f"attitude at t={t * 1e-9:.6f} s is not a finite unit quaternion; ignored",
+                                    throttle_duration_sec=1.0)
+            return
         kind = self.seq.classify(t, self.dt_ns)
         if kind == StepSequencer.NEW:
             self._rebuild()
         elif kind != StepSequencer.NEXT:
             return
-        tau = self.core.torque(quaternion_to_array(msg)[None], t)[0]
+        tau = self.core.torque(q, t)[0]
         self.pub.publish(vector_msg(tau, t, "body"))
 
 

@@ -111,6 +111,8 @@ class PlantNode(SchemaNode):
             self.get_logger().info(f"holding before step t={ls.t_ns * 1e-9:.6f} s")
         elif action is Action.FAIL:
             self.get_logger().error(ls.error)
+        elif action is Action.REFUSED:
+            self.get_logger().warning(ls.refusal, throttle_duration_sec=1.0)
         elif action is Action.START:
             self.get_logger().info("graph wired; starting episode")
             self.reset_episode()

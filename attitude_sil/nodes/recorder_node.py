@@ -7,20 +7,29 @@ read from the CDR bytes, so a bag replays with its simulated timing;
 ``/parameter_events`` (stamped by each node's clock, wall time before
 ``use_sim_time`` takes effect) are logged at the latest lockstep stamp. The
 node also keeps the raw messages of chosen topics in memory for the runner's
-metrics.
+metrics. Stray messages (a /clock that jumps, a stamp far ahead of the clock:
+foreign or corrupt publishers) are not recorded, counted in ``refused`` and
+logged once a second.
 """
 
 from __future__ import annotations
 
 from collections import defaultdict
 
+import numpy as np
 from rclpy.node import Node
 
+from attitude_sil.core.quaternion import UNIT_NORM_TOLERANCE
 from attitude_sil.errors import BagWriteError
-from attitude_sil.ros.contract import PARAMETER_EVENTS, RECORDED_TOPICS, message_class
+from attitude_sil.ros.contract import CLOCK, PARAMETER_EVENTS, RECORDED_TOPICS, message_class
 from attitude_sil.ros.qos import LOCKSTEP_QOS, PARAMETER_EVENTS_QOS, offered_qos_yaml
-from attitude_sil.storage.cdr import stamp_from_cdr
+from attitude_sil.storage.cdr import stamp_from_cdr, stamped_values
 from attitude_sil.storage.writer import BagWriter
+
+#: the most the clock may jump forward between two /clock messages (a control step is far less)
+MAX_CLOCK_JUMP_NS = 10_000_000_000
+#: how far ahead of the latest /clock a message may be stamped and still be recorded
+MAX_CLOCK_LEAD_NS = 1_000_000_000
 
 
 class Recorder(Node):
@@ -42,6 +51,8 @@ class Recorder(Node):
         self.writer = writer
         self.error = ""  # why recording stopped, if it did
         self.counts: dict[str, int] = defaultdict(int)
+        self.refused: dict[str, int] = defaultdict(int)  # stray messages not recorded, per topic
+        self.clock_ns = 0  # the latest /clock, ns
         self.sim_now = 0  # latest lockstep stamp seen, ns
         self.kept: dict[str, list[tuple[int, bytes]]] = {name: [] for name in keep}
         self.subs = {}
@@ -53,13 +64,18 @@ class Recorder(Node):
             self.subs[name] = sub
         self.resolved = {name: sub.topic_name for name, sub in self.subs.items()}
         self.types = dict(topics or RECORDED_TOPICS)
+        # topics whose values are checked before recording: float64 count per message
+        self._widths = {name: 4 if t.endswith("QuaternionStamped") else 3 for name, t in self.types.items()
+                        if t.endswith(("QuaternionStamped", "Vector3Stamped"))}
         if writer is not None:
             self.start_episode(writer)
 
     def start_episode(self, writer: BagWriter | None) -> None:
         """Clear counts and kept messages and record to ``writer`` (None: stop recording)."""
         self.counts.clear()
+        self.refused.clear()
         self.sim_now = 0
+        self.clock_ns = 0
         self.error = ""
         for kept in self.kept.values():
             kept.clear()
@@ -76,6 +92,22 @@ class Recorder(Node):
             t = self.sim_now
         elif t is None:
             t = self.sim_now
+        elif name == CLOCK:
+            # the plant's clock goes forward a step at a time, or back to 0 at a reset
+            if t != 0 and not self.clock_ns <= t <= self.clock_ns + MAX_CLOCK_JUMP_NS:
+                self._refuse(name, t, "jumps the clock")
+                return
+            self.clock_ns = t
+            self.sim_now = t
+        elif t > self.clock_ns + MAX_CLOCK_LEAD_NS:
+            # far ahead of the clock (a step's messages may overtake its /clock, never by
+            # seconds): a stray (foreign or corrupt) message, which would stretch the bag
+            self._refuse(name, t, "is ahead of the clock")
+            return
+        elif name in self._widths and not self._valid(name, data):
+            # the nodes refuse non-finite values and non-unit quaternions: so does the bag
+            self._refuse(name, t, "is not finite or not a unit quaternion")
+            return
         else:
             self.sim_now = max(self.sim_now, t)
         self.counts[name] += 1
@@ -88,3 +120,14 @@ class Recorder(Node):
         kept = self.kept.get(name)
         if kept is not None:
             kept.append((t, data))
+
+    def _refuse(self, name: str, t: int, why: str) -> None:
+        self.refused[name] += 1
+        self.get_logger().warning(f"{name} stamped {t * 1e-9:.6f} s {why} (clock {self.clock_ns * 1e-9:.6f} s); "
+                                  "not recorded", throttle_duration_sec=1.0)
+
+    def _valid(self, name: str, data: bytes) -> bool:
+        values = stamped_values(data, self._widths[name])
+        if values is None or not np.all(np.isfinite(values)):
+            return False
+        return values.size != 4 or abs(float(np.sqrt(values @ values)) - 1.0) <= UNIT_NORM_TOLERANCE

@@ -39,18 +39,20 @@ class WheelsNode(SchemaNode):
 
     def _on_command(self, msg, torque_mode: bool) -> None:
         t = stamp_to_ns(msg.header.stamp)
+        v = vector_to_array(msg)[None]
+        if not self.finite(v):  # before sequencing: a refused message must not take the step's place
+            self.get_logger().error(f"command at t={t * 1e-9:.6f} s is not finite: {v[0].tolist()}; ignored",
+                                    throttle_duration_sec=1.0)
+            return
         kind = self.seq.classify(t, self.dt_ns)
         if kind == StepSequencer.NEW:
             self._rebuild()
-        elif kind == StepSequencer.DUPLICATE:
+        elif kind in (StepSequencer.DUPLICATE, StepSequencer.STALE):
             return
         elif kind == StepSequencer.MISMATCH:
-            self.get_logger().error(
-                f"command stamped {t * 1e-9:.6f} s does not follow {self.seq.last_ns * 1e-9:.6f} s; ignored")
-            return
-        v = vector_to_array(msg)[None]
-        if not self.finite(v):
-            self.get_logger().error(f"command at t={t * 1e-9:.6f} s is not finite: {v[0].tolist()}; ignored")
+            after = "no episode yet" if self.seq.last_ns is None else f"{self.seq.last_ns * 1e-9:.6f} s"
+            self.get_logger().error(f"command stamped {t * 1e-9:.6f} s does not follow {after}; ignored",
+                                    throttle_duration_sec=1.0)
             return
         out = self.core.advance(v, torque_mode)
         self.pub_torque.publish(vector_msg(out.tau_c_B[0], t, "body"))

@@ -95,8 +95,7 @@ def joint_state_msg(names: list[str], position: np.ndarray, velocity: np.ndarray
 def decode_step_messages(topic: str, items: Iterable[tuple[int, bytes]]) -> tuple[np.ndarray, np.ndarray]:
     """Serialized messages of one step topic -> (stamps ns (n,), values (n, 3|4)), ordered by stamp.
 
-    The last copy of a stamp wins (a step republished after a reset replaces
-    the earlier one).
+    The first copy of a stamp wins, as in the nodes (a later one is a stray).
 
     Parameters
     ----------
@@ -108,7 +107,7 @@ def decode_step_messages(topic: str, items: Iterable[tuple[int, bytes]]) -> tupl
     """
     by_t: dict[int, bytes] = {}
     for t, data in items:
-        by_t[t] = data
+        by_t.setdefault(t, data)
     cls = message_class(STEP_TOPICS[topic])
     times = sorted(by_t)
     rows = [message_to_array(deserialize_message(by_t[t], cls)) for t in times]

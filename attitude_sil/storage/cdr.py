@@ -11,7 +11,7 @@ import struct
 
 import numpy as np
 
-__all__ = ["stamp_from_cdr", "encode_stamped_vectors", "encode_clocks", "encode_joint_states"]
+__all__ = ["stamp_from_cdr", "stamped_values", "encode_stamped_vectors", "encode_clocks", "encode_joint_states"]
 
 _STAMP = struct.Struct("<iI")
 
@@ -123,3 +123,20 @@ def encode_joint_states(stamps_ns: np.ndarray, frame_id: str, names: list[str], 
         layout.float64s(joints, sequence=True)
     columns = [np.asarray(a, dtype=float).reshape(len(stamps_ns), joints) for a in (position, velocity, effort)]
     return layout.encode(stamps_ns, [c for c in columns if joints])
+
+
+def stamped_values(data: bytes, count: int) -> np.ndarray | None:
+    """The ``count`` float64 values that end a CDR ``Vector3Stamped`` (3) or ``QuaternionStamped`` (4), or None.
+
+    Reads the header's frame id length to find them, without decoding the
+    message: what the recorder needs to check a value before it records it.
+    """
+    if len(data) < 16 or data[1] != 1:  # little-endian CDR only (what rmw writes here)
+        return None
+    (length,) = struct.unpack_from("<I", data, 12)
+    start = 8 + 4 + length  # relative to the data after the 4-byte encapsulation header
+    start += (-start) % 8
+    end = 4 + start + 8 * count
+    if end > len(data):
+        return None
+    return np.frombuffer(data, dtype="<f8", count=count, offset=4 + start)

@@ -1,0 +1,110 @@
+"""Hostile messages on every lockstep input do not change a run: refused, logged, and the step goes on.
+
+While a real-time run is live, this process publishes on every input topic of
+every node, at every step: a non-finite message stamped for the current step,
+a stale one (five steps old) and a future one (1000 s ahead). The run must end
+normally with the metrics of an undisturbed run, and its bag must not be
+stretched by the stray stamps.
+"""
+
+import json
+import math
+import subprocess
+import sys
+import time
+
+import rclpy
+from geometry_msgs.msg import QuaternionStamped, Vector3Stamped
+from rclpy.executors import SingleThreadedExecutor
+from rosgraph_msgs.msg import Clock
+
+from attitude_sil.ros.contract import (
+    ATTITUDE,
+    ATTITUDE_SETPOINT,
+    BODY_RATE,
+    CLOCK,
+    DISTURBANCE_TORQUE,
+    RATE_SETPOINT,
+    TORQUE_CMD,
+    VOLTAGE_CMD,
+    WHEEL_MOMENTUM,
+    WHEEL_TORQUE,
+)
+from attitude_sil.ros.convert import ns_to_stamp, quaternion_msg, stamp_to_ns, vector_msg
+from attitude_sil.ros.qos import LOCKSTEP_QOS
+from attitude_sil.storage.reader import open_bag
+from conftest import ROOT
+
+VECTOR_INPUTS = (BODY_RATE, RATE_SETPOINT, VOLTAGE_CMD, TORQUE_CMD, WHEEL_TORQUE, WHEEL_MOMENTUM, DISTURBANCE_TORQUE)
+QUATERNION_INPUTS = (ATTITUDE, ATTITUDE_SETPOINT)
+DT_NS = 10_000_000
+NAN = float("nan")
+ATTACK_CLOCK = True  # a foreign /clock too (stale guidance, jumping node clocks)
+
+
+def _run(bag, duration="4"):
+    return subprocess.Popen([sys.executable, "-m", "attitude_sil.cli", "run", "config/hst_roll_step.yaml",
+                             "--real-time", "--duration", duration, "--json", "--quiet", "--record", str(bag)],
+                            cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            stdin=subprocess.DEVNULL)
+
+
+def _metrics(out):
+    m = json.loads(out.strip().splitlines()[-1])
+    return {k: v for k, v in m.items() if k not in ("wall_time_s", "real_time_factor", "bag")}
+
+
+def test_nan_stale_and_future_messages_on_every_input_change_nothing(tmp_path):
+    context = rclpy.Context()
+    rclpy.init(args=[], context=context)
+    node = rclpy.create_node("intruder", context=context)
+    pubs = {t: node.create_publisher(Vector3Stamped, t, LOCKSTEP_QOS) for t in VECTOR_INPUTS}
+    pubs.update({t: node.create_publisher(QuaternionStamped, t, LOCKSTEP_QOS) for t in QUATERNION_INPUTS})
+    clock_pub = node.create_publisher(Clock, CLOCK, LOCKSTEP_QOS)
+    now = {"t": None, "steps": 0}
+    sent = {"n": 0}
+
+    def attack(msg):
+        t = stamp_to_ns(msg.clock)
+        if t == now["t"] or t > 10**12:  # our own future /clock comes back too
+            return
+        now["t"] = t
+        now["steps"] += 1
+        stale, future = t - 5 * DT_NS, t + 1000 * 10**9
+        for topic, pub in pubs.items():
+            if topic in QUATERNION_INPUTS:
+                for stamp, q in ((t, (NAN, 0.0, 0.0, 1.0)), (t, (7.071, 0.0, 0.0, 7.071)), (stale, (0, 0, 0, 1.0)),
+                                 (future, (0, 0, 0, 1.0))):
+                    if stamp > 0:  # stale ones from the sixth step on
+                        pub.publish(quaternion_msg(q, stamp, "inertial"))
+            else:
+                for stamp, v in ((t, (NAN, 1.0, 0.0)), (stale, (1e9, 0.0, 0.0)), (future, (1e9, 1e9, 1e9))):
+                    if stamp > 0:
+                        pub.publish(vector_msg(v, stamp, "body"))
+            sent["n"] += 1
+        if ATTACK_CLOCK:
+            clock_pub.publish(Clock(clock=ns_to_stamp(future)))
+
+    node.create_subscription(Clock, CLOCK, attack, LOCKSTEP_QOS)
+    executor = SingleThreadedExecutor(context=context)
+    executor.add_node(node)
+    attacked = _run(tmp_path / "attacked")
+    try:
+        deadline = time.monotonic() + 120
+        while attacked.poll() is None and time.monotonic() < deadline:
+            executor.spin_once(timeout_sec=0.02)
+        out, err = attacked.communicate(timeout=60)
+    finally:
+        attacked.kill()
+        node.destroy_node()
+        rclpy.try_shutdown(context=context)
+    (tmp_path / "stderr.txt").write_text(err)
+    assert attacked.returncode == 0, str(tmp_path / "stderr.txt")
+    assert now["steps"] > 100 and sent["n"] > 500  # the attack really ran, most of the episode
+    quiet = _run(tmp_path / "quiet")
+    q_out, q_err = quiet.communicate(timeout=120)
+    assert quiet.returncode == 0, q_err
+    assert _metrics(out) == _metrics(q_out)
+    assert "refused" in err or "ignored" in err  # the refusals were said
+    reader = open_bag(tmp_path / "attacked")
+    assert math.isclose(reader.end_ns * 1e-9, 4.0, abs_tol=0.02)  # no stray stamp stretched the bag
