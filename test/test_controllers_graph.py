@@ -1,5 +1,6 @@
 """Every controller through the graph, swaps (scheduled and live), bumpless bounds, refusals."""
 
+import os
 import signal
 import subprocess
 import sys
@@ -192,3 +193,38 @@ def test_sigterm_and_sighup_close_the_bag_and_end_every_node(tmp_path, sig, code
     with open(bag / "stopped_0.mcap", "rb") as f:
         summary = make_reader(f, decoder_factories=[DecoderFactory()]).get_summary()
     assert summary.statistics.message_count == info["message_count"]
+
+
+def _node_of(pid: int) -> str:
+    cmdline = open(f"/proc/{pid}/cmdline").read().split("\0")
+    return next(a.split(".")[-1].removesuffix("_node") for a in cmdline if a.startswith("attitude_sil.nodes."))
+
+
+@pytest.mark.parametrize("fault", [signal.SIGKILL, signal.SIGSTOP], ids=["kill-9", "stop"])
+@pytest.mark.parametrize("victim", ["plant", "wheels", "disturbance", "guidance", "controller"])
+def test_a_failed_node_process_ends_the_run_with_one_line_and_a_readable_bag(tmp_path, victim, fault):
+    params = tmp_path / "fast_watchdog.yaml"  # a stopped node is noticed after 2 s instead of 10
+    params.write_text("plant:\n  ros__parameters:\n    input_timeout: 2.0\n")
+    bag = tmp_path / "faulty"
+    run = subprocess.Popen([sys.executable, "-m", "attitude_sil.cli", "run", "config/hst_roll_step.yaml",
+                            "--real-time", "--duration", "3600", "--processes", "--params", str(params),
+                            "--record", str(bag)], cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                           text=True, stdin=subprocess.DEVNULL)
+    nodes = []
+    try:
+        assert "real time" in run.stderr.readline()
+        nodes = _children(run.pid)
+        target = next(pid for pid in nodes if _node_of(pid) == victim)
+        os.kill(target, fault)
+        _, err = run.communicate(timeout=60)  # bounded: the watchdogs, not the hour of sim time, end it
+    finally:
+        run.kill()
+        for pid in nodes:
+            if _alive(pid):
+                os.kill(pid, signal.SIGKILL)
+    assert run.returncode == 2, err
+    last = [ln for ln in err.splitlines() if ln.startswith("attitude-sil:")]
+    assert len(last) == 1 and "error:" in last[0] and "Traceback" not in err
+    assert not [pid for pid in nodes if _alive(pid)]  # no node process left behind
+    info = yaml.safe_load((bag / "metadata.yaml").read_text())["rosbag2_bagfile_information"]
+    assert info["message_count"] > 0
