@@ -228,3 +228,23 @@ def test_a_failed_node_process_ends_the_run_with_one_line_and_a_readable_bag(tmp
     assert not [pid for pid in nodes if _alive(pid)]  # no node process left behind
     info = yaml.safe_load((bag / "metadata.yaml").read_text())["rosbag2_bagfile_information"]
     assert info["message_count"] > 0
+
+
+def test_ctrl_c_in_a_terminal_stops_every_process_with_one_line(tmp_path):
+    # a terminal's Ctrl-C reaches the whole process group: the runner and every node process at once
+    bag = tmp_path / "ctrl_c"
+    run = subprocess.Popen([sys.executable, "-m", "attitude_sil.cli", "run", "config/hst_roll_step.yaml",
+                            "--real-time", "--duration", "3600", "--processes", "--record", str(bag)], cwd=ROOT,
+                           stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, stdin=subprocess.DEVNULL,
+                           start_new_session=True)
+    try:
+        assert "real time" in run.stderr.readline()
+        nodes = _children(run.pid)
+        os.killpg(run.pid, signal.SIGINT)
+        _, err = run.communicate(timeout=60)
+    finally:
+        run.kill()
+    assert run.returncode == 130
+    assert err.strip().splitlines() == ["interrupted (SIGINT); everything recorded so far is kept"], err
+    assert not [pid for pid in nodes if _alive(pid)]
+    assert (bag / "metadata.yaml").is_file()

@@ -8,6 +8,7 @@ publish the result. :func:`run_node` is the body of every node's ``main()``.
 
 from __future__ import annotations
 
+import signal
 import sys
 from collections.abc import Callable
 from typing import Any
@@ -20,6 +21,7 @@ from rclpy.executors import ExternalShutdownException
 from rclpy.experimental import EventsExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
+from rclpy.signals import SignalHandlerOptions
 
 from attitude_sil.core.params import NODE_PARAMS
 from attitude_sil.core.scenario import Scenario, scenario_from_dict
@@ -132,14 +134,24 @@ class SchemaNode(Node):
 
 
 def run_node(factory: Callable[[], Node], args: list[str] | None = None) -> int:
-    """Spin one node in its own process until Ctrl-C or shutdown; the body of every ``main()``.
+    """Spin one node in its own process until Ctrl-C, SIGTERM or SIGHUP; the body of every ``main()``.
 
     Uses rclpy's ``EventsExecutor``: about 7x less overhead per message than the
     default executor on this machine, which is what bounds a lockstep graph.
+    The signals set a flag that the spin loop checks between callbacks, so the
+    node stops at a clean point (rclpy's own handler would shut the context
+    down under a running callback, whose publish then fails with a stack
+    trace). Bad parameters print one line and exit 2.
 
-    Bad parameters print one line and exit 2.
+    Returns
+    -------
+    int
+        0, 2 for bad parameters, or 128 + the signal that stopped it (130 for Ctrl-C).
     """
-    rclpy.init(args=args)
+    rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
+    stop: list[int] = []
+    previous = {sig: signal.signal(sig, lambda signum, frame: stop.append(signum))
+                for sig in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)}
     node = None
     executor = None
     try:
@@ -148,13 +160,8 @@ def run_node(factory: Callable[[], Node], args: list[str] | None = None) -> int:
         executor.add_node(node)
         # spin_once in a loop: EventsExecutor.spin() of rclpy 7.1 left service
         # requests unanswered in a separate process (measured here)
-        while rclpy.ok():
-            try:
-                executor.spin_once(timeout_sec=0.5)
-            except RuntimeError:
-                if rclpy.ok():
-                    raise
-                break  # Ctrl-C shut the context down inside spin_once
+        while rclpy.ok() and not stop:
+            executor.spin_once(timeout_sec=0.1)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     except (AttitudeSilError, ValueError) as exc:
@@ -166,4 +173,6 @@ def run_node(factory: Callable[[], Node], args: list[str] | None = None) -> int:
         if node is not None:
             node.destroy_node()
         rclpy.try_shutdown()
-    return 0
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)
+    return 128 + stop[0] if stop else 0
