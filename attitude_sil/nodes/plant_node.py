@@ -5,9 +5,10 @@ Publishes ``/clock``, ``attitude`` and ``body_rate`` for step k (stamp t_k)
 waits for ``wheel_torque``, ``wheel_momentum`` and ``disturbance_torque``
 stamped t_k, integrates to t_k+1 with :class:`attitude_sil.core.engine.Plant`
 and publishes the next step (docs/architecture.md, "Lockstep"). An input that
-does not arrive within ``input_timeout`` (wall time), or arrives with a wrong
-stamp or non-finite values, stops the episode with an error; the plant never
-integrates with a stale input.
+does not arrive within ``input_timeout`` (wall time) stops the episode with an
+error; one stamped for another step, non-finite, or a second one for a step is
+refused with a (throttled) log line and the step waits for its producer's
+message: the plant never integrates with a stale or stray input.
 
 Service ``~/reset`` (std_srvs/Trigger) re-initialises the episode from the
 current parameters and starts it.

@@ -2,8 +2,9 @@
 
 DDS discovery spans every process on a machine. rmw reads these variables at
 ``rclpy.init``; :func:`localhost_environment` sets
-``ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST`` when none of them is set, so a run
-never talks to another machine by accident. ``ROS_DOMAIN_ID`` separates runs
+``ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST`` unless the user chose a discovery
+range, so a run never talks to another machine by accident (a domain id alone,
+chosen by the user or by :func:`isolated_domain`, does not open it). ``ROS_DOMAIN_ID`` separates runs
 on one machine: :func:`isolated_domain` gives a run a domain of its own unless
 the user chose one (docs/architecture.md, "Environment").
 """
@@ -18,7 +19,7 @@ from typing import IO
 
 from attitude_sil.errors import RunError
 
-__all__ = ["DISCOVERY_VARS", "DOMAIN_RANGE", "isolated_domain", "localhost_environment"]
+__all__ = ["DISCOVERY_VARS", "RANGE_VARS", "DOMAIN_RANGE", "isolated_domain", "localhost_environment"]
 
 #: domains handed out, in this order: clear of 0 (ROS's default) and of the small numbers labs give robots;
 #: 101 is the highest Fast DDS maps to ports safely on Linux
@@ -66,10 +67,12 @@ def isolated_domain(env: dict[str, str] | None = None) -> tuple[int, bool]:
 
 #: the variables that choose who a process discovers
 DISCOVERY_VARS = ("ROS_DOMAIN_ID", "ROS_AUTOMATIC_DISCOVERY_RANGE", "ROS_STATIC_PEERS", "ROS_LOCALHOST_ONLY")
+#: those that choose how far discovery reaches (a domain id alone does not open a run to the network)
+RANGE_VARS = ("ROS_AUTOMATIC_DISCOVERY_RANGE", "ROS_STATIC_PEERS", "ROS_LOCALHOST_ONLY")
 
 
 def localhost_environment(env: dict[str, str] | None = None) -> dict[str, str]:
-    """Keep discovery on this machine unless the user set a discovery variable.
+    """Keep discovery on this machine unless the user chose a discovery range (:data:`RANGE_VARS`).
 
     Parameters
     ----------
@@ -83,6 +86,6 @@ def localhost_environment(env: dict[str, str] | None = None) -> dict[str, str]:
         The (possibly updated) mapping.
     """
     target = os.environ if env is None else env
-    if not any(v in target for v in DISCOVERY_VARS):
+    if not any(v in target for v in RANGE_VARS):
         target["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
     return target
