@@ -119,26 +119,6 @@ def _chunk(law, lo, hi, n_steps, stride, dt, dt_ns, substeps, step_time,
         x, x_next = x_next, x
 
 
-@njit(cache=True)
-def _chunks_serial(bounds, law, n_steps, stride, dt, dt_ns, substeps, step_time,
-                   q0, w0, x0, q_initial, q_final, inertia, inertia_inv,
-                   kp, ki, kd, nf, af, u_max, angle_mode,
-                   e_scale, de_scale, u_scale, fz_rules, v_uniform,
-                   g_rules, g_vertices, g_scales,
-                   allocation, axes, phi_T, gamma, j_m, k_b, headroom, speed_max, v_max, torque_mode, k_i, r_a, b_m,
-                   tau_constant, tau_step, step_ns,
-                   o_q, o_w, o_qr, o_h, o_u, o_tc, o_te, o_ws, o_wa, o_we):
-    for c in range(bounds.shape[0] - 1):
-        _chunk(law, bounds[c], bounds[c + 1], n_steps, stride, dt, dt_ns, substeps, step_time,
-               q0, w0, x0, q_initial, q_final, inertia, inertia_inv,
-               kp, ki, kd, nf, af, u_max, angle_mode,
-               e_scale, de_scale, u_scale, fz_rules, v_uniform,
-               g_rules, g_vertices, g_scales,
-               allocation, axes, phi_T, gamma, j_m, k_b, headroom, speed_max, v_max, torque_mode, k_i, r_a, b_m,
-               tau_constant, tau_step, step_ns,
-               o_q, o_w, o_qr, o_h, o_u, o_tc, o_te, o_ws, o_wa, o_we)
-
-
 @njit(cache=True, parallel=True)
 def _chunks(bounds, law, n_steps, stride, dt, dt_ns, substeps, step_time,
             q0, w0, x0, q_initial, q_final, inertia, inertia_inv,
@@ -219,8 +199,7 @@ def run_compiled(plant, wheels, dist, guide, ctrl, n_steps: int, dt: float, stri
     if threads is not None:
         numba.set_num_threads(n_threads)
     try:
-        run = _chunks if n_threads > 1 and bounds.shape[0] > 2 else _chunks_serial  # no thread launch for one chunk
-        run(bounds, law, int(n_steps), int(stride), float(dt), dt_ns, int(plant.substeps), float(guide.step_time),
+        rest = (int(n_steps), int(stride), float(dt), dt_ns, int(plant.substeps), float(guide.step_time),
                 _c(plant.q0), _c(plant.omega0), np.ascontiguousarray(wheels.x), _c(guide.q_initial),
                 _c(guide.q_final), _c(plant.inertia), _c(plant.inertia_inv),
                 kp, ki, kd, nf, af, float(ga.u_max if law == 2 else pid.u_max), bool(pid.angle_mode),
@@ -232,6 +211,11 @@ def run_compiled(plant, wheels, dist, guide, ctrl, n_steps: int, dt: float, stri
                 mot.resistance * mot.current_max, mot.speed_max, mot.v_max, ctrl.kind == "torque",
                 mot.torque_constant, mot.resistance,
                 mot.viscous_friction, tau_constant, tau_step, step_ns, *out)
+        if n_threads > 1 and bounds.shape[0] > 2:
+            _chunks(bounds, law, *rest)
+        else:  # one thread: the chunks one after another, no thread launch
+            for lo, hi in zip(bounds[:-1].tolist(), bounds[1:].tolist(), strict=True):
+                _chunk(law, lo, hi, *rest)
     finally:
         numba.set_num_threads(previous)
     q, w, qr, h, u, tc, te, ws, wa, we = (a.transpose(1, 0, 2) for a in out)

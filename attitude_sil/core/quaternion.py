@@ -203,7 +203,7 @@ UNIT_NORM_TOLERANCE = 1e-3
 
 
 def unit_or_none(q: np.ndarray, tolerance: float = UNIT_NORM_TOLERANCE) -> np.ndarray | None:
-    """A received quaternion (..., 4) renormalised if its norm is within ``tolerance`` of 1, else None.
+    """A received quaternion (..., 4) renormalised if its norm is within ``tolerance`` of 1, else None (NaN too).
 
     Quaternions that come over a topic carry rounding (renormalised here, so a
     law never sees a scaled attitude: a norm of 10 scales the error vector and

@@ -8,8 +8,6 @@ every input whatever the scenario.
 
 from __future__ import annotations
 
-import numpy as np
-
 from attitude_sil.core.engine import build_disturbance
 from attitude_sil.core.lockstep import StepSequencer
 from attitude_sil.core.quaternion import unit_or_none
@@ -37,7 +35,7 @@ class DisturbanceNode(SchemaNode):
 
     def _on_attitude(self, msg) -> None:
         t = stamp_to_ns(msg.header.stamp)
-        q = unit_or_none(quaternion_to_array(msg)[None]) if np.all(np.isfinite(quaternion_to_array(msg))) else None
+        q = unit_or_none(quaternion_to_array(msg)[None])  # None for a non-finite or non-unit quaternion
         if q is None:  # before sequencing: a refused message must not take the step's place
             self.get_logger().error(f"attitude at t={t * 1e-9:.6f} s is not a finite unit quaternion; ignored",
                                     throttle_duration_sec=1.0)

@@ -19,7 +19,7 @@ from collections import defaultdict
 import numpy as np
 from rclpy.node import Node
 
-from attitude_sil.core.quaternion import UNIT_NORM_TOLERANCE
+from attitude_sil.core.quaternion import unit_or_none
 from attitude_sil.errors import BagWriteError
 from attitude_sil.ros.contract import CLOCK, PARAMETER_EVENTS, RECORDED_TOPICS, message_class
 from attitude_sil.ros.qos import LOCKSTEP_QOS, PARAMETER_EVENTS_QOS, offered_qos_yaml
@@ -130,4 +130,4 @@ class Recorder(Node):
         values = stamped_values(data, self._widths[name])
         if values is None or not np.all(np.isfinite(values)):
             return False
-        return values.size != 4 or abs(float(np.sqrt(values @ values)) - 1.0) <= UNIT_NORM_TOLERANCE
+        return values.size != 4 or unit_or_none(values) is not None  # the nodes' own quaternion rule
