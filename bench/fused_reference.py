@@ -15,7 +15,38 @@ import numpy as np
 from numba import njit, prange
 
 from attitude_sil.core.engine import build_controller, build_guidance, build_plant, build_wheels
-from attitude_sil.core.kernels import _deriv, _error3, _stage
+from attitude_sil.core.kernels import _error3
+
+
+@njit(cache=True, inline="always")
+def _deriv(q, w, h, inertia, inertia_inv, tc, te, dq, dw, dh):
+    # the body's derivatives (paper 000 eq. 4, 10-11), written out on small arrays
+    hx = inertia[0, 0] * w[0] + inertia[0, 1] * w[1] + inertia[0, 2] * w[2] + h[0]
+    hy = inertia[1, 0] * w[0] + inertia[1, 1] * w[1] + inertia[1, 2] * w[2] + h[1]
+    hz = inertia[2, 0] * w[0] + inertia[2, 1] * w[1] + inertia[2, 2] * w[2] + h[2]
+    rx = -(w[1] * hz - w[2] * hy) + tc[0] + te[0]
+    ry = -(w[2] * hx - w[0] * hz) + tc[1] + te[1]
+    rz = -(w[0] * hy - w[1] * hx) + tc[2] + te[2]
+    dw[0] = inertia_inv[0, 0] * rx + inertia_inv[0, 1] * ry + inertia_inv[0, 2] * rz
+    dw[1] = inertia_inv[1, 0] * rx + inertia_inv[1, 1] * ry + inertia_inv[1, 2] * rz
+    dw[2] = inertia_inv[2, 0] * rx + inertia_inv[2, 1] * ry + inertia_inv[2, 2] * rz
+    x, y, z, s = q[0], q[1], q[2], q[3]
+    dq[0] = 0.5 * (w[2] * y - w[1] * z + w[0] * s)
+    dq[1] = 0.5 * (-w[2] * x + w[0] * z + w[1] * s)
+    dq[2] = 0.5 * (w[1] * x - w[0] * y + w[2] * s)
+    dq[3] = 0.5 * (-w[0] * x - w[1] * y - w[2] * z)
+    dh[0] = -tc[0]
+    dh[1] = -tc[1]
+    dh[2] = -tc[2]
+
+
+@njit(cache=True, inline="always")
+def _stage(cq, cw, ch, kq, kw, kh, c, tq, tw, th):
+    for i in range(4):
+        tq[i] = cq[i] + c * kq[i]
+    for i in range(3):
+        tw[i] = cw[i] + c * kw[i]
+        th[i] = ch[i] + c * kh[i]
 
 
 @njit(cache=True)

@@ -10,7 +10,8 @@ arithmetic in the same order, whatever the chunking or the thread count.
 import numpy as np
 import pytest
 
-from attitude_sil.core.engine import simulate
+from attitude_sil.core.engine import simulate, simulate_summary
+from attitude_sil.core.metrics import summarize
 from attitude_sil.core.scenario import load_scenario
 from attitude_sil.errors import ScenarioError
 from conftest import CONFIG
@@ -84,3 +85,61 @@ def test_runs_outside_the_compiled_set_fall_back_or_are_refused_by_name(hst):
         simulate(hst, 1, duration=1.0, schedule=[(10, "fuzzy_pid")], driver="compiled")
     with pytest.raises(ScenarioError, match="driver must be one of"):
         simulate(hst, 1, driver="fast")
+
+
+def _assert_same_summary(a, b, rtol=1e-12):
+    assert a.metrics.keys() == b.metrics.keys()
+    for key in a.metrics:
+        x, y = a.metrics[key], b.metrics[key]
+        assert np.array_equal(np.isnan(x), np.isnan(y)), key
+        ok = ~np.isnan(x)
+        assert np.allclose(x[ok], y[ok], rtol=rtol, atol=0.0), (key, x, y)
+    assert np.array_equal(a.finite, b.finite)
+    assert np.allclose(a.peak_command, b.peak_command, rtol=rtol, atol=0.0)
+    assert np.allclose(a.peak_wheel_speed, b.peak_wheel_speed, rtol=rtol, atol=0.0)
+
+
+@pytest.mark.parametrize("law", ["pid", "fuzzy_pid", "ga_flc"])
+@pytest.mark.parametrize("step_time", [0.0, 0.5])
+def test_running_sums_equal_the_metrics_of_the_trajectory(hst, law, step_time):
+    # the compiled driver's O(P) running sums give what metrics.summarize computes from whole trajectories
+    # (summation order differs: rtol 1e-12), including a design too slow to reach 63.2 % (NaN time constant,
+    # never settled) and one that saturates; NaN where the trajectory gives NaN
+    scn = hst.with_values("guidance", step_time=step_time)
+    params = {f"{law}.kp" if law != "ga_flc" else "ga_flc.scales":
+              np.array([[0.5, 0.5, 0.5], [40.0, 40.0, 40.0], [400.0, 400.0, 400.0]])
+              if law != "ga_flc" else np.array([[5.0, 5.0, 0.2], [55.0, 45.0, 2.0], [70.0, 60.0, 2.5]])}
+    kw = dict(duration=6.0, controller=law, controller_params=params)
+    whole = simulate(scn, 3, **kw)
+    reference = summarize(whole, scn.values["scenario"], step_time=step_time)
+    summary = simulate_summary(scn, 3, **kw)
+    _assert_same_summary(summary, reference)
+    m = summary.metrics
+    if law == "pid":  # the slow design never reaches 63.2 %, the others do: both branches were taken
+        assert np.isnan(m["time_constant_s"][0]) and np.all(np.isfinite(m["time_constant_s"][1:]))
+    assert np.all(m["iae"] > 0) and np.all(m["control_effort_Nms"] > 0) and np.ptp(m["iae"]) > 0
+    # and the stepwise driver, summarised, agrees
+    _assert_same_summary(simulate_summary(scn, 3, driver="stepwise", **kw), reference)
+
+
+def test_a_summary_outside_the_compiled_set_is_the_summary_of_its_trajectory():
+    flexible = load_scenario(CONFIG / "flexible_axis.yaml")
+    tr = simulate(flexible, 1, duration=5.0)
+    ref = summarize(tr, flexible.values["scenario"], step_time=flexible.param("guidance", "step_time"))
+    got = simulate_summary(flexible, 1, duration=5.0)
+    assert "mse" in got.metrics
+    for key in ref.metrics:
+        assert np.array_equal(ref.metrics[key], got.metrics[key], equal_nan=True), key
+
+
+def test_keep_only_what_is_asked(hst):
+    full = simulate(hst, 3, duration=1.0)
+    some = simulate(hst, 3, duration=1.0, keep=("q_BN", "u_cmd"))
+    assert np.array_equal(some.q_BN, full.q_BN) and np.array_equal(some.u_cmd, full.u_cmd)
+    assert some.omega_BN_B is None and some.wheel_speed is None and some.tau_c_B is None
+    stepwise = simulate(hst, 3, duration=1.0, keep=("q_BN", "u_cmd"), driver="stepwise")
+    assert np.array_equal(stepwise.q_BN, full.q_BN) and stepwise.omega_BN_B is None
+    with pytest.raises(ScenarioError, match="unknown trajectory arrays attitude"):
+        simulate(hst, 1, duration=1.0, keep=("attitude",))
+    with pytest.raises(ScenarioError, match="at least one"):
+        simulate(hst, 1, duration=1.0, keep=())

@@ -27,16 +27,43 @@ import numpy as np
 from numba import njit, prange
 
 from .fuzzy import UNIFORM_VERTICES
-from .kernels import fuzzy_pid_step_into, ga_flc_step_into, pid_step_into, rk4_body_scratch, wheel_step_into
+from .kernels import fuzzy_pid_step_into, ga_flc_step_into, pid_step_into, rk4_body_into, wheel_step_into
 from .trajectory import Trajectory
 
-__all__ = ["COMPILED_LAWS", "COMPILED_DISTURBANCES", "run_compiled"]
+__all__ = ["COMPILED_LAWS", "COMPILED_DISTURBANCES", "SUMMARY_COLUMNS", "TRAJECTORY_FIELDS", "run_compiled"]
 
 #: laws the compiled driver runs (the geometric law and swaps take the stepwise driver)
 COMPILED_LAWS = {"pid": 0, "fuzzy_pid": 1, "ga_flc": 2}
 
 #: disturbance models the compiled driver evaluates in the loop
 COMPILED_DISTURBANCES = frozenset({"constant", "step"})
+
+
+#: columns of the running sums the compiled driver keeps per episode (``summary=True``)
+SUMMARY_COLUMNS = ("time_constant_s", "t10_s", "t90_s", "max_fraction", "settling_time_s", "steady_state_error_rad",
+                   "iae", "ise", "itae", "control_effort_Nms", "finite", "peak_command", "peak_wheel_speed")
+
+
+@njit(cache=True, inline="always")
+def _euler_axis(q, p, axis):
+    # roll, pitch or yaw (ZYX, paper 000 eq. 9) of row p, as quaternion.euler_from_quat computes it
+    x, y, z, w = q[p, 0], q[p, 1], q[p, 2], q[p, 3]
+    if axis == 0:
+        return np.arctan2(2.0 * (w * x + y * z), 1.0 - 2.0 * (x * x + y * y))
+    if axis == 1:
+        return np.arcsin(min(max(2.0 * (w * y - z * x), -1.0), 1.0))
+    return np.arctan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
+
+
+@njit(cache=True, inline="always")
+def _crossing(found, level, f, f_prev, ta, ta_prev, first):
+    # metrics._first_crossing, one sample at a time: the interpolated time frac reaches level, or found
+    if not np.isnan(found) or not f >= level:
+        return found
+    if first:
+        return ta
+    frac = (level - f_prev) / (f - f_prev) if f != f_prev else 0.0
+    return ta_prev + frac * (ta - ta_prev)
 
 
 @njit(cache=True)
@@ -47,8 +74,15 @@ def _chunk(law, lo, hi, n_steps, stride, dt, dt_ns, substeps, step_time,
            g_rules, g_vertices, g_scales,
            allocation, axes, phi_T, gamma, j_m, k_b, headroom, speed_max, v_max, torque_mode, k_i, r_a, b_m,
            tau_constant, tau_step, step_ns,
-           o_q, o_w, o_qr, o_h, o_u, o_tc, o_te, o_ws, o_wa, o_we):
-    """Episodes ``lo..hi-1`` from step 0 to K, the stepwise driver's order of calls, kept every ``stride``."""
+           o_q, o_w, o_qr, o_h, o_u, o_tc, o_te, o_ws, o_wa, o_we,
+           m_axis, m_y0, m_r, m_band, o_sum):
+    """Episodes ``lo..hi-1`` from step 0 to K, the stepwise driver's order of calls, kept every ``stride``.
+
+    An output array with
+    no rows is not kept; ``o_sum`` (P, len(SUMMARY_COLUMNS)) gets the running
+    sums when it has rows (``m_*``: the metrics axis, per-episode start and
+    final values, the settling band as a fraction of the step).
+    """
     q = q0[lo:hi].copy()
     w = w0[lo:hi].copy()
     x = x0[lo:hi].copy()
@@ -63,8 +97,7 @@ def _chunk(law, lo, hi, n_steps, stride, dt, dt_ns, substeps, step_time,
     e_prev = np.zeros((m, 3))
     es, ds, us, fr = e_scale[lo:hi].copy(), de_scale[lo:hi].copy(), u_scale[lo:hi].copy(), fz_rules[lo:hi].copy()
     gr, gv, gs = g_rules[lo:hi].copy(), g_vertices[lo:hi].copy(), g_scales[lo:hi].copy()
-    # private copies of the shared read-only arrays: kernel calls touch their reference counts,
-    # which threads sharing one array would fight over (measured: no speed-up on two cores without)
+    # private copies of the shared read-only arrays: threads sharing one array would fight over its reference count
     allocation, axes, phi_T, gamma = allocation.copy(), axes.copy(), phi_T.copy(), gamma.copy()
     tau_constant, tau_step, v_uniform = tau_constant.copy(), tau_step.copy(), v_uniform.copy()
     omega_r = np.zeros((m, 3))
@@ -74,12 +107,22 @@ def _chunk(law, lo, hi, n_steps, stride, dt, dt_ns, substeps, step_time,
     h0 = np.empty((m, 3))
     x_next = np.empty_like(x)
     h_out = np.empty((m, 3))
-    scratch = np.empty((18, 4))
     nw = x.shape[1]
+    keep_q, keep_w, keep_qr, keep_h = o_q.shape[0] > 0, o_w.shape[0] > 0, o_qr.shape[0] > 0, o_h.shape[0] > 0
+    keep_u, keep_tc, keep_te = o_u.shape[0] > 0, o_tc.shape[0] > 0, o_te.shape[0] > 0
+    keep_ws, keep_wa, keep_we = o_ws.shape[0] > 0, o_wa.shape[0] > 0, o_we.shape[0] > 0
+    sums = o_sum.shape[0] > 0
+    # running sums (see SUMMARY_COLUMNS) and what each needs of the previous sample
+    acc = np.zeros((m, len(SUMMARY_COLUMNS)))
+    acc[:, 0:3] = np.nan
+    acc[:, 3] = -np.inf
+    acc[:, 10] = 1.0
+    last_out = np.full(m, -1)
+    prev = np.zeros((m, 3))  # fraction of the step, time after it, error
+    n_after = 0
     for k in range(n_steps + 1):
         t_ns = k * dt_ns
-        t = t_ns * 1e-9
-        q_r = qf if t >= step_time - 1e-12 else qi
+        q_r = qf if t_ns * 1e-9 >= step_time - 1e-12 else qi
         for p in range(m):
             for i in range(3):
                 tau_e[p, i] = 0.0 + tau_constant[i]
@@ -102,21 +145,92 @@ def _chunk(law, lo, hi, n_steps, stride, dt, dt_ns, substeps, step_time,
             for p in range(m):
                 e = lo + p
                 for i in range(4):
-                    o_q[r, e, i] = q[p, i]
-                    o_qr[r, e, i] = q_r[p, i]
+                    if keep_q:
+                        o_q[e, r, i] = q[p, i]
+                    if keep_qr:
+                        o_qr[e, r, i] = q_r[p, i]
                 for i in range(3):
-                    o_w[r, e, i] = w[p, i]
-                    o_h[r, e, i] = h0[p, i]
-                    o_u[r, e, i] = u[p, i]
-                    o_tc[r, e, i] = tau_c[p, i]
-                    o_te[r, e, i] = tau_e[p, i]
+                    if keep_w:
+                        o_w[e, r, i] = w[p, i]
+                    if keep_h:
+                        o_h[e, r, i] = h0[p, i]
+                    if keep_u:
+                        o_u[e, r, i] = u[p, i]
+                    if keep_tc:
+                        o_tc[e, r, i] = tau_c[p, i]
+                    if keep_te:
+                        o_te[e, r, i] = tau_e[p, i]
                 for j in range(nw):
-                    o_wa[r, e, j] = x[p, j, 0]
-                    o_ws[r, e, j] = x[p, j, 2]
-                    o_we[r, e, j] = k_i * x[p, j, 1]
+                    if keep_wa:
+                        o_wa[e, r, j] = x[p, j, 0]
+                    if keep_ws:
+                        o_ws[e, r, j] = x[p, j, 2]
+                    if keep_we:
+                        o_we[e, r, j] = k_i * x[p, j, 1]
+        if sums:
+            t = k * dt
+            after = t >= step_time - 1e-12
+            _accumulate(acc, last_out, prev, lo, k, n_steps, t, dt, after, n_after, step_time,
+                        q, w, u, tau_c, x, m_axis, m_y0, m_r, m_band)
+            n_after += after
         if k < n_steps:
-            rk4_body_scratch(q, w, h0, ii, iv, tau_c, tau_e, dt, substeps, q, w, h_out, scratch)
+            rk4_body_into(q, w, h0, ii, iv, tau_c, tau_e, dt, substeps, q, w, h_out)
         x, x_next = x_next, x
+    if sums:
+        for p in range(m):
+            if last_out[p] < 0:
+                acc[p, 4] = 0.0
+            elif last_out[p] == n_after - 1:
+                acc[p, 4] = np.nan
+            acc[p, 5] = abs(prev[p, 2])
+            for c in range(len(SUMMARY_COLUMNS)):
+                o_sum[lo + p, c] = acc[p, c]
+
+
+@njit(cache=True)
+def _accumulate(acc, last_out, prev, lo, k, n_steps, t, dt, after, n_after, step_time,
+                q, w, u, tau_c, x, axis, m_y0, m_r, m_band):
+    # one step of the chunk's running sums (SUMMARY_COLUMNS), as metrics.summarize computes them
+    for p in range(q.shape[0]):
+        _accumulate_row(acc, last_out, prev, p, lo + p, k, n_steps, t, dt, after, n_after, step_time,
+                        q, w, u, tau_c, x, axis, m_y0, m_r, m_band)
+
+
+@njit(cache=True, inline="always")
+def _accumulate_row(acc, last_out, prev, p, e, k, n_steps, t, dt, after, n_after, step_time,
+                    q, w, u, tau_c, x, axis, m_y0, m_r, m_band):
+    for i in range(3):
+        if not (np.isfinite(w[p, i]) and np.isfinite(u[p, i])):
+            acc[p, 10] = 0.0
+        acc[p, 11] = max(acc[p, 11], abs(u[p, i])) if not np.isnan(u[p, i]) else np.inf
+    for j in range(x.shape[1]):
+        acc[p, 12] = max(acc[p, 12], abs(x[p, j, 2])) if not np.isnan(x[p, j, 2]) else np.inf
+    if k < n_steps:
+        acc[p, 9] += np.sqrt(tau_c[p, 0] ** 2 + tau_c[p, 1] ** 2 + tau_c[p, 2] ** 2) * ((k + 1) * dt - t)
+    if not after:
+        return
+    y0, r_fin = m_y0[e], m_r[e]
+    span = r_fin - y0
+    ta = t - step_time
+    y = _euler_axis(q, p, axis)
+    f = (y - y0) / (1.0 if span == 0.0 else span)
+    first = n_after == 0
+    f_prev, ta_prev, err_prev = prev[p, 0], prev[p, 1], prev[p, 2]
+    acc[p, 0] = _crossing(acc[p, 0], 0.632, f, f_prev, ta, ta_prev, first)
+    acc[p, 1] = _crossing(acc[p, 1], 0.1, f, f_prev, ta, ta_prev, first)
+    acc[p, 2] = _crossing(acc[p, 2], 0.9, f, f_prev, ta, ta_prev, first)
+    acc[p, 3] = max(acc[p, 3], f)
+    if abs(y - r_fin) > m_band * abs(span):
+        last_out[p] = n_after
+    elif last_out[p] == n_after - 1 and last_out[p] >= 0:
+        acc[p, 4] = ta  # settled: the first sample after the last one outside the band, unless it leaves again
+    err = r_fin - y
+    if not first:
+        d = ta - ta_prev
+        acc[p, 6] += 0.5 * (abs(err) + abs(err_prev)) * d
+        acc[p, 7] += 0.5 * (err ** 2 + err_prev ** 2) * d
+        acc[p, 8] += 0.5 * (ta * abs(err) + ta_prev * abs(err_prev)) * d
+    prev[p, 0], prev[p, 1], prev[p, 2] = f, ta, err
 
 
 @njit(cache=True, parallel=True)
@@ -127,7 +241,8 @@ def _chunks(bounds, law, n_steps, stride, dt, dt_ns, substeps, step_time,
             g_rules, g_vertices, g_scales,
             allocation, axes, phi_T, gamma, j_m, k_b, headroom, speed_max, v_max, torque_mode, k_i, r_a, b_m,
             tau_constant, tau_step, step_ns,
-            o_q, o_w, o_qr, o_h, o_u, o_tc, o_te, o_ws, o_wa, o_we):
+            o_q, o_w, o_qr, o_h, o_u, o_tc, o_te, o_ws, o_wa, o_we,
+            m_axis, m_y0, m_r, m_band, o_sum):
     for c in prange(bounds.shape[0] - 1):
         _chunk(law, bounds[c], bounds[c + 1], n_steps, stride, dt, dt_ns, substeps, step_time,
                q0, w0, x0, q_initial, q_final, inertia, inertia_inv,
@@ -136,7 +251,8 @@ def _chunks(bounds, law, n_steps, stride, dt, dt_ns, substeps, step_time,
                g_rules, g_vertices, g_scales,
                allocation, axes, phi_T, gamma, j_m, k_b, headroom, speed_max, v_max, torque_mode, k_i, r_a, b_m,
                tau_constant, tau_step, step_ns,
-               o_q, o_w, o_qr, o_h, o_u, o_tc, o_te, o_ws, o_wa, o_we)
+               o_q, o_w, o_qr, o_h, o_u, o_tc, o_te, o_ws, o_wa, o_we,
+               m_axis, m_y0, m_r, m_band, o_sum)
 
 
 def _c(a, shape=None) -> np.ndarray:
@@ -144,8 +260,14 @@ def _c(a, shape=None) -> np.ndarray:
     return np.ascontiguousarray(a if shape is None else np.broadcast_to(a, shape))
 
 
+#: the Trajectory arrays the compiled driver can keep (``keep``), in its output order
+TRAJECTORY_FIELDS = ("q_BN", "omega_BN_B", "q_RN", "h_wheels_B", "u_cmd", "tau_c_B", "tau_ext_B", "wheel_speed",
+                     "wheel_angle", "wheel_effort")
+
+
 def run_compiled(plant, wheels, dist, guide, ctrl, n_steps: int, dt: float, stride: int = 1, threads: int | None = None,
-                 chunk: int = 64) -> Trajectory:
+                 chunk: int = 64, keep=TRAJECTORY_FIELDS, sums: tuple | None = None
+                 ) -> tuple[Trajectory | None, np.ndarray | None]:
     """Run built models (fresh, as the stepwise driver gets them) in the compiled loop.
 
     Parameters
@@ -165,12 +287,23 @@ def run_compiled(plant, wheels, dist, guide, ctrl, n_steps: int, dt: float, stri
         gives the same numbers.
     chunk : int
         Episodes per chunk.
+    keep : collection of str
+        The :data:`TRAJECTORY_FIELDS` (and ``omega_RN_R``, zero for step
+        guidance) to keep; the others are None. Empty keeps no trajectory.
+    sums : tuple, optional
+        ``(axis, y0 (P,), r (P,), band)``: keep the running sums of
+        :data:`SUMMARY_COLUMNS` for a step on that Euler axis from ``y0`` to
+        ``r`` (rad) with a settling band of ``band`` times the step.
 
     Returns
     -------
-    Trajectory
-        With ``t`` the kept steps' times.
+    (Trajectory or None, ndarray (P, len(SUMMARY_COLUMNS)) or None)
+        The trajectory with ``t`` the kept steps' times (None if ``keep`` is
+        empty), and the running sums (None without ``sums``).
     """
+    unknown = set(keep) - set(TRAJECTORY_FIELDS) - {"omega_RN_R"}
+    if unknown:
+        raise ValueError(f"keep: unknown trajectory fields {sorted(unknown)}")
     P = plant.n_episodes
     law = COMPILED_LAWS[ctrl.active]
     kept = n_steps // stride + 1
@@ -188,9 +321,15 @@ def run_compiled(plant, wheels, dist, guide, ctrl, n_steps: int, dt: float, stri
     tau_constant = _c(v["constant.torque"]) if "constant" in models else np.zeros(3)
     tau_step = _c(v["step.torque"]) if "step" in models else np.zeros(3)
     step_ns = int(round(v["step.time"] * 1e9)) if "step" in models else np.iinfo(np.int64).max
-    # time-major (step, episode, .): a step's rows of a chunk are contiguous; returned as (P, K+1, .) views
-    out = [np.empty((kept, P, 4)), np.empty((kept, P, 3)), np.empty((kept, P, 4))] + \
-        [np.empty((kept, P, 3)) for _ in range(4)] + [np.empty((kept, P, nw)) for _ in range(3)]
+    # episode-major (episode, step, .): each episode's series is contiguous, as the Trajectory holds it
+    width = dict(q_BN=4, q_RN=4, wheel_speed=nw, wheel_angle=nw, wheel_effort=nw)
+    out = {f: np.empty((P, kept, width.get(f, 3)) if f in keep else (0, 0, width.get(f, 3)))
+           for f in TRAJECTORY_FIELDS}
+    if sums is None:
+        m_axis, m_y0, m_r, m_band, o_sum = 0, np.zeros(P), np.zeros(P), 0.0, np.empty((0, len(SUMMARY_COLUMNS)))
+    else:
+        m_axis, m_y0, m_r, m_band = int(sums[0]), _c(sums[1], (P,)), _c(sums[2], (P,)), float(sums[3])
+        o_sum = np.empty((P, len(SUMMARY_COLUMNS)))
     previous = numba.get_num_threads()
     n_threads = previous if threads is None else max(1, min(int(threads), numba.config.NUMBA_NUM_THREADS))
     size = max(1, min(int(chunk), -(-P // n_threads)))  # every thread gets work, chunks stay cache-sized
@@ -210,7 +349,8 @@ def run_compiled(plant, wheels, dist, guide, ctrl, n_steps: int, dt: float, stri
                 asm.allocation, asm.axes_B, asm.phi_T, asm.gamma, mot.rotor_inertia, mot.back_emf_constant,
                 mot.resistance * mot.current_max, mot.speed_max, mot.v_max, ctrl.kind == "torque",
                 mot.torque_constant, mot.resistance,
-                mot.viscous_friction, tau_constant, tau_step, step_ns, *out)
+                mot.viscous_friction, tau_constant, tau_step, step_ns, *out.values(),
+                m_axis, m_y0, m_r, m_band, o_sum)
         if n_threads > 1 and bounds.shape[0] > 2:
             _chunks(bounds, law, *rest)
         else:  # one thread: the chunks one after another, no thread launch
@@ -218,7 +358,9 @@ def run_compiled(plant, wheels, dist, guide, ctrl, n_steps: int, dt: float, stri
                 _chunk(law, lo, hi, *rest)
     finally:
         numba.set_num_threads(previous)
-    q, w, qr, h, u, tc, te, ws, wa, we = (a.transpose(1, 0, 2) for a in out)
-    return Trajectory(t=np.arange(0, n_steps + 1, stride) * dt, q_BN=q, omega_BN_B=w, q_RN=qr, h_wheels_B=h,
-                      u_cmd=u, tau_c_B=tc, tau_ext_B=te, wheel_speed=ws, kind=[ctrl.kind] * kept,
-                      wheel_angle=wa, wheel_effort=we, omega_RN_R=np.zeros((P, kept, 3)))
+    trajectory = None
+    if keep:
+        got = {f: (a if f in keep else None) for f, a in out.items()}
+        trajectory = Trajectory(t=np.arange(0, n_steps + 1, stride) * dt, kind=[ctrl.kind] * kept,
+                                omega_RN_R=np.zeros((P, kept, 3)) if "omega_RN_R" in keep else None, **got)
+    return trajectory, (None if sums is None else o_sum)

@@ -21,15 +21,16 @@ import numpy as np
 from attitude_sil.errors import ScenarioError
 
 from .actuators import SpeedLoopWheels, TorqueActuator
-from .batch import COMPILED_DISTURBANCES, COMPILED_LAWS, run_compiled
+from .batch import COMPILED_DISTURBANCES, COMPILED_LAWS, TRAJECTORY_FIELDS, run_compiled
 from .controllers import ControllerBank
 from .disturbance import DisturbanceModel, lvlh_attitude, orbit_rate
 from .linear import LinearizedPlant
+from .metrics import step_summary, summarize
 from .plants import FLEXIBLE_CASES, FlexibleAxisPlant, PitchNormalizedPlant
-from .quaternion import quat_from_euler, quat_multiply
+from .quaternion import euler_from_quat, quat_from_euler, quat_multiply
 from .rigid_body import BodyState, rk4_step
 from .scenario import Scenario
-from .trajectory import Trajectory, WheelStep
+from .trajectory import EpisodeSummary, Trajectory, WheelStep
 from .wheels import GEOMETRIES, MotorParams, WheelAssembly
 
 __all__ = [
@@ -43,6 +44,8 @@ __all__ = [
     "build_controller",
     "Trajectory",
     "simulate",
+    "simulate_summary",
+    "EpisodeSummary",
 ]
 
 RPM = 2.0 * np.pi / 60.0
@@ -298,6 +301,10 @@ def compiled_plan(plant, wheels, dist: DisturbanceModel, guide: Guidance, ctrl: 
 DRIVERS = ("auto", "compiled", "stepwise")
 
 
+#: what ``simulate(keep=...)`` can keep: the Trajectory's arrays
+KEEPABLE = TRAJECTORY_FIELDS + ("omega_RN_R",)
+
+
 def simulate(
     scn: Scenario,
     n_episodes: int = 1,
@@ -311,6 +318,7 @@ def simulate(
     driver: str = "auto",
     stride: int = 1,
     threads: int | None = None,
+    keep=KEEPABLE,
 ) -> Trajectory:
     """Run P episodes of the scenario in lockstep, vectorised over episodes.
 
@@ -345,34 +353,106 @@ def simulate(
     threads : int, optional
         Threads of the compiled driver (default one per core); any count gives
         the same numbers.
+    keep : collection of str
+        The trajectory arrays to keep (default all of :data:`KEEPABLE`); the
+        others are None. The compiled driver does not compute what is not kept
+        into memory; the stepwise driver drops it at the end.
 
     Returns
     -------
     Trajectory
+
+    See Also
+    --------
+    simulate_summary : the metrics and checks of each episode in O(P) memory.
     """
-    if driver not in DRIVERS:
-        raise ScenarioError(f"driver must be one of {', '.join(DRIVERS)}, got {driver!r}")
+    keep = tuple(keep)
+    unknown = sorted(set(keep) - set(KEEPABLE))
+    if unknown:
+        raise ScenarioError(f"keep: unknown trajectory arrays {', '.join(unknown)} (known: {', '.join(KEEPABLE)})")
+    if not keep:
+        raise ScenarioError("keep: name at least one trajectory array (simulate_summary keeps none)")
     if int(stride) < 1:
         raise ScenarioError(f"stride must be >= 1, got {stride!r}")
-    P = n_episodes
-    K = scn.steps(duration)
-    dt = scn.dt
-    plant = build_plant(scn, P, inertia=inertia)
-    wheels = build_wheels(scn, P)
-    dist = build_disturbance(scn, P, seeds=seeds, inertia=inertia)
-    guide = build_guidance(scn, P, setpoints_rpy_deg)
-    ctrl = build_controller(scn, P, params=controller_params)
-    if controller is not None:
-        ctrl.active = controller
-    swaps = dict(schedule_from_scenario(scn) if schedule is None else schedule)
-    if driver != "stepwise":
-        why = compiled_plan(plant, wheels, dist, guide, ctrl, swaps)
-        if not why:
-            return run_compiled(plant, wheels, dist, guide, ctrl, K, dt, stride=int(stride), threads=threads)
-        if driver == "compiled":
-            raise ScenarioError(f"the compiled driver does not run this scenario ({why}); use driver='auto'")
-    tr = _simulate_stepwise(plant, wheels, dist, guide, ctrl, swaps, K, dt)
-    return tr if stride == 1 else tr.every(int(stride))
+    run = _Run(scn, n_episodes, duration, controller_params, inertia, seeds, controller, schedule, setpoints_rpy_deg,
+               driver)
+    if run.compiled:
+        tr, _ = run_compiled(*run.models, run.K, run.dt, stride=int(stride), threads=threads, keep=keep)
+        return tr
+    tr = _simulate_stepwise(*run.models, run.swaps, run.K, run.dt)
+    tr = tr if stride == 1 else tr.every(int(stride))
+    for name in set(KEEPABLE) - set(keep):
+        setattr(tr, name, None)
+    return tr
+
+
+def simulate_summary(
+    scn: Scenario,
+    n_episodes: int = 1,
+    duration: float | None = None,
+    controller_params: dict | None = None,
+    inertia=None,
+    seeds=None,
+    controller: str | None = None,
+    schedule: list[tuple[int, str]] | None = None,
+    setpoints_rpy_deg=None,
+    driver: str = "auto",
+    threads: int | None = None,
+) -> EpisodeSummary:
+    """The metrics and checks of P episodes, as :func:`attitude_sil.core.metrics.summarize` gives them.
+
+    Where the compiled driver runs the scenario and its metrics are a step's
+    (``scenario.metrics.mode: step``), the episodes keep running sums only:
+    memory O(P), whatever the duration, and no trajectory is written. Other
+    runs keep their trajectories until they are summarised. The parameters
+    are those of :func:`simulate`.
+    """
+    run = _Run(scn, n_episodes, duration, controller_params, inertia, seeds, controller, schedule, setpoints_rpy_deg,
+               driver)
+    values = scn.values["scenario"]
+    if run.compiled and values["metrics.mode"] == "step":
+        plant, _, _, guide, _ = run.models
+        axis = values["metrics.axis"]
+        # metrics_from_trajectory's start and end of the step: the setpoint before it (or the initial
+        # attitude if the step is at t = 0) and the setpoint at the last step
+        y0 = euler_from_quat(guide.q_initial if guide.step_time > 1e-12 else plant.q0)[..., axis]
+        y0 = np.broadcast_to(y0, (n_episodes,))
+        end = guide.q_final if run.K * int(round(run.dt * 1e9)) * 1e-9 >= guide.step_time - 1e-12 else guide.q_initial
+        r = np.broadcast_to(euler_from_quat(end)[..., axis], (n_episodes,))
+        _, sums = run_compiled(*run.models, run.K, run.dt, threads=threads, keep=(),
+                               sums=(axis, y0, r, values["metrics.settling_band"]))
+        return step_summary(sums, values, r - y0)
+    if run.compiled:
+        tr, _ = run_compiled(*run.models, run.K, run.dt, threads=threads)
+    else:
+        tr = _simulate_stepwise(*run.models, run.swaps, run.K, run.dt)
+    return summarize(tr, values, step_time=scn.param("guidance", "step_time"))
+
+
+class _Run:
+    """The models of one :func:`simulate` call and the driver that will run them."""
+
+    def __init__(self, scn, P, duration, controller_params, inertia, seeds, controller, schedule,
+                 setpoints_rpy_deg, driver) -> None:
+        if driver not in DRIVERS:
+            raise ScenarioError(f"driver must be one of {', '.join(DRIVERS)}, got {driver!r}")
+        self.K = scn.steps(duration)
+        self.dt = scn.dt
+        plant = build_plant(scn, P, inertia=inertia)
+        wheels = build_wheels(scn, P)
+        dist = build_disturbance(scn, P, seeds=seeds, inertia=inertia)
+        guide = build_guidance(scn, P, setpoints_rpy_deg)
+        ctrl = build_controller(scn, P, params=controller_params)
+        if controller is not None:
+            ctrl.active = controller
+        self.models = (plant, wheels, dist, guide, ctrl)
+        self.swaps = dict(schedule_from_scenario(scn) if schedule is None else schedule)
+        self.compiled = False
+        if driver != "stepwise":
+            why = compiled_plan(*self.models, self.swaps)
+            if driver == "compiled" and why:
+                raise ScenarioError(f"the compiled driver does not run this scenario ({why}); use driver='auto'")
+            self.compiled = not why
 
 
 def _simulate_stepwise(plant, wheels, dist, guide, ctrl, swaps: dict, K: int, dt: float) -> Trajectory:

@@ -20,37 +20,93 @@ __all__ = ["rk4_body", "pid_step"]
 
 
 @njit(cache=True, inline="always")
-def _deriv(q, w, h, inertia, inertia_inv, tc, te, dq, dw, dh):
+def _deriv(q, w, h, ii, iv, tc, te):
+    # the body's derivatives on scalars: q (4-tuple), w, h, tc, te (3-tuples), ii and iv (9-tuples, row-major)
     # H = I w + h
-    hx = inertia[0, 0] * w[0] + inertia[0, 1] * w[1] + inertia[0, 2] * w[2] + h[0]
-    hy = inertia[1, 0] * w[0] + inertia[1, 1] * w[1] + inertia[1, 2] * w[2] + h[1]
-    hz = inertia[2, 0] * w[0] + inertia[2, 1] * w[1] + inertia[2, 2] * w[2] + h[2]
+    hx = ii[0] * w[0] + ii[1] * w[1] + ii[2] * w[2] + h[0]
+    hy = ii[3] * w[0] + ii[4] * w[1] + ii[5] * w[2] + h[1]
+    hz = ii[6] * w[0] + ii[7] * w[1] + ii[8] * w[2] + h[2]
     # rhs = -w x H + tau_c + tau_e
     rx = -(w[1] * hz - w[2] * hy) + tc[0] + te[0]
     ry = -(w[2] * hx - w[0] * hz) + tc[1] + te[1]
     rz = -(w[0] * hy - w[1] * hx) + tc[2] + te[2]
-    dw[0] = inertia_inv[0, 0] * rx + inertia_inv[0, 1] * ry + inertia_inv[0, 2] * rz
-    dw[1] = inertia_inv[1, 0] * rx + inertia_inv[1, 1] * ry + inertia_inv[1, 2] * rz
-    dw[2] = inertia_inv[2, 0] * rx + inertia_inv[2, 1] * ry + inertia_inv[2, 2] * rz
+    dw = (iv[0] * rx + iv[1] * ry + iv[2] * rz,
+          iv[3] * rx + iv[4] * ry + iv[5] * rz,
+          iv[6] * rx + iv[7] * ry + iv[8] * rz)
     # q' = 1/2 Omega(w) q, eq. 10-11, (x, y, z, w) order
-    x, y, z, s = q[0], q[1], q[2], q[3]
-    dq[0] = 0.5 * (w[2] * y - w[1] * z + w[0] * s)
-    dq[1] = 0.5 * (-w[2] * x + w[0] * z + w[1] * s)
-    dq[2] = 0.5 * (w[1] * x - w[0] * y + w[2] * s)
-    dq[3] = 0.5 * (-w[0] * x - w[1] * y - w[2] * z)
-    dh[0] = -tc[0]
-    dh[1] = -tc[1]
-    dh[2] = -tc[2]
+    x, y, z, s = q
+    dq = (0.5 * (w[2] * y - w[1] * z + w[0] * s),
+          0.5 * (-w[2] * x + w[0] * z + w[1] * s),
+          0.5 * (w[1] * x - w[0] * y + w[2] * s),
+          0.5 * (-w[0] * x - w[1] * y - w[2] * z))
+    return dq, dw, (-tc[0], -tc[1], -tc[2])
 
 
 @njit(cache=True, inline="always")
-def _stage(cq, cw, ch, kq, kw, kh, c, tq, tw, th):
-    # RK4 intermediate state: t = current + c * k
+def _stage4(c, k, a):
+    # RK4 intermediate state c + a k of a 4-tuple
+    return (c[0] + a * k[0], c[1] + a * k[1], c[2] + a * k[2], c[3] + a * k[3])
+
+
+@njit(cache=True, inline="always")
+def _stage3(c, k, a):
+    return (c[0] + a * k[0], c[1] + a * k[1], c[2] + a * k[2])
+
+
+@njit(cache=True, inline="always")
+def _combine4(c, k1, k2, k3, k4, sixth):
+    return (c[0] + sixth * (k1[0] + 2.0 * (k2[0] + k3[0]) + k4[0]),
+            c[1] + sixth * (k1[1] + 2.0 * (k2[1] + k3[1]) + k4[1]),
+            c[2] + sixth * (k1[2] + 2.0 * (k2[2] + k3[2]) + k4[2]),
+            c[3] + sixth * (k1[3] + 2.0 * (k2[3] + k3[3]) + k4[3]))
+
+
+@njit(cache=True, inline="always")
+def _combine3(c, k1, k2, k3, k4, sixth):
+    return (c[0] + sixth * (k1[0] + 2.0 * (k2[0] + k3[0]) + k4[0]),
+            c[1] + sixth * (k1[1] + 2.0 * (k2[1] + k3[1]) + k4[1]),
+            c[2] + sixth * (k1[2] + 2.0 * (k2[2] + k3[2]) + k4[2]))
+
+
+@njit(cache=True, inline="always")
+def _row3(a, p):
+    return a[p, 0], a[p, 1], a[p, 2]
+
+
+@njit(cache=True, inline="always")
+def _mat9(a, p):
+    return (a[p, 0, 0], a[p, 0, 1], a[p, 0, 2], a[p, 1, 0], a[p, 1, 1], a[p, 1, 2], a[p, 2, 0], a[p, 2, 1], a[p, 2, 2])
+
+
+@njit(cache=True, inline="always")
+def rk4_body_row(q, w, h, inertia, inertia_inv, tau_c, tau_e, p, dt, substeps, qo, wo, ho):
+    """RK4 over one held interval for episode ``p``, on scalars: no temporaries, no array views.
+
+    Reads row ``p`` of q (P, 4), w, h, tau_c, tau_e (P, 3), inertia and
+    inertia_inv (P, 3, 3); writes row ``p`` of ``qo``, ``wo``, ``ho`` (which
+    may be the inputs). The quaternion is renormalised at the end.
+    """
+    step = dt / substeps
+    half = 0.5 * step
+    sixth = step / 6.0
+    ii, iv = _mat9(inertia, p), _mat9(inertia_inv, p)
+    tc, te = _row3(tau_c, p), _row3(tau_e, p)
+    cq = (q[p, 0], q[p, 1], q[p, 2], q[p, 3])
+    cw, ch = _row3(w, p), _row3(h, p)
+    for _ in range(substeps):
+        k1q, k1w, k1h = _deriv(cq, cw, ch, ii, iv, tc, te)
+        k2q, k2w, k2h = _deriv(_stage4(cq, k1q, half), _stage3(cw, k1w, half), _stage3(ch, k1h, half), ii, iv, tc, te)
+        k3q, k3w, k3h = _deriv(_stage4(cq, k2q, half), _stage3(cw, k2w, half), _stage3(ch, k2h, half), ii, iv, tc, te)
+        k4q, k4w, k4h = _deriv(_stage4(cq, k3q, step), _stage3(cw, k3w, step), _stage3(ch, k3h, step), ii, iv, tc, te)
+        cq = _combine4(cq, k1q, k2q, k3q, k4q, sixth)
+        cw = _combine3(cw, k1w, k2w, k3w, k4w, sixth)
+        ch = _combine3(ch, k1h, k2h, k3h, k4h, sixth)
+    norm = np.sqrt(cq[0] * cq[0] + cq[1] * cq[1] + cq[2] * cq[2] + cq[3] * cq[3])
     for i in range(4):
-        tq[i] = cq[i] + c * kq[i]
+        qo[p, i] = cq[i] / norm
     for i in range(3):
-        tw[i] = cw[i] + c * kw[i]
-        th[i] = ch[i] + c * kh[i]
+        wo[p, i] = cw[i]
+        ho[p, i] = ch[i]
 
 
 @njit(cache=True)
@@ -70,45 +126,8 @@ def rk4_body(q, w, h, inertia, inertia_inv, tau_c, tau_e, dt, substeps):
 @njit(cache=True)
 def rk4_body_into(q, w, h, inertia, inertia_inv, tau_c, tau_e, dt, substeps, qo, wo, ho):
     """:func:`rk4_body` into given arrays; ``qo``, ``wo``, ``ho`` may be ``q``, ``w``, ``h`` (in place)."""
-    rk4_body_scratch(q, w, h, inertia, inertia_inv, tau_c, tau_e, dt, substeps, qo, wo, ho, np.empty((18, 4)))
-
-
-@njit(cache=True)
-def rk4_body_scratch(q, w, h, inertia, inertia_inv, tau_c, tau_e, dt, substeps, qo, wo, ho, scratch):
-    """:func:`rk4_body_into` with its stage vectors in ``scratch`` (18, 4): no allocation, for step loops."""
-    n = q.shape[0]
-    step = dt / substeps
-    half = 0.5 * step
-    sixth = step / 6.0
-    k1q, k2q, k3q, k4q = scratch[0], scratch[1], scratch[2], scratch[3]
-    k1w, k2w, k3w, k4w = scratch[4, :3], scratch[5, :3], scratch[6, :3], scratch[7, :3]
-    k1h, k2h, k3h, k4h = scratch[8, :3], scratch[9, :3], scratch[10, :3], scratch[11, :3]
-    tq, tw, th = scratch[12], scratch[13, :3], scratch[14, :3]
-    cq, cw, ch = scratch[15], scratch[16, :3], scratch[17, :3]
-    for p in range(n):
-        cq[:] = q[p]
-        cw[:] = w[p]
-        ch[:] = h[p]
-        ii, iv, tc, te = inertia[p], inertia_inv[p], tau_c[p], tau_e[p]
-        for _ in range(substeps):
-            _deriv(cq, cw, ch, ii, iv, tc, te, k1q, k1w, k1h)
-            _stage(cq, cw, ch, k1q, k1w, k1h, half, tq, tw, th)
-            _deriv(tq, tw, th, ii, iv, tc, te, k2q, k2w, k2h)
-            _stage(cq, cw, ch, k2q, k2w, k2h, half, tq, tw, th)
-            _deriv(tq, tw, th, ii, iv, tc, te, k3q, k3w, k3h)
-            _stage(cq, cw, ch, k3q, k3w, k3h, step, tq, tw, th)
-            _deriv(tq, tw, th, ii, iv, tc, te, k4q, k4w, k4h)
-            for i in range(4):
-                cq[i] = cq[i] + sixth * (k1q[i] + 2.0 * (k2q[i] + k3q[i]) + k4q[i])
-            for i in range(3):
-                cw[i] = cw[i] + sixth * (k1w[i] + 2.0 * (k2w[i] + k3w[i]) + k4w[i])
-                ch[i] = ch[i] + sixth * (k1h[i] + 2.0 * (k2h[i] + k3h[i]) + k4h[i])
-        norm = np.sqrt(cq[0] * cq[0] + cq[1] * cq[1] + cq[2] * cq[2] + cq[3] * cq[3])
-        for i in range(4):
-            qo[p, i] = cq[i] / norm
-        for i in range(3):
-            wo[p, i] = cw[i]
-            ho[p, i] = ch[i]
+    for p in range(q.shape[0]):
+        rk4_body_row(q, w, h, inertia, inertia_inv, tau_c, tau_e, p, dt, substeps, qo, wo, ho)
 
 
 @njit(cache=True, inline="always")
@@ -138,11 +157,11 @@ def _segment_uniform(x):
 
 
 @njit(cache=True, inline="always")
-def _infer_uniform(xr, xc, r):
-    # _infer1 with evenly spaced input and output sets (output centre of set k is (k - 4) / 3)
+def _infer_uniform(xr, xc, rules, p):
+    # _infer1 with evenly spaced input and output sets (output centre of set k is (k - 4) / 3), rules[p]
     i, ti = _segment_uniform(xr)
     j, tj = _segment_uniform(xc)
-    c00, c01, c10, c11 = r[i, j], r[i, j + 1], r[i + 1, j], r[i + 1, j + 1]
+    c00, c01, c10, c11 = rules[p, i, j], rules[p, i, j + 1], rules[p, i + 1, j], rules[p, i + 1, j + 1]
     return ((1.0 - ti) * ((1.0 - tj) * c00 + tj * c01) + ti * ((1.0 - tj) * c10 + tj * c11) - 4.0) / 3.0
 
 
@@ -171,17 +190,22 @@ def pid_step(q_BN, q_RN, kp, ki, kd, n, a, integral, filt, dt, u_max, angle_mode
 @njit(cache=True)
 def pid_step_into(q_BN, q_RN, kp, ki, kd, n, a, integral, filt, dt, u_max, angle_mode, u):
     """:func:`pid_step` writing the command into ``u`` (P, 3)."""
-    m = q_BN.shape[0]
-    for p in range(m):
-        e = _error3(q_BN, q_RN, p, angle_mode)
-        for i in range(3):
-            deriv = n[p, i] * (e[i] - filt[p, i])
-            raw = kp[p, i] * e[i] + ki[p, i] * integral[p, i] + kd[p, i] * deriv
-            out = min(max(raw, -u_max), u_max)
-            if not (out != raw and e[i] * raw > 0.0):
-                integral[p, i] += e[i] * dt
-            filt[p, i] = a[p, i] * filt[p, i] + (1.0 - a[p, i]) * e[i]
-            u[p, i] = out
+    for p in range(q_BN.shape[0]):
+        pid_row(q_BN, q_RN, p, kp, ki, kd, n, a, integral, filt, dt, u_max, angle_mode, u)
+
+
+@njit(cache=True, inline="always")
+def pid_row(q_BN, q_RN, p, kp, ki, kd, n, a, integral, filt, dt, u_max, angle_mode, u):
+    """:func:`pid_step_into` for episode ``p`` alone (row ``p`` of every array)."""
+    e = _error3(q_BN, q_RN, p, angle_mode)
+    for i in range(3):
+        deriv = n[p, i] * (e[i] - filt[p, i])
+        raw = kp[p, i] * e[i] + ki[p, i] * integral[p, i] + kd[p, i] * deriv
+        out = min(max(raw, -u_max), u_max)
+        if not (out != raw and e[i] * raw > 0.0):
+            integral[p, i] += e[i] * dt
+        filt[p, i] = a[p, i] * filt[p, i] + (1.0 - a[p, i]) * e[i]
+        u[p, i] = out
 
 
 @njit(cache=True)
@@ -208,44 +232,52 @@ def wheel_step(x, v_cmd, allocation, axes, phi_T, gamma, j_m, k_b, headroom, spe
 def wheel_step_into(x, v_cmd, allocation, axes, phi_T, gamma, j_m, k_b, headroom, speed_max, v_max, dt,
                     torque_mode, k_i, r_a, b_m, x_next, tau_c, h0):
     """:func:`wheel_step` into given arrays (``x_next`` must not be ``x``)."""
-    m, nw = x.shape[0], x.shape[1]
-    for p in range(m):
-        for i in range(3):
-            tau_c[p, i] = 0.0
-            h0[p, i] = 0.0
-        for j in range(nw):
-            speed = x[p, j, 2]
-            e = -(allocation[j, 0] * v_cmd[p, 0] + allocation[j, 1] * v_cmd[p, 1] + allocation[j, 2] * v_cmd[p, 2])
-            emf = k_b * speed
-            if torque_mode:
-                # inverse motor model: wheel torque -> steady current -> voltage
-                e = r_a * (e + b_m * speed) / k_i + emf
-            e = min(max(e, emf - headroom), emf + headroom)
-            if abs(speed) >= speed_max and (e - emf) * speed > 0.0:
-                e = emf
-            e = min(max(e, -v_max), v_max)
-            for r in range(3):
-                x_next[p, j, r] = (x[p, j, 0] * phi_T[0, r] + x[p, j, 1] * phi_T[1, r]
-                                   + x[p, j, 2] * phi_T[2, r] + e * gamma[r])
-            for i in range(3):
-                h0[p, i] += axes[i, j] * (speed * j_m)
-                tau_c[p, i] += axes[i, j] * (x_next[p, j, 2] * j_m)
-        for i in range(3):
-            tau_c[p, i] = -(tau_c[p, i] - h0[p, i]) / dt
+    for p in range(x.shape[0]):
+        wheel_row(x, v_cmd, p, allocation, axes, phi_T, gamma, j_m, k_b, headroom, speed_max, v_max, dt,
+                  torque_mode, k_i, r_a, b_m, x_next, tau_c, h0)
 
 
 @njit(cache=True, inline="always")
-def _segment(x, v):
-    # clip to [-1, 1], find the segment [v_j, v_j+1] holding x; returns (j, t)
-    if x <= v[0]:
+def wheel_row(x, v_cmd, p, allocation, axes, phi_T, gamma, j_m, k_b, headroom, speed_max, v_max, dt,
+              torque_mode, k_i, r_a, b_m, x_next, tau_c, h0):
+    """:func:`wheel_step_into` for episode ``p`` alone (row ``p`` of every per-episode array)."""
+    nw = x.shape[1]
+    for i in range(3):
+        tau_c[p, i] = 0.0
+        h0[p, i] = 0.0
+    for j in range(nw):
+        speed = x[p, j, 2]
+        e = -(allocation[j, 0] * v_cmd[p, 0] + allocation[j, 1] * v_cmd[p, 1] + allocation[j, 2] * v_cmd[p, 2])
+        emf = k_b * speed
+        if torque_mode:
+            # inverse motor model: wheel torque -> steady current -> voltage
+            e = r_a * (e + b_m * speed) / k_i + emf
+        e = min(max(e, emf - headroom), emf + headroom)
+        if abs(speed) >= speed_max and (e - emf) * speed > 0.0:
+            e = emf
+        e = min(max(e, -v_max), v_max)
+        for r in range(3):
+            x_next[p, j, r] = (x[p, j, 0] * phi_T[0, r] + x[p, j, 1] * phi_T[1, r]
+                               + x[p, j, 2] * phi_T[2, r] + e * gamma[r])
+        for i in range(3):
+            h0[p, i] += axes[i, j] * (speed * j_m)
+            tau_c[p, i] += axes[i, j] * (x_next[p, j, 2] * j_m)
+    for i in range(3):
+        tau_c[p, i] = -(tau_c[p, i] - h0[p, i]) / dt
+
+
+@njit(cache=True, inline="always")
+def _segment(x, v, p, a):
+    # clip to [-1, 1], find the segment [v_j, v_j+1] of the vertices v[p, a] holding x; returns (j, t)
+    if x <= v[p, a, 0]:
         return 0, 0.0
-    if x >= v[6]:
+    if x >= v[p, a, 6]:
         return 5, 1.0
     j = 0
     for k in range(1, 6):  # a fixed-length scan compiles to branch-light code (2x faster than a while)
-        if x > v[k]:
+        if x > v[p, a, k]:
             j = k
-    return j, (x - v[j]) / (v[j + 1] - v[j])
+    return j, (x - v[p, a, j]) / (v[p, a, j + 1] - v[p, a, j])
 
 
 @njit(cache=True)
@@ -260,8 +292,8 @@ def fuzzy_infer(x_row, x_col, v_row, v_col, rules, centres):
     out = np.empty((m, 3))
     for p in range(m):
         for a in range(3):
-            i, ti = _segment(x_row[p, a], v_row[p, a])
-            j, tj = _segment(x_col[p, a], v_col[p, a])
+            i, ti = _segment(x_row[p, a], v_row, p, a)
+            j, tj = _segment(x_col[p, a], v_col, p, a)
             mi0, mi1 = 1.0 - ti, ti
             mj0, mj1 = 1.0 - tj, tj
             c = centres[p, a]
@@ -272,11 +304,12 @@ def fuzzy_infer(x_row, x_col, v_row, v_col, rules, centres):
 
 
 @njit(cache=True, inline="always")
-def _infer1(xr, xc, vr, vc, r, c):
-    i, ti = _segment(xr, vr)
-    j, tj = _segment(xc, vc)
-    return ((1.0 - ti) * ((1.0 - tj) * c[r[i, j] - 1] + tj * c[r[i, j + 1] - 1])
-            + ti * ((1.0 - tj) * c[r[i + 1, j] - 1] + tj * c[r[i + 1, j + 1] - 1]))
+def _infer1(xr, xc, v, r, p):
+    # episode p's inference: rows of v[p, 0], columns of v[p, 1], output centres v[p, 2], rules r[p]
+    i, ti = _segment(xr, v, p, 0)
+    j, tj = _segment(xc, v, p, 1)
+    return ((1.0 - ti) * ((1.0 - tj) * v[p, 2, r[p, i, j] - 1] + tj * v[p, 2, r[p, i, j + 1] - 1])
+            + ti * ((1.0 - tj) * v[p, 2, r[p, i + 1, j] - 1] + tj * v[p, 2, r[p, i + 1, j + 1] - 1]))
 
 
 @njit(cache=True)
@@ -299,32 +332,38 @@ def fuzzy_pid_step(q_BN, q_RN, e_prev, has_prev, kp, ki, kd, n, a, integral, fil
 def fuzzy_pid_step_into(q_BN, q_RN, e_prev, has_prev, kp, ki, kd, n, a, integral, filt, e_scale, de_scale,
                         u_scale, rules, v, dt, u_max, angle_mode, out):
     """:func:`fuzzy_pid_step` writing the mixed command into ``out`` (P, 3)."""
-    m = q_BN.shape[0]
-    for p in range(m):
-        e3 = _error3(q_BN, q_RN, p, angle_mode)
-        r = rules[p]
-        for i in range(3):
-            e = e3[i]
-            de = (e - e_prev[p, i]) / dt if has_prev else 0.0
-            xe = e / e_scale[p, i]
-            u_f = u_scale[p, i] * _infer_uniform(de / de_scale[p, i], xe, r)
-            # PID part, as pid_step
-            deriv = n[p, i] * (e - filt[p, i])
-            raw = kp[p, i] * e + ki[p, i] * integral[p, i] + kd[p, i] * deriv
-            u_p = min(max(raw, -u_max), u_max)
-            if not (u_p != raw and e * raw > 0.0):
-                integral[p, i] += e * dt
-            filt[p, i] = a[p, i] * filt[p, i] + (1.0 - a[p, i]) * e
-            # mixing block, f(e) = e_n^2
-            en = min(max(xe, -1.0), 1.0)
-            f = en * en
-            if abs(u_f) > abs(u_p) + 1e-12:
-                out[p, i] = f * u_p + (1.0 - f) * u_f
-            elif abs(u_p) > abs(u_f) + 1e-12:
-                out[p, i] = (1.0 - f) * u_p + f * u_f
-            else:
-                out[p, i] = u_p
-            e_prev[p, i] = e
+    for p in range(q_BN.shape[0]):
+        fuzzy_pid_row(q_BN, q_RN, p, e_prev, has_prev, kp, ki, kd, n, a, integral, filt, e_scale, de_scale,
+                      u_scale, rules, v, dt, u_max, angle_mode, out)
+
+
+@njit(cache=True, inline="always")
+def fuzzy_pid_row(q_BN, q_RN, p, e_prev, has_prev, kp, ki, kd, n, a, integral, filt, e_scale, de_scale,
+                  u_scale, rules, v, dt, u_max, angle_mode, out):
+    """:func:`fuzzy_pid_step_into` for episode ``p`` alone (row ``p`` of every array)."""
+    e3 = _error3(q_BN, q_RN, p, angle_mode)
+    for i in range(3):
+        e = e3[i]
+        de = (e - e_prev[p, i]) / dt if has_prev else 0.0
+        xe = e / e_scale[p, i]
+        u_f = u_scale[p, i] * _infer_uniform(de / de_scale[p, i], xe, rules, p)
+        # PID part, as pid_step
+        deriv = n[p, i] * (e - filt[p, i])
+        raw = kp[p, i] * e + ki[p, i] * integral[p, i] + kd[p, i] * deriv
+        u_p = min(max(raw, -u_max), u_max)
+        if not (u_p != raw and e * raw > 0.0):
+            integral[p, i] += e * dt
+        filt[p, i] = a[p, i] * filt[p, i] + (1.0 - a[p, i]) * e
+        # mixing block, f(e) = e_n^2
+        en = min(max(xe, -1.0), 1.0)
+        f = en * en
+        if abs(u_f) > abs(u_p) + 1e-12:
+            out[p, i] = f * u_p + (1.0 - f) * u_f
+        elif abs(u_p) > abs(u_f) + 1e-12:
+            out[p, i] = (1.0 - f) * u_p + f * u_f
+        else:
+            out[p, i] = u_p
+        e_prev[p, i] = e
 
 
 @njit(cache=True)
@@ -342,27 +381,30 @@ def ga_flc_step(q_BN, omega, q_RN, omega_RN_R, rules, vertices, scales, u_max):
 @njit(cache=True)
 def ga_flc_step_into(q_BN, omega, q_RN, omega_RN_R, rules, vertices, scales, u_max, out):
     """:func:`ga_flc_step` writing the saturated command into ``out`` (P, 3)."""
-    m = q_BN.shape[0]
-    for p in range(m):
-        x, y, z, w = _error_quat(q_BN, q_RN, p)
-        vx, vy, vz = omega_RN_R[p, 0], omega_RN_R[p, 1], omega_RN_R[p, 2]
-        if vx == 0.0 and vy == 0.0 and vz == 0.0:
-            nu = (0.0, 0.0, 0.0)
-        else:
-            # Q^T w_d = R(conj(q_BR)) w_d: v + 2 w (r x v) + 2 r x (r x v) with r = -vec(q_BR)
-            rx, ry, rz = -x, -y, -z
-            cx, cy, cz = ry * vz - rz * vy, rz * vx - rx * vz, rx * vy - ry * vx
-            ccx, ccy, ccz = ry * cz - rz * cy, rz * cx - rx * cz, rx * cy - ry * cx
-            nu = (vx + 2.0 * (w * cx + ccx), vy + 2.0 * (w * cy + ccy), vz + 2.0 * (w * cz + ccz))
-        vec = (x, y, z)
-        r = rules[p]
-        for i in range(3):
-            # errors, reference minus measurement (paper 004 Fig. 2 feeds the FLC the error)
-            theta = -2.0 * np.arcsin(min(max(vec[i], -1.0), 1.0))
-            rate = nu[i] - omega[p, i]
-            u = scales[p, 2] * _infer1(scales[p, 0] * theta, scales[p, 1] * rate, vertices[p, 0], vertices[p, 1],
-                                       r, vertices[p, 2])
-            out[p, i] = min(max(u, -u_max), u_max)
+    for p in range(q_BN.shape[0]):
+        ga_flc_row(q_BN, omega, q_RN, omega_RN_R, p, rules, vertices, scales, u_max, out)
+
+
+@njit(cache=True, inline="always")
+def ga_flc_row(q_BN, omega, q_RN, omega_RN_R, p, rules, vertices, scales, u_max, out):
+    """:func:`ga_flc_step_into` for episode ``p`` alone (row ``p`` of every array)."""
+    x, y, z, w = _error_quat(q_BN, q_RN, p)
+    vx, vy, vz = omega_RN_R[p, 0], omega_RN_R[p, 1], omega_RN_R[p, 2]
+    if vx == 0.0 and vy == 0.0 and vz == 0.0:
+        nu = (0.0, 0.0, 0.0)
+    else:
+        # Q^T w_d = R(conj(q_BR)) w_d: v + 2 w (r x v) + 2 r x (r x v) with r = -vec(q_BR)
+        rx, ry, rz = -x, -y, -z
+        cx, cy, cz = ry * vz - rz * vy, rz * vx - rx * vz, rx * vy - ry * vx
+        ccx, ccy, ccz = ry * cz - rz * cy, rz * cx - rx * cz, rx * cy - ry * cx
+        nu = (vx + 2.0 * (w * cx + ccx), vy + 2.0 * (w * cy + ccy), vz + 2.0 * (w * cz + ccz))
+    vec = (x, y, z)
+    for i in range(3):
+        # errors, reference minus measurement (paper 004 Fig. 2 feeds the FLC the error)
+        theta = -2.0 * np.arcsin(min(max(vec[i], -1.0), 1.0))
+        rate = nu[i] - omega[p, i]
+        u = scales[p, 2] * _infer1(scales[p, 0] * theta, scales[p, 1] * rate, vertices, rules, p)
+        out[p, i] = min(max(u, -u_max), u_max)
 
 
 @njit(cache=True)

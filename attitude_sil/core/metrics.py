@@ -11,6 +11,7 @@ from __future__ import annotations
 import numpy as np
 
 from .quaternion import euler_from_quat, quat_error, quat_multiply
+from .trajectory import EpisodeSummary, Trajectory
 
 
 def principal_angle(q_BN: np.ndarray, q_RN: np.ndarray) -> np.ndarray:
@@ -30,7 +31,7 @@ def _axis_turn(axis: int, deg: float) -> np.ndarray:
 PAPER_001_SETTLING_ANGLE = float(2.0 * np.arccos(
     quat_multiply(quat_multiply(_axis_turn(0, 0.1), _axis_turn(1, 0.1)), _axis_turn(2, 0.1))[3]))
 
-__all__ = ["METRIC_KEYS", "episode_report",
+__all__ = ["METRIC_KEYS", "episode_report", "summarize", "step_summary",
            "step_metrics", "metrics_from_trajectory", "segment_metrics", "tracking_metrics", "scenario_metrics",
            "principal_angle", "PAPER_001_SETTLING_ANGLE"]
 
@@ -228,6 +229,48 @@ def scenario_metrics(t: np.ndarray, q_BN: np.ndarray, q_RN: np.ndarray, tau_c_B:
             if idx.size and idx[-1] < t.size - 1:
                 m["settling_time_s"][p] = t[idx[-1] + 1]
     return m
+
+
+def summarize(tr: Trajectory, scenario_values: dict, step_time: float = 0.0) -> EpisodeSummary:
+    """The :class:`EpisodeSummary` of whole trajectories (what the compiled running sums give directly).
+
+    ``tr`` needs ``t``, ``q_BN``, ``q_RN``, ``omega_BN_B``, ``tau_c_B`` and
+    ``u_cmd``; ``wheel_speed`` may be None.
+    """
+    with np.errstate(invalid="ignore"):
+        m = scenario_metrics(tr.t, tr.q_BN, tr.q_RN, tr.tau_c_B, scenario_values, step_time=step_time)
+    finite = np.all(np.isfinite(tr.omega_BN_B), axis=(1, 2)) & np.all(np.isfinite(tr.u_cmd), axis=(1, 2))
+    peak_ws = None if tr.wheel_speed is None else np.max(np.abs(np.nan_to_num(tr.wheel_speed, nan=np.inf)), axis=(1, 2))
+    return EpisodeSummary(metrics=m, finite=finite,
+                          peak_command=np.max(np.abs(np.nan_to_num(tr.u_cmd, nan=np.inf)), axis=(1, 2)),
+                          peak_wheel_speed=peak_ws)
+
+
+def step_summary(sums: np.ndarray, scenario_values: dict, span: np.ndarray) -> EpisodeSummary:
+    """An :class:`EpisodeSummary` from the compiled driver's running sums of a ``step`` scenario.
+
+    Parameters
+    ----------
+    sums : (P, len(batch.SUMMARY_COLUMNS))
+        Running sums (:func:`attitude_sil.core.batch.run_compiled` with ``sums``).
+    scenario_values : dict
+        The ``scenario`` node's values (``metrics.tau_d``, ``metrics.w_os``).
+    span : (P,) rad
+        Size of each episode's step (final minus initial angle); a zero step
+        has no time constant, rise, settling or overshoot (NaN), as in
+        :func:`step_metrics`.
+    """
+    tc, t10, t90, f_max, settle = (sums[:, i].copy() for i in range(5))
+    overshoot = np.maximum(0.0, f_max - 1.0) * 100.0
+    zero_step = np.asarray(span) == 0.0
+    for arr in (tc, t10, t90, overshoot, settle):
+        arr[zero_step] = np.nan
+    m = {"time_constant_s": tc, "rise_time_s": t90 - t10, "settling_time_s": settle, "overshoot_pct": overshoot,
+         "steady_state_error_rad": sums[:, 5].copy(), "iae": sums[:, 6].copy(), "ise": sums[:, 7].copy(),
+         "itae": sums[:, 8].copy(), "control_effort_Nms": sums[:, 9].copy()}
+    m["cost_J"] = np.abs(tc - scenario_values["metrics.tau_d"]) + scenario_values["metrics.w_os"] * overshoot
+    return EpisodeSummary(metrics=m, finite=sums[:, 10] > 0.5, peak_command=sums[:, 11].copy(),
+                          peak_wheel_speed=sums[:, 12].copy())
 
 
 def segment_metrics(

@@ -12,7 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["Trajectory", "WheelStep"]
+__all__ = ["EpisodeSummary", "Trajectory", "WheelStep"]
 
 
 @dataclass
@@ -50,17 +50,18 @@ class Trajectory:
     The batch engine (:func:`attitude_sil.core.engine.simulate`) and a graph
     run (:func:`attitude_sil.graph.trajectory.trajectory_from_messages`, P = 1)
     both return this type, so the cost functions and metrics take either.
+    An array the run was asked not to keep (``simulate(keep=...)``) is None.
     """
 
     t: np.ndarray
-    q_BN: np.ndarray
-    omega_BN_B: np.ndarray
-    q_RN: np.ndarray
-    h_wheels_B: np.ndarray
-    u_cmd: np.ndarray
-    tau_c_B: np.ndarray
-    tau_ext_B: np.ndarray
-    wheel_speed: np.ndarray
+    q_BN: np.ndarray | None
+    omega_BN_B: np.ndarray | None
+    q_RN: np.ndarray | None
+    h_wheels_B: np.ndarray | None
+    u_cmd: np.ndarray | None
+    tau_c_B: np.ndarray | None
+    tau_ext_B: np.ndarray | None
+    wheel_speed: np.ndarray | None
     kind: list
     wheel_angle: np.ndarray | None = None
     wheel_effort: np.ndarray | None = None
@@ -78,3 +79,25 @@ class Trajectory:
                           tau_ext_B=cut(self.tau_ext_B), wheel_speed=cut(self.wheel_speed), kind=self.kind[keep],
                           wheel_angle=cut(self.wheel_angle), wheel_effort=cut(self.wheel_effort),
                           omega_RN_R=cut(self.omega_RN_R))
+
+
+@dataclass
+class EpisodeSummary:
+    """What an evaluation needs of P episodes, without their trajectories: O(P) memory.
+
+    Attributes
+    ----------
+    metrics : dict of (P,) arrays
+        The scenario's metrics (:func:`attitude_sil.core.metrics.scenario_metrics`).
+    finite : (P,) bool
+        Body rate and command stayed finite at every step.
+    peak_command : (P,)
+        Largest |command| component over the run (inf if one was not finite).
+    peak_wheel_speed : (P,) rad/s, or None
+        Largest |wheel speed| over the run (None without wheels).
+    """
+
+    metrics: dict
+    finite: np.ndarray
+    peak_command: np.ndarray
+    peak_wheel_speed: np.ndarray | None = None

@@ -29,9 +29,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from attitude_sil.core.engine import simulate
-from attitude_sil.core.metrics import scenario_metrics
+from attitude_sil.core.engine import simulate, simulate_summary
+from attitude_sil.core.metrics import summarize
 from attitude_sil.core.quaternion import euler_from_quat
+from attitude_sil.core.trajectory import EpisodeSummary, Trajectory
 
 from .spec import TuningSpec, decode
 
@@ -79,7 +80,8 @@ def _add(terms: dict, key: str, value: np.ndarray) -> None:
 
 
 #: candidates simulated at once: a population is run in slices of this many episodes, so an
-#: evaluation holds O(P) results plus one slice's trajectories, not O(P x K) (bench_tuner.py measures it)
+#: evaluation holds O(P) results plus at most one slice's trajectories, not O(P x K) (bench_tuner.py
+#: measures it); runs the compiled driver summarises keep no trajectory at all
 EPISODES_PER_SLICE = 128
 
 
@@ -124,9 +126,10 @@ def evaluate(spec: TuningSpec, x: np.ndarray, first: int = 0, threads: int | Non
         for cond in spec.conditions:
             scn = scenario_for(spec, base, cond)
             seeds = scn.param("disturbance", "noise.seed") + first + np.arange(n)
-            tr = simulate(scn, n, controller_params=params, controller=spec.controller, schedule=[], seeds=seeds,
-                          threads=threads)
-            score(spec, scn, tr, final_time, F, terms, fail)
+            run = simulate if name == "paper004_objective" else simulate_summary  # eq. 7 needs the series
+            result = run(scn, n, controller_params=params, controller=spec.controller, schedule=[], seeds=seeds,
+                         threads=threads)
+            score(spec, scn, result, final_time, F, terms, fail)
     for p, why in enumerate(reasons):
         if why:
             F[p] = PENALTY
@@ -144,24 +147,26 @@ def scenario_for(spec: TuningSpec, base, cond: dict):
     return scn
 
 
-def score(spec: TuningSpec, scn, tr, final_time, F: np.ndarray, terms: dict, fail) -> None:
-    """Add the cost of trajectories ``tr`` (batch arrays with a leading P axis) to F and terms.
+def score(spec: TuningSpec, scn, run: EpisodeSummary | Trajectory, final_time, F: np.ndarray, terms: dict,
+          fail) -> None:
+    """Add the cost of P episodes to F and terms.
 
-    ``tr`` needs ``t``, ``q_BN``, ``q_RN``, ``omega_BN_B``, ``tau_c_B``, ``u_cmd``
-    and ``wheel_speed`` (may be None); ``fail(mask, reason)`` records failures.
+    ``run`` is their :class:`EpisodeSummary`, or their trajectories (batch
+    arrays with a leading P axis: ``t``, ``q_BN``, ``q_RN``, ``omega_BN_B``,
+    ``tau_c_B``, ``u_cmd`` and ``wheel_speed``, which may be None), which are
+    summarised here; ``paper004_objective`` needs the trajectories.
+    ``fail(mask, reason)`` records failures.
     """
     cost = spec.cost
     name = cost["name"]
-    finite = np.all(np.isfinite(tr.omega_BN_B), axis=(1, 2)) & np.all(np.isfinite(tr.u_cmd), axis=(1, 2))
-    fail(~finite, "diverged: non-finite state")
+    s = run if isinstance(run, EpisodeSummary) else summarize(run, scn.values["scenario"],
+                                                              step_time=scn.param("guidance", "step_time"))
+    fail(~s.finite, "diverged: non-finite state")
     wheels = scn.values["wheels"]
-    if wheels["actuator"] == "reaction_wheels" and tr.wheel_speed is not None:
+    if wheels["actuator"] == "reaction_wheels" and s.peak_wheel_speed is not None:
         limit = wheels["motor.speed_max_rpm"] * 2 * np.pi / 60
-        fail(np.max(np.abs(np.nan_to_num(tr.wheel_speed, nan=np.inf)), axis=(1, 2)) >= 0.999 * limit,
-             "runaway wheel speed: a wheel reached its speed limit")
-    with np.errstate(invalid="ignore"):
-        m = scenario_metrics(tr.t, tr.q_BN, tr.q_RN, tr.tau_c_B, scn.values["scenario"],
-                             step_time=scn.param("guidance", "step_time"))
+        fail(s.peak_wheel_speed >= 0.999 * limit, "runaway wheel speed: a wheel reached its speed limit")
+    m = s.metrics
     if name == "paper000_j":
         fail(~np.isfinite(m["cost_J"]), "never reached 63.2 % of the step")
         F[:, 0] += np.nan_to_num(m["cost_J"], nan=PENALTY)
@@ -169,7 +174,7 @@ def score(spec: TuningSpec, scn, tr, final_time, F: np.ndarray, terms: dict, fai
         _add(terms, "overshoot_pct", m["overshoot_pct"])
     elif name in ("paper001_fitness", "ts_ce"):
         lim = float(cost.get("limit", scn.values["wheels"]["torque_limit"]))
-        peak = np.max(np.abs(np.nan_to_num(tr.u_cmd, nan=np.inf)), axis=(1, 2))
+        peak = s.peak_command
         fail(peak > lim, f"death penalty: commanded torque above {lim:g} N m")
         fail(~np.isfinite(m["settling_time_s"]), "never settled")
         ts = np.nan_to_num(m["settling_time_s"], nan=PENALTY)
@@ -187,7 +192,7 @@ def score(spec: TuningSpec, scn, tr, final_time, F: np.ndarray, terms: dict, fai
         _add(terms, "mse", m["mse"])
         _add(terms, "settling_time_s", m["settling_time_s"])
     elif name == "paper004_objective":
-        F[:, 0] += _paper004(tr, scn, cost, final_time, terms)
+        F[:, 0] += _paper004(run, scn, cost, final_time, terms)
 
 
 def _paper004(tr, scn, cost, final_time, terms) -> np.ndarray:
