@@ -25,6 +25,7 @@ from attitude_sil.cli.format import format_bar, format_segments, format_table
 from attitude_sil.core import yaml12
 from attitude_sil.core.linearize import PAPER_000_COMPARISON_GAINS, rmse_table
 from attitude_sil.core.linearize import format_table as format_rmse_table
+from attitude_sil.core.paramfile import section_node
 from attitude_sil.core.scenario import load_scenario
 from attitude_sil.errors import AttitudeSilError, ScenarioError
 from attitude_sil.graph.session import run_graph
@@ -116,7 +117,7 @@ def _load_with_params(scenario: str, params: str | None):
             if not isinstance(values, dict):
                 raise AttitudeSilError(f"{path}: {node}: expected 'ros__parameters:' with a mapping of values")
             try:
-                scn = scn.with_values(str(node).lstrip("/"), **values)
+                scn = scn.with_values(section_node(str(node)), **values)
             except (ScenarioError, KeyError) as exc:
                 raise AttitudeSilError(f"{path}: {exc}") from None
     return scn
