@@ -6,6 +6,8 @@ only); the loaders take ``/**/node``, ``/**``, ``node``, ``/node`` and
 ``/ns/node``; a node given a parameter file with no section for it says so.
 """
 
+from array import array
+
 import numpy as np
 import pytest
 import rclpy
@@ -13,8 +15,10 @@ import yaml
 
 from attitude_sil.core.paramfile import applies_to, node_key, section_node
 from attitude_sil.core.scenario import GRAPH_NODES, load_scenario, scenario_from_dict
+from attitude_sil.errors import ParamClientError
 from attitude_sil.graph import launcher
 from attitude_sil.ros.node import params_file_warning
+from attitude_sil.tools.paramclient import file_values, format_dump
 from attitude_sil.tuning.results import write_best_yaml
 from attitude_sil.tuning.spec import load_spec
 from conftest import CONFIG
@@ -123,3 +127,25 @@ def test_a_node_whose_parameter_file_has_no_section_for_it_warns(tmp_path):
     finally:
         node.destroy_node()
         rclpy.try_shutdown(context=context)
+
+
+def test_param_dump_writes_ros2_form_that_param_load_and_the_loaders_read(tmp_path):
+    text = format_dump("/sat1/controller", {"pid.kp": array("d", [1.0, 2.0, 3.0]), "controller_type": "pid",
+                                            "use_sim_time": True, "ga_flc.rules": [1, 2]})
+    data = yaml.safe_load(text)
+    assert data == {"/sat1/controller": {"ros__parameters": {
+        "pid": {"kp": [1.0, 2.0, 3.0]}, "controller_type": "pid", "use_sim_time": True,
+        "ga_flc": {"rules": [1, 2]}}}}
+    path = tmp_path / "dump.yaml"
+    path.write_text(text)
+    assert file_values(path, "/sat1/controller") == {"pid.kp": [1.0, 2.0, 3.0], "controller_type": "pid",
+                                                     "use_sim_time": True, "ga_flc.rules": [1, 2]}
+    with pytest.raises(ParamClientError, match="no section applies to /controller .keys: /sat1/controller"):
+        file_values(path, "/controller")
+    # every section that applies counts, later ones over earlier ones
+    path.write_text("/**:\n  ros__parameters: {a: 1, b: 1}\n/**/controller:\n  ros__parameters: {b: 2}\n"
+                    "/plant:\n  ros__parameters: {c: 3}\n")
+    assert file_values(path, "/sat1/controller") == {"a": 1, "b": 2}
+    path.write_text("/**/controller: 3\n")
+    with pytest.raises(ParamClientError, match="ros__parameters"):
+        file_values(path, "/controller")
