@@ -187,15 +187,18 @@ def _cmd_replay(args: argparse.Namespace) -> int:
     options = ReplayOptions(rate=args.rate, start=args.start, duration=args.duration, topics=args.topics,
                             loop=args.loop, namespace=args.namespace)
 
+    # a \r progress line only where it redraws: on a terminal, not in a log or a pipe
+    show = not args.quiet and sys.stderr.isatty()
+
     def progress(t, sent):
-        if not args.quiet:
+        if show:
             print(f"\rreplay t={t:8.2f} s  {sent} messages", end="", file=sys.stderr, flush=True)
 
     try:
         sent = replay_bag(args.bag, options, on_progress=progress, should_stop=lambda: stop["flag"])
     finally:
         signal.signal(signal.SIGINT, old)
-    if not args.quiet:
+    if show:
         print(file=sys.stderr)
     print(f"replayed {sent} messages" + (" (interrupted)" if stop["flag"] else ""))
     return 130 if stop["flag"] else 0
