@@ -19,7 +19,7 @@ run: $(STAMP)
 	$(BIN)/attitude-sil run config/hst_roll_step.yaml --swap 5:fuzzy_pid
 
 lint: $(STAMP)
-	$(BIN)/ruff check attitude_sil test bench
+	$(BIN)/ruff check attitude_sil test bench launch
 
 test: $(STAMP) lint
 	$(BIN)/python -m pytest -q test

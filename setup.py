@@ -8,6 +8,18 @@ PACKAGE = "attitude_sil"
 
 NODES = ("plant", "wheels", "disturbance", "guidance", "controller")
 
+#: what the node executables import (package.xml declares the same; test/test_package.py checks both)
+REQUIRES = [
+    "numpy>=1.26",
+    "scipy>=1.11",
+    "PyYAML>=6.0",
+    "mcap>=1.2",
+    "mcap-ros2-support>=0.5",
+    "numba>=0.59",
+]
+#: the tuner, its plots and the root-locus design; the attitude-sil command imports them too
+TUNE = ["pymoo>=0.6.1", "control>=0.10", "matplotlib>=3.7"]
+
 setup(
     name=PACKAGE,
     version="0.1.0",
@@ -16,22 +28,14 @@ setup(
         ("share/ament_index/resource_index/packages", [f"resource/{PACKAGE}"]),
         (f"share/{PACKAGE}", ["package.xml"]),
         (f"share/{PACKAGE}/config", glob("config/*.yaml")),
+        (f"share/{PACKAGE}/launch", glob("launch/*.launch.py")),
     ],
     python_requires=">=3.11",
     # The ROS 2 Jazzy wheels (ros-jazzy-rclpy[fastrtps], ros-jazzy-common-interfaces)
     # are installed by the Makefile; a ROS 2 install provides them instead.
-    install_requires=[
-        "numpy>=1.26",
-        "scipy>=1.11",
-        "PyYAML>=6.0",
-        "mcap>=1.2",
-        "mcap-ros2-support>=0.5",
-        "numba>=0.59",
-        "pymoo>=0.6.1",
-        "control>=0.10",
-        "matplotlib>=3.7",
-    ],
-    extras_require={"test": ["pytest>=8.0", "ruff>=0.5", "rosbags>=0.10"]},
+    # a node-only install: pip install . ; everything (the attitude-sil command): pip install '.[tune]'
+    install_requires=REQUIRES,
+    extras_require={"tune": TUNE, "test": [*TUNE, "pytest>=8.0", "ruff>=0.5", "rosbags>=0.10"]},
     zip_safe=True,
     maintainer="attitude_sil developers",
     description="Spacecraft attitude-control software-in-the-loop simulator on ROS 2 Jazzy",

@@ -175,6 +175,7 @@ def test_info_text(full_bag) -> None:
     assert fields['Start'] == '1.000000000 s (sim time)'
     assert fields['End'] == '2.990000000 s (sim time)'
     assert fields['Bag size'].endswith('KiB')
+    assert fields['Service'] == '0' and lines[-1] == 'Service information:'  # as Jazzy's ros2 bag info
     assert 'Recovered' not in fields
     topic_lines = [line.split('Topic: ', 1)[1] for line in lines if 'Topic: ' in line]
     assert topic_lines == [

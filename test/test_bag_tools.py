@@ -97,7 +97,7 @@ def test_verify_controller_passes_unchanged_and_fails_on_a_changed_gain(swap_bag
     assert ok.returncode == 0, ok.stdout + ok.stderr
     assert ok.stdout.startswith("PASS") and "1 recorded parameter change(s) applied" in ok.stdout
     changed = yaml.safe_load((CONFIG / "hst_roll_step.yaml").read_text())
-    changed["controller"]["ros__parameters"]["fuzzy_pid.kd"] = [90.0, 90.0, 90.0]
+    changed["/**/controller"]["ros__parameters"]["fuzzy_pid.kd"] = [90.0, 90.0, 90.0]
     path = tmp_path / "changed.yaml"
     path.write_text(yaml.safe_dump(changed))
     bad = cli("replay", str(swap_bag), "--verify-controller", "--params", str(path))

@@ -99,7 +99,7 @@ def _param(*args, timeout=60.0):
                           capture_output=True, text=True, timeout=timeout + 60, stdin=subprocess.DEVNULL)
 
 
-def test_live_param_set_from_a_second_process(tmp_path):
+def test_live_param_list_get_set_dump_load_from_a_second_process(tmp_path):
     bag = tmp_path / "live"
     # the episode outlasts any test run (it is stopped with Ctrl-C below), so a slow machine
     # cannot end it before the parameter calls are done: each call waits by condition only
@@ -111,7 +111,7 @@ def test_live_param_set_from_a_second_process(tmp_path):
     try:
         assert "real time" in run.stderr.readline()  # running
         listing = _param("list", "controller")
-        assert listing.returncode == 0 and "pid.kp" in listing.stdout.split()
+        assert listing.returncode == 0 and "  pid.kp" in listing.stdout.splitlines()  # as ros2 param list
         # refusals name the parameter and the rule; the node keeps its values
         for name, value, needle in (("geometric.k", "[1.0, 1.0, 2.0]", "distinct"),
                                     ("pid.kp", "[1.0, 2.0]", "3 elements"),
@@ -120,20 +120,50 @@ def test_live_param_set_from_a_second_process(tmp_path):
             bad = _param("set", "controller", name, value)
             assert bad.returncode == 2, bad.stdout
             assert needle in bad.stderr and name in bad.stderr and "Traceback" not in bad.stderr
+            assert "Setting parameter failed" in bad.stderr
         got = _param("get", "controller", "pid.kp")
-        assert got.stdout.strip() == "[48.894, 48.894, 48.894]", got.stderr
+        assert got.stdout.strip() == "Double values are: [48.894, 48.894, 48.894]", got.stderr
         ok = _param("set", "controller", "controller_type", "ga_flc")
-        assert ok.returncode == 0, ok.stderr
+        assert ok.returncode == 0 and ok.stdout.strip() == "Set parameter successful", ok.stderr
         got = _param("get", "controller", "controller_type")
-        assert got.stdout.strip() == "ga_flc", got.stderr
+        assert got.stdout.strip() == "String value is: ga_flc", got.stderr
         # YAML 1.2 numbers, as the scenario files take them
         assert _param("set", "controller", "pid.kp", "[1e2, 1e2, 1e2]").returncode == 0
-        assert _param("get", "controller", "pid.kp").stdout.strip() == "[100.0, 100.0, 100.0]"
+        assert _param("get", "controller", "pid.kp", "--hide-type").stdout.strip() == "[100.0, 100.0, 100.0]"
         # what the schema marks not changeable at runtime is refused, naming the parameter
         for name, value in (("command", "torque"), ("control_period", "0.02")):
             refused = _param("set", "controller", name, value)
             assert refused.returncode == 2 and name in refused.stderr and "read-only" in refused.stderr, \
                 refused.stderr
+        # dump, edit, load: ros2 param's file form, one verdict line per parameter sent
+        dumped = tmp_path / "controller.yaml"
+        assert _param("dump", "/controller", str(dumped)).returncode == 0
+        data = yaml.safe_load(dumped.read_text())
+        values = data["/controller"]["ros__parameters"]
+        assert values["pid"]["kp"] == [100.0, 100.0, 100.0] and values["controller_type"] == "ga_flc"
+        assert values["use_sim_time"] is True and values["command"] == "voltage"
+        values["pid"]["kd"] = [120.0, 120.0, 120.0]
+        values["pid"]["ki"] = [-1.0, 0.0, 0.0]  # refused by the node: the rest still goes in
+        values["pid"]["nosuch"] = 1.0  # not declared: refused here
+        dumped.write_text(yaml.safe_dump(data))
+        loaded = _param("load", "controller", str(dumped))
+        assert loaded.returncode == 2, loaded.stdout + loaded.stderr
+        assert loaded.stdout.splitlines()[0] == "Set parameter pid.kd successful", loaded.stdout
+        assert "Set parameter pid.ki failed: " in loaded.stderr and ">= 0.0" in loaded.stderr
+        assert "Set parameter pid.nosuch failed: controller has no parameter 'pid.nosuch'" in loaded.stderr
+        assert "Traceback" not in loaded.stderr
+        assert "already at the file's value, not sent" in loaded.stdout  # read-only ones included
+        assert _param("get", "controller", "pid.kd", "--hide-type").stdout.strip() == "[120.0, 120.0, 120.0]"
+        assert _param("get", "controller", "pid.ki", "--hide-type").stdout.strip() == "[0.071, 0.071, 0.071]"
+        # a tuner's best.yaml (/**/controller) applies a tuned design to the live graph
+        best = tmp_path / "best.yaml"
+        best.write_text("/**/controller:\n  ros__parameters:\n    controller_type: pid\n"
+                        "    pid.kp: [60, 60, 60]\n")
+        loaded = _param("load", "/controller", str(best))
+        assert loaded.returncode == 0, loaded.stderr
+        assert loaded.stdout.splitlines() == ["Set parameter controller_type successful",
+                                              "Set parameter pid.kp successful"]
+        assert _param("get", "controller", "pid.kp").stdout.strip() == "Double values are: [60.0, 60.0, 60.0]"
         assert run.poll() is None, "the run ended during the test"
         missing = _param("get", "nosuchnode", "x", "--timeout", "1")
         assert missing.returncode == 2 and "not found" in missing.stderr

@@ -80,7 +80,7 @@ def test_engine_bag_equals_the_graph_recorded_bag(tmp_path):
     snapshots = [yaml.safe_load(yaml.safe_load((d / "metadata.yaml").read_text())["rosbag2_bagfile_information"]
                                 ["custom_data"][PARAMETERS_KEY]) for d in (tmp_path / "graph", tmp_path / "engine")]
     assert snapshots[0] == snapshots[1]
-    assert snapshots[1]["controller"]["ros__parameters"]["pid.kp"] == DESIGN["pid.kp"]
+    assert snapshots[1]["/**/controller"]["ros__parameters"]["pid.kp"] == DESIGN["pid.kp"]
     # the design's parameter change is in /parameter_events, as the graph's parameter service logged it
     changes = {}
     for _, event in e_reader.iter_decoded(["/parameter_events"]):

@@ -115,7 +115,7 @@ def test_exported_yaml_reproduces_the_reported_cost(tmp_path):
     spec = small("tune_hst_pid_ga.yaml", tmp_path, 10, 3)
     run_tuning(spec)
     summary = json.loads((spec.output / "summary.json").read_text())
-    best = yaml.safe_load((spec.output / "best.yaml").read_text())["controller"]["ros__parameters"]
+    best = yaml.safe_load((spec.output / "best.yaml").read_text())["/**/controller"]["ros__parameters"]
     scn = spec.scenarios[0].with_values("controller", **{k: v for k, v in best.items()})
     tr = simulate(scn, 1, controller=best["controller_type"], schedule=[])
     m = scenario_metrics(tr.t, tr.q_BN, tr.q_RN, tr.tau_c_B, scn.values["scenario"])

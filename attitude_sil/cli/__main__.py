@@ -1,5 +1,5 @@
 """``python -m attitude_sil.cli``: the ``attitude-sil`` command."""
 
-from attitude_sil.cli.main import main
+from attitude_sil.cli import main
 
 raise SystemExit(main())

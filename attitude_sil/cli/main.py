@@ -25,6 +25,7 @@ from attitude_sil.cli.format import format_bar, format_segments, format_table
 from attitude_sil.core import yaml12
 from attitude_sil.core.linearize import PAPER_000_COMPARISON_GAINS, rmse_table
 from attitude_sil.core.linearize import format_table as format_rmse_table
+from attitude_sil.core.paramfile import section_node
 from attitude_sil.core.scenario import load_scenario
 from attitude_sil.errors import AttitudeSilError, ScenarioError
 from attitude_sil.graph.session import run_graph
@@ -32,7 +33,7 @@ from attitude_sil.graph.tuner_node import TunerNode, tune
 from attitude_sil.ros.environment import isolated_domain, localhost_environment
 from attitude_sil.storage.info import format_info
 from attitude_sil.storage.reader import open_bag
-from attitude_sil.tools.paramclient import param_command
+from attitude_sil.tools.paramclient import param_command, param_dump, param_load
 from attitude_sil.tools.plot import plot_bag
 from attitude_sil.tools.replay import ReplayOptions, replay_bag
 from attitude_sil.tools.verify import verify_controller
@@ -116,7 +117,7 @@ def _load_with_params(scenario: str, params: str | None):
             if not isinstance(values, dict):
                 raise AttitudeSilError(f"{path}: {node}: expected 'ros__parameters:' with a mapping of values")
             try:
-                scn = scn.with_values(str(node).lstrip("/"), **values)
+                scn = scn.with_values(section_node(str(node)), **values)
             except (ScenarioError, KeyError) as exc:
                 raise AttitudeSilError(f"{path}: {exc}") from None
     return scn
@@ -132,12 +133,23 @@ def _cmd_robustness(args: argparse.Namespace) -> int:
 
 
 def _cmd_param(args: argparse.Namespace) -> int:
-
-    if args.action in ("get", "set") and not args.name:
-        raise AttitudeSilError(f"param {args.action} needs a parameter NAME")
-    if args.action == "set" and args.value is None:
-        raise AttitudeSilError("param set needs a VALUE")
-    print(param_command(args.action, args.node, args.name, args.value, timeout=args.timeout))
+    if args.action == "dump":
+        text = param_dump(args.node, timeout=args.timeout)
+        if args.file:
+            Path(args.file).write_text(text)
+            print(f"wrote {args.file}")
+        else:
+            print(text, end="")
+        return 0
+    if args.action == "load":
+        report = param_load(args.node, args.file, timeout=args.timeout)
+        for line, ok in report.lines:
+            print(line, file=sys.stdout if ok else sys.stderr)
+        if report.unchanged:
+            print(f"{len(report.unchanged)} parameter(s) already at the file's value, not sent")
+        return 2 if report.failed else 0
+    print(param_command(args.action, args.node, getattr(args, "name", None), getattr(args, "value", None),
+                        timeout=args.timeout, hide_type=getattr(args, "hide_type", False)))
     return 0
 
 
@@ -175,15 +187,18 @@ def _cmd_replay(args: argparse.Namespace) -> int:
     options = ReplayOptions(rate=args.rate, start=args.start, duration=args.duration, topics=args.topics,
                             loop=args.loop, namespace=args.namespace)
 
+    # a \r progress line only where it redraws: on a terminal, not in a log or a pipe
+    show = not args.quiet and sys.stderr.isatty()
+
     def progress(t, sent):
-        if not args.quiet:
+        if show:
             print(f"\rreplay t={t:8.2f} s  {sent} messages", end="", file=sys.stderr, flush=True)
 
     try:
         sent = replay_bag(args.bag, options, on_progress=progress, should_stop=lambda: stop["flag"])
     finally:
         signal.signal(signal.SIGINT, old)
-    if not args.quiet:
+    if show:
         print(file=sys.stderr)
     print(f"replayed {sent} messages" + (" (interrupted)" if stop["flag"] else ""))
     return 130 if stop["flag"] else 0
@@ -276,13 +291,30 @@ def build_parser() -> argparse.ArgumentParser:
     rob.add_argument("--params", help="controller parameters to evaluate (e.g. a tuner's best.yaml)")
     rob.add_argument("--json", action="store_true", help="also print the rows as JSON")
     rob.set_defaults(func=_cmd_robustness)
-    param = sub.add_parser("param", help="list, get or set parameters of a running node")
-    param.add_argument("action", choices=("list", "get", "set"))
-    param.add_argument("node", help="node name, e.g. controller")
-    param.add_argument("name", nargs="?", help="parameter name")
-    param.add_argument("value", nargs="?", help="new value, parsed as YAML (e.g. '[1.0, 2.0, 3.0]')")
-    param.add_argument("--timeout", type=float, default=10.0, help="seconds to wait for the node")
-    param.set_defaults(func=_cmd_param)
+    param = sub.add_parser("param", help="list, get, set, dump or load parameters of a running node (like ros2 param)")
+    param_sub = param.add_subparsers(dest="action", required=True)
+    param_actions = {
+        "list": "names of the node's parameters",
+        "get": "a parameter's value ('Double value is: 1.0')",
+        "set": "set a parameter (value parsed as YAML, typed as declared)",
+        "dump": "every parameter as a ROS 2 parameter file (/node: ros__parameters:)",
+        "load": "set parameters from a ROS 2 parameter file (e.g. a tuner's best.yaml); one line per parameter",
+    }
+    for action, text in param_actions.items():
+        p = param_sub.add_parser(action, help=text, description=text)
+        p.add_argument("node", help="node name, e.g. controller or /sat1/controller")
+        if action in ("get", "set"):
+            p.add_argument("name", help="parameter name, e.g. pid.kp")
+        if action == "get":
+            p.add_argument("--hide-type", action="store_true", help="print the value only")
+        if action == "set":
+            p.add_argument("value", help="new value, parsed as YAML (e.g. '[1.0, 2.0, 3.0]')")
+        if action == "dump":
+            p.add_argument("file", nargs="?", help="write the file here (default: print it)")
+        if action == "load":
+            p.add_argument("file", help="parameter YAML; every section that applies to the node counts")
+        p.add_argument("--timeout", type=float, default=10.0, help="seconds to wait for the node")
+        p.set_defaults(func=_cmd_param)
     bag = sub.add_parser("bag", help="bag tools")
     bag_sub = bag.add_subparsers(dest="bag_command", required=True)
     info = bag_sub.add_parser("info", help="duration, start, end, counts and types per topic (like ros2 bag info)")

@@ -1,10 +1,14 @@
 """Scenario files: ROS 2 parameter YAML validated against the node schema.
 
-A scenario is a standard ``node_name: ros__parameters: {...}`` file, so the
-same file can be handed to ``ros2 run ... --params-file``. Sections:
+A scenario is a standard ``/**/node_name: ros__parameters: {...}`` file, so the
+same file can be handed to ``ros2 run ... --params-file`` under any namespace.
+Sections:
 
 * one per node (``plant``, ``wheels``, ``disturbance``, ``guidance``,
-  ``controller``), a leading ``/`` allowed;
+  ``controller``), keyed ``/**/node`` (what the project writes), ``node``,
+  ``/node`` or ``/ns/node`` (:func:`attitude_sil.core.paramfile.section_node`:
+  the namespace part is ignored, a scenario is one graph; two keys naming
+  the same node are merged in file order);
 * ``/**`` for names shared by every node that declares them (``control_period``);
 * ``scenario`` for what only the runner reads (name, metrics settings).
 
@@ -25,6 +29,7 @@ import yaml
 from attitude_sil.errors import ScenarioError
 
 from . import yaml12
+from .paramfile import node_key, section_node
 from .params import GLOBAL_NODE, NODE_PARAMS, SCENARIO_NODE
 
 __all__ = ["ScenarioError", "Scenario", "load_scenario", "scenario_from_dict", "GRAPH_NODES"]
@@ -114,13 +119,13 @@ class Scenario:
         for node in GRAPH_NODES:
             values = dict(self.values[node])
             values.update({k: v for k, v in extra.items() if k in values})
-            out[node] = {"ros__parameters": values}
+            out[node_key(node)] = {"ros__parameters": values}
         return yaml.safe_dump(out, sort_keys=True)
 
     def params_file_dict(self) -> dict:
-        """The explicit values as a ROS 2 parameter YAML mapping."""
+        """The explicit values as a ROS 2 parameter YAML mapping (``/**/node`` keys)."""
         return {
-            node: {"ros__parameters": dict(vals)}
+            node_key(node): {"ros__parameters": dict(vals)}
             for node, vals in self.explicit.items()
             if node in GRAPH_NODES and vals
         }
@@ -160,9 +165,7 @@ def scenario_from_dict(data: Any, source: str = "<dict>", check: bool = True) ->
     explicit: dict[str, dict[str, Any]] = {}
     sections: dict[str, dict] = {}
     for raw_node, section in data.items():
-        node = str(raw_node)
-        if node != GLOBAL_NODE:
-            node = node.lstrip("/")
+        node = section_node(str(raw_node))
         if node not in known_nodes:
             raise ScenarioError(f"{source}: unknown section {raw_node!r}{_suggest(node, known_nodes)}")
         if not isinstance(section, dict) or set(section) != {"ros__parameters"}:
@@ -172,7 +175,7 @@ def scenario_from_dict(data: Any, source: str = "<dict>", check: bool = True) ->
             params = {}
         if not isinstance(params, dict):
             raise ScenarioError(f"{source}: {raw_node}.ros__parameters must be a mapping")
-        sections[node] = _flatten(params)
+        sections.setdefault(node, {}).update(_flatten(params))
     # wildcard first, node sections override it
     order = [GLOBAL_NODE] + [n for n in sections if n != GLOBAL_NODE]
     for node in order:

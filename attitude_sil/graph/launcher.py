@@ -26,6 +26,7 @@ import yaml
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 
+from attitude_sil.core.paramfile import node_key
 from attitude_sil.core.params import spec_for
 from attitude_sil.core.scenario import GRAPH_NODES, Scenario
 from attitude_sil.errors import RunError
@@ -94,7 +95,8 @@ def start_processes(scn: Scenario, extra: dict[str, Any], tmp: Path,
         values = {k: v for k, v in node_overrides(scn, name, extra).items() if v != []}
         values["use_sim_time"] = True
         path = tmp / f"{name}.yaml"
-        path.write_text(yaml.safe_dump({name: {"ros__parameters": values}}))
+        # /**/name: a plain "name:" key would not apply to the node under a namespace
+        path.write_text(yaml.safe_dump({node_key(name): {"ros__parameters": values}}))
         cmd = [sys.executable, "-m", f"attitude_sil.nodes.{name}_node", "--ros-args", "--params-file", str(path)]
         if namespace:
             cmd += ["-r", f"__ns:=/{namespace}", *clock_remap(namespace)]

@@ -10,11 +10,13 @@ from __future__ import annotations
 
 import signal
 import sys
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
+from pathlib import Path
 from typing import Any
 
 import numpy as np
 import rclpy
+import yaml
 from rcl_interfaces.msg import SetParametersResult
 from rclpy.clock import Clock, ClockType
 from rclpy.executors import ExternalShutdownException
@@ -23,6 +25,8 @@ from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.signals import SignalHandlerOptions
 
+from attitude_sil.core import yaml12
+from attitude_sil.core.paramfile import node_key, sections_for
 from attitude_sil.core.params import NODE_PARAMS
 from attitude_sil.core.scenario import Scenario, scenario_from_dict
 from attitude_sil.errors import AttitudeSilError, ScenarioError
@@ -31,7 +35,7 @@ from attitude_sil.ros.contract import message_class
 from attitude_sil.ros.parameters import PARAMETER_TYPES, descriptor
 from attitude_sil.ros.qos import LOCKSTEP_QOS
 
-__all__ = ["SchemaNode", "run_node", "steady_clock"]
+__all__ = ["SchemaNode", "params_file_warning", "run_node", "steady_clock"]
 
 
 def steady_clock() -> Clock:
@@ -133,6 +137,45 @@ class SchemaNode(Node):
         return bool(np.all(np.isfinite(array)))
 
 
+def params_file_warning(node: Node, args: Sequence[str]) -> str:
+    """A warning if ``args`` give ``--params-file`` files and no section of any applies to ``node``.
+
+    rcl silently ignores a section keyed for another node or namespace (a
+    plain ``controller:`` does not apply to ``/sat1/controller``), so a node
+    would run on its defaults without a word.
+
+    Parameters
+    ----------
+    node : rclpy.node.Node
+        The node, already created (its namespace resolved).
+    args : sequence of str
+        The command line the node was given (``sys.argv`` for a console script).
+
+    Returns
+    -------
+    str
+        The warning, or ``''`` when no file was given or one has a section for the node.
+    """
+    files = [args[i + 1] for i, a in enumerate(args[:-1]) if a == "--params-file"]
+    if not files:
+        return ""
+    fqn = node.get_fully_qualified_name()
+    keys: list[str] = []
+    for name in files:
+        try:
+            data = yaml12.load(Path(name).read_text())
+        except (OSError, yaml.YAMLError):
+            return ""  # rcl read the file already; nothing to say about what it could not
+        if not isinstance(data, dict):
+            continue
+        if sections_for(data, fqn):
+            return ""
+        keys += [str(k) for k in data]
+    return (f"no section of the parameter file(s) {', '.join(files)} applies to {fqn} (keys: "
+            f"{', '.join(keys) or 'none'}); none of their values is applied. '{node_key(node.get_name())}:' "
+            "or '/**:' apply under any namespace")
+
+
 def run_node(factory: Callable[[], Node], args: list[str] | None = None) -> int:
     """Spin one node in its own process until Ctrl-C, SIGTERM or SIGHUP; the body of every ``main()``.
 
@@ -156,6 +199,9 @@ def run_node(factory: Callable[[], Node], args: list[str] | None = None) -> int:
     executor = None
     try:
         node = factory()
+        warning = params_file_warning(node, sys.argv if args is None else args)
+        if warning:
+            node.get_logger().warning(warning)
         executor = EventsExecutor()
         executor.add_node(node)
         # spin_once in a loop: EventsExecutor.spin() of rclpy 7.1 left service

@@ -15,6 +15,7 @@ from .writer import (
     BagClosedError,
     BagWriteError,
     BagWriter,
+    parse_qos_profiles,
     qos_profiles_yaml,
 )
 
@@ -26,6 +27,7 @@ __all__ = [
     'BagWriter',
     'message_definition',
     'normalize_type_name',
+    'parse_qos_profiles',
     'qos_profiles_yaml',
     'type_description_hash',
 ]

@@ -61,7 +61,8 @@ def format_info(reader: BagReader) -> str:
 
             Topic: /attitude | Type: geometry_msgs/msg/QuaternionStamped | Count: 2001 | Serialization Format: cdr
 
-        plus ``Recovered: yes (summary missing, read by scanning)`` when the
+        then ``Service: 0`` and ``Service information:`` (Jazzy's service
+        lines; the simulator records no services), plus ``Recovered: yes (summary missing, read by scanning)`` when the
         bag was recovered from files without a summary, and a ``Note`` when
         the log times span more than ten years (sim and wall-clock stamps
         mixed).
@@ -89,6 +90,9 @@ def format_info(reader: BagReader) -> str:
         add('Topic information' if i == 0 else '',
             f'Topic: {topic.name} | Type: {topic.type} | Count: {topic.count} | '
             f'Serialization Format: {topic.message_encoding}')
+    # ros2 bag info of Jazzy goes on with the recorded services: a run records none
+    add('Service', '0')
+    add('Service information', '')
     if reader.recovered:
         add('Recovered', 'yes (summary missing, read by scanning)')
     if reader.duration_ns > _MAX_PLAUSIBLE_SPAN_NS:

@@ -77,6 +77,10 @@ class TopicInfo:
         Serialization format, ``cdr`` for ROS 2.
     schema_encoding : str
         Encoding of the stored type definition, ``ros2msg`` for ROS 2.
+    offered_qos_profiles : str
+        The QoS the recording saw offered, as rosbag2 stores it (YAML, see
+        :func:`~attitude_sil.storage.writer.parse_qos_profiles`): from the
+        channel's metadata, else from ``metadata.yaml``; empty if neither has it.
     """
 
     name: str
@@ -84,6 +88,7 @@ class TopicInfo:
     count: int
     message_encoding: str
     schema_encoding: str
+    offered_qos_profiles: str = ''
 
 
 class RawMessage(NamedTuple):
@@ -399,6 +404,21 @@ def _load_metadata_yaml(directory: Path) -> dict[str, Any] | None:
     return info if isinstance(info, dict) else None
 
 
+def _metadata_qos(metadata: dict[str, Any]) -> dict[str, str]:
+    """Topic -> ``offered_qos_profiles`` as a YAML string, from ``metadata.yaml`` (a list in version 9)."""
+    out = {}
+    for entry in metadata.get('topics_with_message_count') or []:
+        topic = entry.get('topic_metadata') if isinstance(entry, dict) else None
+        if not isinstance(topic, dict) or not isinstance(topic.get('name'), str):
+            continue
+        qos = topic.get('offered_qos_profiles')
+        if isinstance(qos, list):
+            qos = yaml.safe_dump(qos, sort_keys=False)
+        if isinstance(qos, str):
+            out[topic['name']] = qos
+    return out
+
+
 def _bag_files(path: Path) -> tuple[list[Path], dict[str, Any] | None]:
     if not path.exists():
         raise BagError(f'{path}: no such file or directory')
@@ -465,6 +485,7 @@ class BagReader:
     def __init__(self, files: list[_McapFile], metadata: dict[str, Any] | None = None) -> None:
         self._files = files
         self._metadata = metadata or {}
+        listed_qos = _metadata_qos(self._metadata)
         topics: dict[str, TopicInfo] = {}
         for info in files:
             for channel_id, channel in info.channels.items():
@@ -480,6 +501,8 @@ class BagReader:
                     count=(old.count if old else 0) + info.counts.get(channel_id, 0),
                     message_encoding=channel.message_encoding,
                     schema_encoding=schema.encoding if schema is not None else '',
+                    offered_qos_profiles=(channel.metadata or {}).get('offered_qos_profiles')
+                    or (old.offered_qos_profiles if old else '') or listed_qos.get(channel.topic, ''),
                 )
         self._topics = dict(sorted(topics.items()))
 

@@ -68,6 +68,7 @@ __all__ = [
     'BagWriteError',
     'BagWriter',
     'PARAMETERS_KEY',
+    'parse_qos_profiles',
     'qos_profiles_yaml',
 ]
 
@@ -173,6 +174,28 @@ def _dump_qos_cached(profiles_json: str) -> str:
 def _parse_qos(text: str) -> list[dict[str, Any]]:
     """:func:`_parse_qos_uncached`, remembered per text (a fresh copy each call)."""
     return copy.deepcopy(_parse_qos_cached(text))
+
+
+def parse_qos_profiles(text: str) -> list[dict[str, Any]]:
+    """Read an ``offered_qos_profiles`` YAML string (any rosbag2 format version).
+
+    Parameters
+    ----------
+    text : str
+        The string a bag records per topic; empty means the default profile.
+
+    Returns
+    -------
+    list of dict
+        One complete profile per offer (``history``, ``depth``,
+        ``reliability``, ``durability``, ... as version-9 names).
+
+    Raises
+    ------
+    ValueError
+        Not valid YAML, an unknown key or an invalid policy.
+    """
+    return _parse_qos(text)
 
 
 @functools.lru_cache(maxsize=64)

@@ -2,7 +2,9 @@
 
 The project's stand-in for ``ros2 bag play``. Messages go out as the recorded
 CDR bytes (no decode/encode), ``/clock`` included, so live nodes with
-``use_sim_time`` consume them as if the plant were running. Timing follows the
+``use_sim_time`` consume them as if the plant were running. Each topic is
+offered with the QoS its bag recorded (``offered_qos_profiles``, adapted as
+``ros2 bag play`` does: :func:`attitude_sil.ros.qos.recorded_qos`). Timing follows the
 log times (the recorded sim-time stamps) scaled by ``rate``; ``rate = 0`` sends
 as fast as possible. ``/parameter_events`` is not republished unless asked for
 (a replayed parameter event would look like a change of the live nodes).
@@ -21,7 +23,7 @@ from rclpy.node import Node
 from attitude_sil.errors import BagError
 from attitude_sil.ros.contract import CLOCK, PARAMETER_EVENTS, message_class
 from attitude_sil.ros.environment import localhost_environment
-from attitude_sil.ros.qos import LOCKSTEP_QOS
+from attitude_sil.ros.qos import recorded_qos
 from attitude_sil.storage.reader import open_bag
 
 __all__ = ["ReplayOptions", "replay_bag", "remap_topic"]
@@ -81,6 +83,13 @@ def _select(reader, wanted: list[str] | None) -> list[str]:
     return chosen
 
 
+def _topic_qos(reader, topic: str):
+    try:
+        return recorded_qos(reader.topics[topic].offered_qos_profiles)
+    except ValueError as exc:
+        raise BagError(f"{reader.paths[0]}: {topic}: {exc}") from None
+
+
 def replay_bag(path: str | Path, options: ReplayOptions, context=None,
                on_progress: Callable[[float, int], None] | None = None,
                should_stop: Callable[[], bool] | None = None) -> int:
@@ -113,7 +122,7 @@ def replay_bag(path: str | Path, options: ReplayOptions, context=None,
     node = Node("replay", context=context)
     try:
         pubs = {t: node.create_publisher(message_class(reader.topics[t].type), remap_topic(t, options.namespace),
-                                         LOCKSTEP_QOS) for t in topics}
+                                         _topic_qos(reader, t)) for t in topics}
         if options.wait_for_subscribers > 0:
             deadline = time.monotonic() + options.connect_timeout
             while any(p.get_subscription_count() < options.wait_for_subscribers for p in pubs.values()):

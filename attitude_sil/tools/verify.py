@@ -25,7 +25,8 @@ from rclpy.experimental import EventsExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter, parameter_value_to_python
 
-from attitude_sil.core.params import spec_for
+from attitude_sil.core.paramfile import sections_for
+from attitude_sil.core.params import GLOBAL_NODE, spec_for
 from attitude_sil.core.scenario import load_scenario, scenario_from_dict
 from attitude_sil.errors import BagError, ScenarioError
 from attitude_sil.nodes.controller_node import ControllerNode
@@ -95,7 +96,12 @@ def controller_parameters(bag_path: str | Path, params_file: str | Path | None =
         raise BagError(f"{path}: the bag holds no parameter snapshot (recorded by another tool, or the run "
                        "was killed before its metadata was written); give --params FILE")
     data = yaml.safe_load(snapshot)
-    return scenario_from_dict({"controller": data["controller"]}, source=f"{meta}", check=False).values["controller"]
+    # "/**/controller" (this version) or "controller" (bags recorded before it)
+    sections = dict(sections_for(data, "/controller")) if isinstance(data, dict) else {}
+    sections.pop(GLOBAL_NODE, None)
+    if not sections:
+        raise BagError(f"{meta}: the parameter snapshot holds no controller section; give --params FILE")
+    return scenario_from_dict(sections, source=f"{meta}", check=False).values["controller"]
 
 
 def _param_changes(reader) -> list[tuple[int, dict]]:

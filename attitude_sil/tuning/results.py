@@ -8,6 +8,7 @@ from pathlib import Path
 import numpy as np
 import yaml
 
+from attitude_sil.core.paramfile import node_key
 from attitude_sil.core.params import spec_for
 
 from .spec import TuningSpec, decode
@@ -45,9 +46,13 @@ def parameter_values(params: dict[str, np.ndarray], i: int) -> dict:
 
 
 def write_best_yaml(spec: TuningSpec, x: np.ndarray, path: Path) -> dict:
-    """The winning controller parameters as a ready-to-use ROS 2 parameter file."""
+    """The winning controller parameters as a ready-to-use ROS 2 parameter file.
+
+    Its section is ``/**/controller``, so it applies to a controller under any
+    namespace (``--params-file``, ``run --params``, ``param load``).
+    """
     params, _ = decode(spec, x[None])
     values = {"controller_type": spec.controller, **parameter_values(params, 0)}
     path.write_text(f"# best of tuning run {spec.name} ({spec.path.name})\n" +
-                    yaml.safe_dump({"controller": {"ros__parameters": values}}, sort_keys=False))
+                    yaml.safe_dump({node_key("controller"): {"ros__parameters": values}}, sort_keys=False))
     return values

@@ -1,0 +1,64 @@
+"""Start the attitude_sil graph as ``attitude-sil run`` does: ``ros2 launch attitude_sil sim.launch.py``.
+
+Needs a full ROS 2 install (``launch`` and ``launch_ros`` are not on PyPI) and
+the package built with colcon. The five node executables, from the node list
+the runner starts (:data:`attitude_sil.core.scenario.GRAPH_NODES`), each on
+simulation time (``use_sim_time: true``, the plant publishes ``/clock``) and
+given one parameter file.
+
+Launch arguments:
+
+* ``namespace`` (default none): the whole graph, its ``/clock`` included, under
+  this namespace (as ``run --namespace``). The parameter files key their
+  sections ``/**/node``, so they apply under any namespace.
+* ``params_file`` (default: the installed ``config/hst_roll_step.yaml``): a
+  scenario or parameter file, e.g. ``config/hawaiisat_lvlh.yaml``.
+* ``controller_type`` (default: the file's): ``pid``, ``fuzzy_pid``,
+  ``ga_flc`` or ``geometric`` (as ``run --controller``).
+
+Unlike ``attitude-sil run``, the plant starts the episode by itself once every
+topic is matched (``autostart``, the nodes' default) and nothing is recorded
+(``ros2 bag record -s mcap -a`` records it) or measured.
+"""
+
+from launch import LaunchDescription
+from launch.actions import DeclareLaunchArgument
+from launch.conditions import IfCondition, UnlessCondition
+from launch.substitutions import LaunchConfiguration, PathJoinSubstitution, PythonExpression
+from launch_ros.actions import Node
+from launch_ros.substitutions import FindPackageShare
+
+from attitude_sil.core.scenario import GRAPH_NODES
+
+PACKAGE = "attitude_sil"
+DEFAULT_PARAMS = ("config", "hst_roll_step.yaml")
+
+
+def generate_launch_description() -> LaunchDescription:
+    """The graph's five nodes and the launch arguments ``namespace``, ``params_file``, ``controller_type``."""
+    namespace = LaunchConfiguration("namespace")
+    params_file = LaunchConfiguration("params_file")
+    controller_type = LaunchConfiguration("controller_type")
+    # /clock moves into the namespace with the graph, as the runner remaps it
+    clock = PythonExpression(["'/' + '", namespace, "'.strip('/') + '/clock' if '", namespace,
+                              "'.strip('/') else '/clock'"])
+    chosen = PythonExpression(["'", controller_type, "' != ''"])
+    actions = [
+        DeclareLaunchArgument("namespace", default_value="", description="namespace of the whole graph"),
+        DeclareLaunchArgument("params_file",
+                              default_value=PathJoinSubstitution([FindPackageShare(PACKAGE), *DEFAULT_PARAMS]),
+                              description="scenario / parameter YAML given to every node"),
+        DeclareLaunchArgument("controller_type", default_value="",
+                              description="pid, fuzzy_pid, ga_flc or geometric (default: the file's)"),
+    ]
+    for name in GRAPH_NODES:
+        common = dict(package=PACKAGE, executable=f"{name}_node", name=name, namespace=namespace,
+                      remappings=[("/clock", clock)], output="screen", emulate_tty=True)
+        parameters = [params_file, {"use_sim_time": True}]
+        if name == "controller":
+            actions.append(Node(**common, parameters=parameters, condition=UnlessCondition(chosen)))
+            actions.append(Node(**common, parameters=[*parameters, {"controller_type": controller_type}],
+                                condition=IfCondition(chosen)))
+        else:
+            actions.append(Node(**common, parameters=parameters))
+    return LaunchDescription(actions)
