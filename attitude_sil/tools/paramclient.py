@@ -8,6 +8,7 @@ sets a double array). A refusal prints the node's reason and exits non-zero.
 
 from __future__ import annotations
 
+import math
 import time
 from typing import Any
 
@@ -20,6 +21,7 @@ from rclpy.parameter_client import AsyncParameterClient
 
 from attitude_sil.core import yaml12
 from attitude_sil.errors import ParamClientError
+from attitude_sil.ros.contract import check_node_name, check_parameter_name
 from attitude_sil.ros.environment import localhost_environment
 
 __all__ = ["ParamClientError", "param_command"]
@@ -62,6 +64,11 @@ def param_command(action: str, node_name: str, name: str | None = None, value: s
     ParamClientError
         Node not found, unknown parameter, bad value or refusal.
     """
+    if not (isinstance(timeout, (int, float)) and math.isfinite(timeout) and timeout > 0):
+        raise ParamClientError(f"--timeout must be a finite number of seconds > 0, got {timeout}")
+    check_node_name(node_name)
+    if name is not None:
+        check_parameter_name(name)
     localhost_environment()
     context = rclpy.Context()
     rclpy.init(args=[], context=context)
