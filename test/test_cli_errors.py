@@ -109,7 +109,7 @@ def test_bad_parameter_files(tmp_path, name, content, needle):
     (("tune", "config/tune_hst_pid_ga.yaml", "--set", "algorithm.pop_size=1.5"), "algorithm.pop_size"),
     (("tune", "config/tune_hst_pid_ga.yaml", "--set", "seed=[1"), "not a YAML value"),
     (("tune", "config/tune_hst_pid_ga.yaml", "--set", "output=config/hst_roll_step.yaml/out", "--no-record"),
-     "Not a directory"),
+     "hst_roll_step.yaml is a file"),
 ])
 def test_bad_values_on_the_command_line(args, needle):
     assert_one_line_error(run_cli(*args), needle)

@@ -25,20 +25,22 @@ from attitude_sil.cli.format import format_bar, format_segments, format_table
 from attitude_sil.core import yaml12
 from attitude_sil.core.linearize import PAPER_000_COMPARISON_GAINS, rmse_table
 from attitude_sil.core.linearize import format_table as format_rmse_table
-from attitude_sil.core.paramfile import section_node
-from attitude_sil.core.scenario import load_scenario
-from attitude_sil.errors import AttitudeSilError, ScenarioError
+from attitude_sil.core.scenario import load_scenario, with_parameter_file
+from attitude_sil.errors import AttitudeSilError
 from attitude_sil.graph.session import run_graph
 from attitude_sil.graph.tuner_node import TunerNode, tune
 from attitude_sil.ros.environment import isolated_domain, localhost_environment
+from attitude_sil.ros.signals import StopSignals
 from attitude_sil.storage.info import format_info
 from attitude_sil.storage.reader import open_bag
 from attitude_sil.tools.paramclient import param_command, param_dump, param_load
 from attitude_sil.tools.plot import plot_bag
 from attitude_sil.tools.replay import ReplayOptions, replay_bag
 from attitude_sil.tools.verify import verify_controller
+from attitude_sil.tuning.optimize import check_output
 from attitude_sil.tuning.plot import plot_results
 from attitude_sil.tuning.robustness import format_robustness, robustness
+from attitude_sil.tuning.spec import apply_overrides, load_spec
 
 __all__ = ["build_parser", "main"]
 
@@ -53,29 +55,33 @@ def _announce_domain() -> None:
 
 def _cmd_run(args: argparse.Namespace) -> int:
     scn = _load_with_params(args.scenario, args.params)
-    _announce_domain()
     if args.duration is not None and not (math.isfinite(args.duration) and args.duration > 0):
         raise AttitudeSilError(f"--duration must be a finite number of seconds > 0, got {args.duration}")
     if args.swap:
         times = list(scn.param("scenario", "schedule.times"))
         kinds = list(scn.param("scenario", "schedule.controller_types"))
         for item in args.swap:
-            t, _, kind = item.partition(":")
+            t, colon, kind = item.partition(":")
             try:
                 times.append(float(t))
             except ValueError:
-                raise AttitudeSilError(f"--swap takes TIME:TYPE, e.g. 2.0:fuzzy_pid; got {item!r}") from None
+                colon = ""
+            if not colon:
+                raise AttitudeSilError(f"--swap takes TIME:TYPE, e.g. 2.0:fuzzy_pid; got {item!r}")
             kinds.append(kind)
         order = sorted(range(len(times)), key=times.__getitem__)
-        scn = scn.with_values("scenario", **{"schedule.times": [times[i] for i in order],
-                                             "schedule.controller_types": [kinds[i] for i in order]})
+        try:
+            scn = scn.with_values("scenario", **{"schedule.times": [times[i] for i in order],
+                                                 "schedule.controller_types": [kinds[i] for i in order]})
+        except AttitudeSilError as exc:
+            raise AttitudeSilError(f"--swap: {exc}") from None
     record = None
     if not args.no_record:
         record = Path(args.record) if args.record else Path("bags") / (
             f"{scn.name}_{datetime.now().strftime('%Y%m%d_%H%M%S')}")
     result = run_graph(scn, duration=args.duration, controller=args.controller, record_dir=record,
                        processes=args.processes, real_time=args.real_time, progress=not args.quiet,
-                       namespace=args.namespace)
+                       namespace=args.namespace, before_start=_announce_domain)
     print(format_table(result.metrics))
     if result.metrics.get("segments"):
         print(format_segments(result.metrics["segments"]))
@@ -100,27 +106,7 @@ def _cmd_linearize(args: argparse.Namespace) -> int:
 def _load_with_params(scenario: str, params: str | None):
     """A scenario with a controller parameter file (e.g. a tuner's best.yaml) laid over it."""
     scn = load_scenario(scenario)
-    if params:
-        path = Path(params)
-        if not path.is_file():
-            raise AttitudeSilError(f"{path}: no such parameter file")
-        try:
-            data = yaml12.load(path.read_text()) or {}
-        except yaml.YAMLError as exc:
-            first = str(exc).splitlines()[0] if str(exc) else "syntax error"
-            raise AttitudeSilError(f"{path}: not valid YAML ({first})") from None
-        if not isinstance(data, dict):
-            raise AttitudeSilError(f"{path}: a parameter file maps node names to ros__parameters, "
-                                   f"got a {type(data).__name__}")
-        for node, section in data.items():
-            values = (section or {}).get("ros__parameters", {}) if isinstance(section, dict) else None
-            if not isinstance(values, dict):
-                raise AttitudeSilError(f"{path}: {node}: expected 'ros__parameters:' with a mapping of values")
-            try:
-                scn = scn.with_values(section_node(str(node)), **values)
-            except (ScenarioError, KeyError) as exc:
-                raise AttitudeSilError(f"{path}: {exc}") from None
-    return scn
+    return with_parameter_file(scn, params) if params else scn
 
 
 def _cmd_robustness(args: argparse.Namespace) -> int:
@@ -159,7 +145,18 @@ def _cmd_bag(args: argparse.Namespace) -> int:
     return 0
 
 
+def _check_png(out: str) -> None:
+    """``-o`` must name a PNG file that can be created (refused before any bag is read)."""
+    path = Path(out)
+    if path.suffix.lower() != ".png" or path.is_dir():
+        raise AttitudeSilError(f"-o {out}: give a .png file to write")
+    parent = next((p for p in path.parents if p.exists()), Path("."))
+    if not parent.is_dir():
+        raise AttitudeSilError(f"-o {out}: {parent} is a file, not a directory")
+
+
 def _cmd_plot(args: argparse.Namespace) -> int:
+    _check_png(args.output)
     path = Path(args.path)
     if (path / "summary.json").is_file() or (path / "evaluations.jsonl").is_file():
         out = plot_results(path, args.output)
@@ -178,12 +175,6 @@ def _cmd_replay(args: argparse.Namespace) -> int:
               f"{result.swaps} recorded parameter change(s) applied")
         return 0 if result.passed else 1
 
-    stop = {"flag": False}
-
-    def on_sigint(signum, frame):
-        stop["flag"] = True
-
-    old = signal.signal(signal.SIGINT, on_sigint)
     options = ReplayOptions(rate=args.rate, start=args.start, duration=args.duration, topics=args.topics,
                             loop=args.loop, namespace=args.namespace)
 
@@ -194,14 +185,12 @@ def _cmd_replay(args: argparse.Namespace) -> int:
         if show:
             print(f"\rreplay t={t:8.2f} s  {sent} messages", end="", file=sys.stderr, flush=True)
 
-    try:
-        sent = replay_bag(args.bag, options, on_progress=progress, should_stop=lambda: stop["flag"])
-    finally:
-        signal.signal(signal.SIGINT, old)
+    with StopSignals() as stop:
+        sent = replay_bag(args.bag, options, on_progress=progress, should_stop=lambda: stop.requested)
     if show:
         print(file=sys.stderr)
-    print(f"replayed {sent} messages" + (" (interrupted)" if stop["flag"] else ""))
-    return 130 if stop["flag"] else 0
+    print(f"replayed {sent} messages" + (" (interrupted)" if stop.requested else ""))
+    return stop.exit_code
 
 
 def _cmd_tune(args: argparse.Namespace) -> int:
@@ -214,13 +203,12 @@ def _cmd_tune(args: argparse.Namespace) -> int:
             overrides[key] = yaml12.load(value)
         except yaml.YAMLError:
             raise AttitudeSilError(f"--set {key}: {value!r} is not a YAML value") from None
-    stop = {"flag": False}
+    spec = apply_overrides(load_spec(args.spec), overrides)  # bad input is refused before ROS starts
+    check_output(spec, args.resume)
 
-    def on_sigint(signum, frame):
-        if stop["flag"]:
-            raise KeyboardInterrupt
-        stop["flag"] = True
-        print("\nstopping after this generation (Ctrl-C again to stop now)", file=sys.stderr)
+    def on_first(signum: int) -> None:
+        print(f"{signal.Signals(signum).name}: stopping after this generation (again to stop now)",
+              file=sys.stderr, flush=True)
 
     _announce_domain()
     localhost_environment()
@@ -233,12 +221,11 @@ def _cmd_tune(args: argparse.Namespace) -> int:
         if not args.quiet:
             print(format_bar(stats), file=sys.stderr, flush=True)
 
-    old = signal.signal(signal.SIGINT, on_sigint)
     try:
-        outcome = tune(args.spec, resume=args.resume, overrides=overrides, record=not args.no_record,
-                       on_progress=progress, should_stop=lambda: stop["flag"])
+        with StopSignals(on_first=on_first, second_stops_now=True) as stop:
+            outcome = tune(spec, resume=args.resume, overrides=overrides, record=not args.no_record,
+                           on_progress=progress, should_stop=lambda: stop.requested)
     finally:
-        signal.signal(signal.SIGINT, old)
         node.destroy_node()
         rclpy.try_shutdown(context=context)
     out = outcome.spec.output
@@ -254,12 +241,19 @@ def _cmd_tune(args: argparse.Namespace) -> int:
     print(f"results in {summary['output']} (evaluations.csv/.json, best.yaml, summary.json, bags/)")
     if args.json:
         print(json.dumps(summary))
-    return 130 if summary.get("interrupted") else 0
+    return (stop.exit_code or 130) if summary.get("interrupted") else 0
+
+
+class _Parser(argparse.ArgumentParser):
+    """argparse with a one-line error: ``attitude-sil run: error: ... (attitude-sil run --help)``, exit 2."""
+
+    def error(self, message: str):
+        self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
 
 
 def build_parser() -> argparse.ArgumentParser:
     """The ``attitude-sil`` argument parser with every subcommand."""
-    parser = argparse.ArgumentParser(prog="attitude-sil", description="Spacecraft attitude-control SIL on ROS 2.")
+    parser = _Parser(prog="attitude-sil", description="Spacecraft attitude-control SIL on ROS 2.")
     sub = parser.add_subparsers(dest="command", required=True)
     run = sub.add_parser("run", help="run a scenario headless through the ROS 2 graph")
     run.add_argument("scenario", help="scenario parameter YAML (config/*.yaml)")
@@ -359,6 +353,6 @@ def main(argv: list[str] | None = None) -> int:
         signum = getattr(exc, "signum", signal.SIGINT)
         print(f"interrupted ({signal.Signals(signum).name}); everything recorded so far is kept", file=sys.stderr)
         return 128 + int(signum)
-    except (AttitudeSilError, ValueError, OSError) as exc:
+    except (AttitudeSilError, OSError) as exc:
         print(f"attitude-sil: error: {exc}", file=sys.stderr)
         return 2

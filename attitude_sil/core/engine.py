@@ -22,7 +22,7 @@ from attitude_sil.errors import ScenarioError
 
 from .actuators import SpeedLoopWheels, TorqueActuator
 from .batch import COMPILED_DISTURBANCES, COMPILED_LAWS, TRAJECTORY_FIELDS, run_compiled
-from .controllers import ControllerBank
+from .controllers import OUTPUT_KIND, ControllerBank
 from .disturbance import DisturbanceModel, lvlh_attitude, orbit_rate
 from .linear import LinearizedPlant
 from .metrics import step_summary, summarize
@@ -46,6 +46,7 @@ __all__ = [
     "simulate",
     "simulate_summary",
     "EpisodeSummary",
+    "check_episode",
 ]
 
 RPM = 2.0 * np.pi / 60.0
@@ -268,6 +269,39 @@ def build_controller(scn: Scenario, n_episodes: int = 1, params: dict | None = N
     """
     c = scn.values["controller"]
     return ControllerBank(c, c["control_period"], n_episodes, per_episode=params)
+
+
+def check_episode(scn: Scenario, controller: str | None = None) -> None:
+    """Build every model of ``scn`` once, so what the schema alone cannot see is refused before a graph starts.
+
+    Catches what the nodes would only find at ``plant/reset``: a wheel-speed list
+    that does not match the geometry, a noise sample time that does not divide
+    the step, and a law (the first, ``controller``, or a scheduled one) whose
+    command the actuator does not take.
+
+    Raises
+    ------
+    ScenarioError
+        Naming the scenario file and the rule.
+    """
+    try:
+        build_plant(scn)
+        actuator = build_wheels(scn)
+        build_disturbance(scn)
+        build_guidance(scn)
+        build_controller(scn)
+    except ScenarioError as exc:
+        raise ScenarioError(f"{scn.source}: {exc}") from None
+    c = scn.values["controller"]
+    for _, law in [(0, controller or c["controller_type"]), *schedule_from_scenario(scn)]:
+        torque = OUTPUT_KIND[law] == "torque" or c["command"] == "torque"
+        topic = "torque_cmd" if torque else "voltage_cmd"
+        if isinstance(actuator, TorqueActuator) and not torque:
+            raise ScenarioError(f"{scn.source}: wheels.actuator torque takes torque_cmd, but {law} (controller.command "
+                                f"{c['command']}) publishes {topic}; set controller.command: torque")
+        if isinstance(actuator, SpeedLoopWheels) and torque:
+            raise ScenarioError(f"{scn.source}: wheels.actuator speed_loop takes voltage_cmd, but {law} publishes "
+                                f"{topic}; use a voltage law with controller.command: voltage")
 
 
 def schedule_from_scenario(scn: Scenario) -> list[tuple[int, str]]:

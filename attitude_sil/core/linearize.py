@@ -14,6 +14,7 @@ import numpy as np
 from attitude_sil.core.engine import simulate
 from attitude_sil.core.quaternion import euler_from_quat
 from attitude_sil.core.scenario import Scenario
+from attitude_sil.errors import ScenarioError
 
 __all__ = ["PAPER_000_TABLE_1", "PAPER_000_COMPARISON_GAINS", "rmse_table", "format_table"]
 
@@ -36,8 +37,28 @@ def rmse_table(scn: Scenario, angles_deg=(3, 8, 15, 25, 35), gains=PAPER_000_COM
     Entry [i, a] is the RMSE of the axis-a angle when ``angles_deg[i]`` is
     commanded on axis a alone, both runs starting at rest from the scenario's
     initial attitude.
+
+    Raises
+    ------
+    ScenarioError
+        An angle that is not finite, zero or beyond 180 deg; gains or a duration the schema refuses.
     """
     angles = np.asarray(angles_deg, dtype=float)
+    if angles.size == 0 or not np.all(np.isfinite(angles)) or np.any(angles == 0) or np.any(np.abs(angles) > 180):
+        raise ScenarioError(f"--angles: each angle must be a finite, nonzero command of at most 180 deg, "
+                            f"got {list(angles_deg)}")
+    if len(gains) != 4:
+        raise ScenarioError(f"--gains takes KP KI KD N, got {len(gains)} values")
+    try:
+        scn = scn.with_values("controller", **{name: [float(g)] * 3 for name, g in
+                                               zip(("pid.kp", "pid.ki", "pid.kd", "pid.n"), gains, strict=True)})
+        if duration is not None:
+            if not duration > 0:
+                raise ScenarioError(f"must be > 0, got {duration}")
+            scn = scn.with_values("plant", duration=duration)
+    except ScenarioError as exc:
+        what = "--gains (KP KI KD N)" if "pid." in str(exc) else "--duration"
+        raise ScenarioError(f"{what}: {exc}") from None
     n = angles.size
     setpoints = np.zeros((3 * n, 3))
     for a in range(3):

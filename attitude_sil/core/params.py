@@ -81,6 +81,8 @@ class ParamSpec:
                 if not value.is_integer():
                     raise ScenarioError(f"{where} must be an integer, got {value!r}")
                 value = int(value)
+            if not -(2**63) <= value < 2**63:
+                raise ScenarioError(f"{where} must fit a 64-bit integer (a ROS integer), got {value!r}")
         else:
             value = float(value)
             if not math.isfinite(value):
@@ -168,6 +170,25 @@ HST_MOTOR = {
 _HST_INERTIA = [31.046, 77.217, 78.754]
 
 
+def _inertia_rule(values: list) -> str:
+    """An inertia must be symmetric and positive definite (3 principal values: each > 0)."""
+    if len(values) == 3:
+        return "" if all(v > 0.0 for v in values) else "principal moments must be > 0"
+    m = [values[0:3], values[3:6], values[6:9]]
+    scale = max(abs(v) for v in values) or 1.0
+    if any(abs(m[i][j] - m[j][i]) > 1e-9 * scale for i in range(3) for j in range(i)):
+        return "must be symmetric (9 row-major entries)"
+    minor2 = m[0][0] * m[1][1] - m[0][1] * m[1][0]
+    det = (m[0][0] * (m[1][1] * m[2][2] - m[1][2] * m[2][1]) - m[0][1] * (m[1][0] * m[2][2] - m[1][2] * m[2][0])
+           + m[0][2] * (m[1][0] * m[2][1] - m[1][1] * m[2][0]))
+    return "" if m[0][0] > 0.0 and minor2 > 0.0 and det > 0.0 else "must be positive definite"
+
+
+def _nonzero(values: list) -> str:
+    """A direction: not the zero vector."""
+    return "" if any(v != 0.0 for v in values) else "must not be the zero vector"
+
+
 def _distinct(values: list) -> str:
     """Rule of paper 001: the entries of K must differ."""
     return "entries must be distinct (paper 001: k1 != k2 != k3)" if len(set(values)) < len(values) else ""
@@ -195,12 +216,12 @@ NODE_PARAMS: dict[str, list[ParamSpec]] = {
         _d("control_period", 0.01, "control step dt, s (shared by every node)", min=0.0, min_exclusive=True, max=1.0),
         _da("inertia", _HST_INERTIA,
             "body inertia, kg m^2: 3 principal values or 9 row-major entries (paper 000: HST)",
-            lengths=(3, 9)),
+            lengths=(3, 9), rule=_inertia_rule),
         _da("initial_attitude_rpy_deg", [0, 0, 0], "initial roll, pitch, yaw of B in N, deg",
             lengths=(3,), min=-360.0, max=360.0),
         _da("initial_body_rate", [0, 0, 0], "initial omega_BN in B, rad/s", lengths=(3,)),
         _da("initial_error_axis", [1, 0, 0], "axis (in B) of an extra initial rotation after the rpy one",
-            lengths=(3,)),
+            lengths=(3,), rule=_nonzero),
         _d("initial_error_deg", 0.0, "angle of that extra rotation, deg (paper 001: 1 deg about [-1,1,-1])",
            min=-180.0, max=180.0),
         ParamSpec("model", "string", "rigid_body",
@@ -277,7 +298,7 @@ NODE_PARAMS: dict[str, list[ParamSpec]] = {
     "disturbance": [
         _d("control_period", 0.01, "control step dt, s (shared by every node)", min=0.0, min_exclusive=True, max=1.0),
         _da("inertia", _HST_INERTIA, "body inertia for the gravity gradient, kg m^2 (3 or 9 values)",
-            lengths=(3, 9)),
+            lengths=(3, 9), rule=_inertia_rule),
         ParamSpec("models", "string_array", [], "disturbance models summed (empty: none)",
                   choices=("constant", "step", "impulse", "noise", "gravity_gradient_linear", "gravity_gradient",
                            "aerodynamic")),
@@ -364,7 +385,7 @@ NODE_PARAMS: dict[str, list[ParamSpec]] = {
         _da("geometric.l", [56.0, 139.0, 142.0], "diagonal of L, N m s", lengths=(3,), min=0.0,
             min_exclusive=True, runtime=True),
         _da("geometric.inertia", _HST_INERTIA, "the law's model of the inertia J, kg m^2 (3 or 9 values)",
-            lengths=(3, 9), runtime=True),
+            lengths=(3, 9), runtime=True, rule=_inertia_rule),
         _d("geometric.torque_limit", 0.7, "torque saturation per body axis, N m", min=0.0, min_exclusive=True,
            runtime=True),
         ParamSpec("geometric.feedforward", "string_array", [],

@@ -32,7 +32,8 @@ from . import yaml12
 from .paramfile import node_key, section_node
 from .params import GLOBAL_NODE, NODE_PARAMS, SCENARIO_NODE
 
-__all__ = ["ScenarioError", "Scenario", "load_scenario", "scenario_from_dict", "GRAPH_NODES"]
+__all__ = ["ScenarioError", "Scenario", "load_scenario", "scenario_from_dict", "with_parameter_file", "yaml_problem",
+           "GRAPH_NODES"]
 
 #: nodes of the graph, in the order the runner starts them
 GRAPH_NODES = ("plant", "wheels", "disturbance", "guidance", "controller")
@@ -212,6 +213,15 @@ def _flatten(params: dict, prefix: str = "") -> dict[str, Any]:
     return out
 
 
+def yaml_problem(exc: BaseException) -> str:
+    """`` at line N`` or `` (problem)`` for a YAML error: one line, for the messages of every YAML file."""
+    mark = getattr(exc, "problem_mark", None)
+    if mark is not None:
+        return f" at line {mark.line + 1}"
+    text = " ".join(str(exc).split())
+    return f" ({text})" if text else ""
+
+
 def load_scenario(path: str | Path) -> Scenario:
     """Read and validate a scenario YAML file.
 
@@ -224,9 +234,44 @@ def load_scenario(path: str | Path) -> Scenario:
     if not p.is_file():
         raise ScenarioError(f"{p}: no such scenario file")
     try:
-        data = yaml12.load(p.read_text())
+        data = yaml12.load_file(p)
     except yaml.YAMLError as exc:
-        mark = getattr(exc, "problem_mark", None)
-        where = f" at line {mark.line + 1}" if mark is not None else ""
-        raise ScenarioError(f"{p}: not valid YAML{where}") from None
+        raise ScenarioError(f"{p}: not valid YAML{yaml_problem(exc)}") from None
+    except OSError as exc:
+        raise ScenarioError(f"{p}: cannot read: {exc.strerror or exc}") from None
     return scenario_from_dict(data, source=str(p))
+
+
+def with_parameter_file(scn: Scenario, path: str | Path) -> Scenario:
+    """``scn`` with a ROS 2 parameter file (e.g. a tuner's ``best.yaml``) laid over it, validated.
+
+    Raises
+    ------
+    ScenarioError
+        Missing, empty or malformed file, unknown node or key, wrong value; the message names the file.
+    """
+    p = Path(path)
+    if not p.is_file():
+        raise ScenarioError(f"{p}: no such parameter file")
+    try:
+        data = yaml12.load_file(p)
+    except yaml.YAMLError as exc:
+        raise ScenarioError(f"{p}: not valid YAML{yaml_problem(exc)}") from None
+    except OSError as exc:
+        raise ScenarioError(f"{p}: cannot read: {exc.strerror or exc}") from None
+    if data is None:
+        raise ScenarioError(f"{p}: empty parameter file (expected node: ros__parameters: ...)")
+    if not isinstance(data, dict):
+        raise ScenarioError(f"{p}: a parameter file maps node names to ros__parameters, got a {type(data).__name__}")
+    for raw_node, section in data.items():
+        node = section_node(str(raw_node))
+        if node not in NODE_PARAMS:
+            raise ScenarioError(f"{p}: unknown node {raw_node!r}{_suggest(node, NODE_PARAMS)}")
+        if not isinstance(section, dict) or set(section) != {"ros__parameters"} \
+                or not isinstance(section["ros__parameters"] or {}, dict):
+            raise ScenarioError(f"{p}: {raw_node}: expected 'ros__parameters:' with a mapping of values")
+        try:
+            scn = scn.with_values(node, **_flatten(section["ros__parameters"] or {}))
+        except ScenarioError as exc:
+            raise ScenarioError(f"{p}: {exc}") from None
+    return scn

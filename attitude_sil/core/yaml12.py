@@ -10,11 +10,12 @@ same wherever it is written.
 from __future__ import annotations
 
 import re
+from pathlib import Path
 from typing import Any
 
 import yaml
 
-__all__ = ["load"]
+__all__ = ["load", "load_file"]
 
 
 class _Loader(yaml.SafeLoader):
@@ -29,5 +30,21 @@ _Loader.add_implicit_resolver(
 
 
 def load(text: str) -> Any:
-    """Parse YAML text (``yaml.YAMLError`` on malformed input)."""
-    return yaml.load(text, Loader=_Loader)  # noqa: S506 - a SafeLoader subclass
+    """Parse YAML text (``yaml.YAMLError`` on malformed input, nesting too deep included)."""
+    try:
+        return yaml.load(text, Loader=_Loader)  # noqa: S506 - a SafeLoader subclass
+    except RecursionError:  # PyYAML composes nested collections recursively
+        raise yaml.YAMLError("collections nested too deeply") from None
+
+
+def load_file(path: str | Path) -> Any:
+    """Parse a YAML file; ``yaml.YAMLError`` also when it is not UTF-8 text (binary garbage).
+
+    ``OSError`` (missing, a directory, unreadable) is left to the caller.
+    """
+    data = Path(path).read_bytes()
+    try:
+        text = data.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        raise yaml.YAMLError(f"not UTF-8 text (byte 0x{data[exc.start]:02x} at offset {exc.start})") from None
+    return load(text)

@@ -15,11 +15,11 @@ machine (:func:`attitude_sil.ros.environment.localhost_environment`).
 
 from __future__ import annotations
 
-import signal
 import subprocess
 import sys
 import tempfile
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -29,7 +29,7 @@ from rclpy.experimental import EventsExecutor
 from rclpy.signals import SignalHandlerOptions
 
 from attitude_sil.core.controllers import OUTPUT_KIND
-from attitude_sil.core.engine import schedule_from_scenario, simulate
+from attitude_sil.core.engine import check_episode, schedule_from_scenario, simulate
 from attitude_sil.core.metrics import episode_report
 from attitude_sil.core.params import spec_for
 from attitude_sil.core.scenario import Scenario
@@ -45,63 +45,13 @@ from attitude_sil.graph.launcher import (
 )
 from attitude_sil.graph.trajectory import KEPT_TOPICS, trajectory_from_messages
 from attitude_sil.nodes.recorder_node import Recorder
-from attitude_sil.ros.contract import ATTITUDE, COMMAND_TOPICS, STEP_TOPICS, WHEEL_TORQUE
+from attitude_sil.ros.contract import ATTITUDE, COMMAND_TOPICS, STEP_TOPICS, WHEEL_TORQUE, check_namespace
 from attitude_sil.ros.environment import isolated_domain, localhost_environment
 from attitude_sil.ros.services import call_reset, set_remote_parameters
-from attitude_sil.storage.writer import PARAMETERS_KEY, BagWriter
+from attitude_sil.ros.signals import STOP_SIGNALS, Interrupted, StopSignals
+from attitude_sil.storage.writer import PARAMETERS_KEY, BagWriter, check_bag_dir
 
 __all__ = ["RunError", "RunResult", "GraphSession", "Interrupted", "STOP_SIGNALS", "run_graph", "extra_parameters"]
-
-
-class Interrupted(KeyboardInterrupt):
-    """A run stopped by a signal; ``signum`` is the signal (the exit code is 128 + signum)."""
-
-    def __init__(self, signum: int) -> None:
-        super().__init__(f"stopped by {signal.Signals(signum).name}")
-        self.signum = signum
-
-
-#: the signals that stop a run cleanly: Ctrl-C, ``kill``/``timeout``/``docker stop``, a closed terminal
-STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
-
-
-class _Interrupt:
-    """Turns Ctrl-C, SIGTERM and SIGHUP into a flag the spin loops check between callbacks.
-
-    A ``KeyboardInterrupt`` raised inside a node callback would tear a step in
-    half (and the executor logs it as a fatal callback error); checking a flag
-    between ``spin_once`` calls stops the run at a clean point instead, where
-    the bag is closed and every node process ended, as rosbag2 does.
-    """
-
-    def __init__(self) -> None:
-        self.signum: int | None = None
-        self._old: dict[int, object] = {}
-
-    @property
-    def requested(self) -> bool:
-        return self.signum is not None
-
-    def __enter__(self) -> _Interrupt:
-        for sig in STOP_SIGNALS:
-            try:
-                self._old[sig] = signal.signal(sig, self._on_signal)
-            except ValueError:  # not the main thread: leave signals alone
-                break
-        return self
-
-    def _on_signal(self, signum, frame) -> None:
-        if self.signum is None:
-            self.signum = signum
-
-    def check(self) -> None:
-        if self.signum is not None:
-            raise Interrupted(self.signum)
-
-    def __exit__(self, *exc) -> None:
-        for sig, old in self._old.items():
-            signal.signal(sig, old if old is not None else signal.SIG_DFL)
-        self._old = {}
 
 
 @dataclass
@@ -194,9 +144,12 @@ class GraphSession:
         self.extra = extra_parameters(scn, duration, controller, real_time)
         self.duration = scn.duration if duration is None else float(duration)
         if self.duration <= 0.0:
-            raise RunError("the runner needs a finite episode: give plant.duration or --duration > 0")
+            raise RunError(f"{scn.source}: plant.duration is 0 (run until stopped), but the runner needs a finite "
+                           "episode: give plant.duration or --duration > 0")
+        check_episode(scn.with_values("plant", duration=self.duration) if duration is not None else scn,
+                      controller)  # what the nodes would refuse at reset is refused before the graph starts
         self.processes = processes
-        self.namespace = namespace.strip("/") if namespace else None
+        self.namespace = check_namespace(namespace)
         self.connect_timeout = connect_timeout
         self.controller = controller or scn.param("controller", "controller_type")
 
@@ -211,7 +164,7 @@ class GraphSession:
             except (AttitudeSilError, ValueError):
                 pass  # a law this preset's actuator cannot take (e.g. torque into speed-loop wheels)
         self.context = rclpy.Context()
-        self.interrupt = _Interrupt().__enter__()
+        self.interrupt = StopSignals().__enter__()  # checked between callbacks: stops at a clean point
         rclpy.init(args=[], context=self.context, signal_handler_options=SignalHandlerOptions.NO)
         self.nodes: list = []
         self.children: list[subprocess.Popen] = []
@@ -322,6 +275,7 @@ def run_graph(
     connect_timeout: float = 20.0,
     namespace: str | None = None,
     controller_params: dict | None = None,
+    before_start: Callable[[], None] | None = None,
 ) -> RunResult:
     """Run one episode of ``scn`` through the ROS graph.
 
@@ -346,6 +300,8 @@ def run_graph(
         Run the whole graph (and its clock) under this namespace.
     controller_params : dict, optional
         Controller parameters set through the parameter service before the episode.
+    before_start : callable, optional
+        Called once the input is validated, before the graph starts (``run`` announces its domain there).
 
     Returns
     -------
@@ -358,8 +314,16 @@ def run_graph(
     KeyboardInterrupt
         After the bag is closed, so nothing recorded is lost.
     """
-    with GraphSession(scn, duration=duration, controller=controller, processes=processes, real_time=real_time,
-                      namespace=namespace, connect_timeout=connect_timeout) as graph:
+    if record_dir is not None:
+        try:
+            check_bag_dir(record_dir)  # before the graph starts, not after discovery
+        except (ValueError, OSError) as exc:
+            raise RunError(str(exc)) from None
+    session = GraphSession(scn, duration=duration, controller=controller, processes=processes, real_time=real_time,
+                           namespace=namespace, connect_timeout=connect_timeout)  # validates
+    if before_start is not None:
+        before_start()
+    with session as graph:
         return graph.run_episode(record_dir=record_dir, controller_params=controller_params, progress=progress)
 
 

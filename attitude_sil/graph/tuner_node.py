@@ -39,7 +39,7 @@ from attitude_sil.graph.engine_bag import record_episode
 from attitude_sil.graph.evaluator import GraphEpisodes, GraphEvaluator, best_parameters
 from attitude_sil.ros.environment import localhost_environment
 from attitude_sil.tuning.evaluate import scenario_for
-from attitude_sil.tuning.optimize import run_tuning
+from attitude_sil.tuning.optimize import check_output, run_tuning
 from attitude_sil.tuning.results import TuningResult
 from attitude_sil.tuning.spec import TuningSpec, apply_overrides, decode, load_spec
 
@@ -90,10 +90,13 @@ def _record_from_engine(spec: TuningSpec, x: np.ndarray, path: Path) -> bool:
     return True
 
 
-def tune(spec_path: str | Path, *, resume: bool = False, overrides: dict | None = None, record: bool = True,
-         on_progress: Callable[[dict], None] | None = None,
+def tune(spec_path: str | Path | TuningSpec, *, resume: bool = False, overrides: dict | None = None,
+         record: bool = True, on_progress: Callable[[dict], None] | None = None,
          should_stop: Callable[[], bool] | None = None) -> TuneOutcome:
     """Run a tuning spec to its end (or until ``should_stop``), recording bests through the graph.
+
+    ``spec_path`` is a spec file, or a spec already loaded (``overrides`` are then applied again, which
+    is harmless, and handed to graph evaluation).
 
     Raises
     ------
@@ -102,7 +105,8 @@ def tune(spec_path: str | Path, *, resume: bool = False, overrides: dict | None 
     RunError
         A recording episode failed.
     """
-    spec = apply_overrides(load_spec(spec_path), overrides or {})
+    spec = spec_path if isinstance(spec_path, TuningSpec) else load_spec(spec_path)
+    spec = apply_overrides(spec, overrides or {})
     bags = spec.output / "bags"
     mode = spec.evaluation.get("mode", "batch")
     recorder: GraphEpisodes | None = None
@@ -124,8 +128,7 @@ def tune(spec_path: str | Path, *, resume: bool = False, overrides: dict | None 
     evaluator = None
     t0 = time.monotonic()
     try:
-        if not resume and bags.exists() and any(bags.iterdir()):
-            raise SpecError(f"{bags}: results of an earlier run are there; use --resume or another output")
+        check_output(spec, resume)
         if mode == "graph":
             evaluator = GraphEvaluator(spec, int(spec.evaluation.get("replicas", 1)), bags if record else None,
                                        overrides).__enter__()

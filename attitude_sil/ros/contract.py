@@ -10,6 +10,7 @@ topics are relative names (a namespace moves a whole graph), except
 from __future__ import annotations
 
 import importlib
+import re
 
 from attitude_sil.errors import AttitudeSilError
 
@@ -17,7 +18,42 @@ __all__ = ["CLOCK", "ATTITUDE", "BODY_RATE", "ATTITUDE_SETPOINT", "RATE_SETPOINT
            "WHEEL_TORQUE", "WHEEL_MOMENTUM", "WHEEL_STATE", "DISTURBANCE_TORQUE", "ATTITUDE_ERROR", "FLEXIBLE_MODE",
            "PLANT_INPUTS", "clock_remap",
            "STEP_TOPICS", "COMMAND_TOPICS", "COMMAND_TOPIC", "CONTROLLER_INPUTS", "MODEL_TOPICS", "RECORDED_TOPICS",
-           "GRAPH_SUBSCRIBERS", "PARAMETER_EVENTS", "message_class"]
+           "GRAPH_SUBSCRIBERS", "PARAMETER_EVENTS", "message_class", "check_namespace", "check_node_name",
+           "check_parameter_name"]
+
+# -- name rules (ROS 2: a token is a letter or _ then letters, digits, _) -----------------
+_TOKEN = re.compile(r"[A-Za-z_][A-Za-z0-9_]*")
+
+
+def check_namespace(namespace: str | None) -> str | None:
+    """A namespace without its outer ``/`` (None for none, ``""`` and ``/`` included), or AttitudeSilError.
+
+    Checked before any ROS context starts, so a bad ``--namespace`` is one line, not rclpy's three.
+    """
+    ns = (namespace or "").strip("/")
+    if not ns:
+        return None
+    bad = [t for t in ns.split("/") if not _TOKEN.fullmatch(t)]
+    if bad:
+        raise AttitudeSilError(f"namespace {namespace!r}: {bad[0]!r} is not a ROS name (a letter or _, then "
+                               "letters, digits and _; tokens separated by one /)")
+    return ns
+
+
+def check_node_name(name: str) -> str:
+    """A node name, optionally with its namespace (``controller``, ``/sat1/controller``), or AttitudeSilError."""
+    tokens = name[1:].split("/") if name.startswith("/") else name.split("/")
+    if not all(_TOKEN.fullmatch(t) for t in tokens):
+        raise AttitudeSilError(f"node name {name!r} is not a ROS node name (e.g. controller or /sat1/controller)")
+    return name
+
+
+def check_parameter_name(name: str) -> str:
+    """A parameter name (``pid.kp``, ``use_sim_time``), or AttitudeSilError."""
+    if not all(_TOKEN.fullmatch(t) for t in name.split(".")):
+        raise AttitudeSilError(f"parameter name {name!r} is not a ROS parameter name (e.g. pid.kp)")
+    return name
+
 
 # -- names (relative, except /clock and /parameter_events) ----------------------------
 CLOCK = "/clock"

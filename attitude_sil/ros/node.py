@@ -8,7 +8,6 @@ publish the result. :func:`run_node` is the body of every node's ``main()``.
 
 from __future__ import annotations
 
-import signal
 import sys
 from collections.abc import Callable, Sequence
 from pathlib import Path
@@ -34,6 +33,7 @@ from attitude_sil.ros.contract import RECORDED_TOPICS as TOPIC_TYPES
 from attitude_sil.ros.contract import message_class
 from attitude_sil.ros.parameters import PARAMETER_TYPES, descriptor
 from attitude_sil.ros.qos import LOCKSTEP_QOS
+from attitude_sil.ros.signals import StopSignals
 
 __all__ = ["SchemaNode", "params_file_warning", "run_node", "steady_clock"]
 
@@ -192,9 +192,7 @@ def run_node(factory: Callable[[], Node], args: list[str] | None = None) -> int:
         0, 2 for bad parameters, or 128 + the signal that stopped it (130 for Ctrl-C).
     """
     rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
-    stop: list[int] = []
-    previous = {sig: signal.signal(sig, lambda signum, frame: stop.append(signum))
-                for sig in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)}
+    stop = StopSignals().__enter__()
     node = None
     executor = None
     try:
@@ -206,7 +204,7 @@ def run_node(factory: Callable[[], Node], args: list[str] | None = None) -> int:
         executor.add_node(node)
         # spin_once in a loop: EventsExecutor.spin() of rclpy 7.1 left service
         # requests unanswered in a separate process (measured here)
-        while rclpy.ok() and not stop:
+        while rclpy.ok() and not stop.requested:
             executor.spin_once(timeout_sec=0.1)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
@@ -219,6 +217,5 @@ def run_node(factory: Callable[[], Node], args: list[str] | None = None) -> int:
         if node is not None:
             node.destroy_node()
         rclpy.try_shutdown()
-        for sig, handler in previous.items():
-            signal.signal(sig, handler)
-    return 128 + stop[0] if stop else 0
+        stop.__exit__()
+    return stop.exit_code

@@ -62,6 +62,7 @@ from attitude_sil.errors import BagWriteError
 from .msgdefs import message_definition, normalize_type_name, type_description_hash
 
 __all__ = [
+    'check_bag_dir',
     'DEFAULT_QOS_PROFILES_YAML',
     'ROSBAG2_FORMAT_VERSION',
     'BagClosedError',
@@ -351,6 +352,36 @@ def _close_open_writers() -> None:
             print(f'attitude_sil.bag: {exc}', file=sys.stderr)
 
 
+def check_bag_dir(run_dir: str | os.PathLike[str]) -> None:
+    """Refuse a bag directory :class:`BagWriter` could not create, without creating anything.
+
+    Raises
+    ------
+    ValueError
+        No usable name (``.``, ``..``, empty).
+    FileExistsError
+        It is a file, or it already holds a bag.
+    NotADirectoryError
+        A parent of it is a file.
+    """
+    run_dir = Path(run_dir)
+    if not run_dir.name or run_dir.name in ('.', '..'):
+        raise ValueError(f'invalid bag directory {str(run_dir)!r}')
+    if run_dir.exists():
+        if not run_dir.is_dir():
+            raise FileExistsError(f"bag path '{run_dir}' exists and is not a directory")
+        if ((run_dir / 'metadata.yaml').exists() or any(run_dir.glob('*.mcap'))
+                or any(run_dir.glob('*.db3'))):
+            raise FileExistsError(
+                f"bag directory '{run_dir}' already contains a bag; "
+                'choose another run name or remove it'
+            )
+        return
+    parent = next((p for p in run_dir.parents if p.exists()), None)
+    if parent is not None and not parent.is_dir():
+        raise NotADirectoryError(f"bag directory '{run_dir}': '{parent}' is a file, not a directory")
+
+
 class BagWriter:
     """Write CDR-serialized messages to a rosbag2 directory with MCAP storage.
 
@@ -404,17 +435,7 @@ class BagWriter:
         custom = dict(custom_data or {})
         if not all(isinstance(k, str) and isinstance(v, str) for k, v in custom.items()):
             raise ValueError('custom_data keys and values must be strings')
-        if not run_dir.name or run_dir.name in ('.', '..'):
-            raise ValueError(f'invalid bag directory {str(run_dir)!r}')
-        if run_dir.exists():
-            if not run_dir.is_dir():
-                raise FileExistsError(f"bag path '{run_dir}' exists and is not a directory")
-            if ((run_dir / 'metadata.yaml').exists() or any(run_dir.glob('*.mcap'))
-                    or any(run_dir.glob('*.db3'))):
-                raise FileExistsError(
-                    f"bag directory '{run_dir}' already contains a bag; "
-                    'choose another run name or remove it'
-                )
+        check_bag_dir(run_dir)
         run_dir.mkdir(parents=True, exist_ok=True)
 
         self._run_dir = run_dir

@@ -15,6 +15,7 @@ non-zero.
 
 from __future__ import annotations
 
+import math
 import time
 from collections.abc import Iterator
 from contextlib import contextmanager
@@ -32,6 +33,7 @@ from rclpy.parameter_client import AsyncParameterClient
 from attitude_sil.core import yaml12
 from attitude_sil.core.paramfile import sections_for
 from attitude_sil.errors import ParamClientError
+from attitude_sil.ros.contract import check_node_name, check_parameter_name
 from attitude_sil.ros.environment import localhost_environment
 
 __all__ = ["LoadReport", "ParamClientError", "file_values", "format_dump", "param_command", "param_dump",
@@ -145,6 +147,9 @@ class _Session:
 
 @contextmanager
 def _session(node_name: str, timeout: float) -> Iterator[_Session]:
+    if not (isinstance(timeout, (int, float)) and math.isfinite(timeout) and timeout > 0):
+        raise ParamClientError(f"--timeout must be a finite number of seconds > 0, got {timeout}")
+    check_node_name(node_name)
     localhost_environment()
     session = _Session(node_name, timeout)
     try:
@@ -177,6 +182,8 @@ def param_command(action: str, node_name: str, name: str | None = None, value: s
     ParamClientError
         Node not found, unknown parameter, bad value or refusal.
     """
+    if name is not None:
+        check_parameter_name(name)
     with _session(node_name, timeout) as s:
         if action == "list":
             names = sorted(s.wait(s.client.list_parameters()).result.names)

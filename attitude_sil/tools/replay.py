@@ -12,6 +12,7 @@ as fast as possible. ``/parameter_events`` is not republished unless asked for
 
 from __future__ import annotations
 
+import math
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -20,8 +21,8 @@ from pathlib import Path
 import rclpy
 from rclpy.node import Node
 
-from attitude_sil.errors import BagError
-from attitude_sil.ros.contract import CLOCK, PARAMETER_EVENTS, message_class
+from attitude_sil.errors import AttitudeSilError, BagError
+from attitude_sil.ros.contract import CLOCK, PARAMETER_EVENTS, check_namespace, message_class
 from attitude_sil.ros.environment import localhost_environment
 from attitude_sil.ros.qos import recorded_qos
 from attitude_sil.storage.reader import open_bag
@@ -61,6 +62,23 @@ class ReplayOptions:
     namespace: str | None = None
     wait_for_subscribers: int = 0
     connect_timeout: float = 20.0
+
+    def check(self) -> None:
+        """Refuse what cannot be played (before any ROS context starts).
+
+        Raises
+        ------
+        AttitudeSilError
+            A rate, start or duration that is not finite or out of range, or a bad namespace.
+        """
+        for flag, value, least, strict in (("--rate", self.rate, 0.0, False), ("--start", self.start, 0.0, False),
+                                           ("--duration", self.duration, 0.0, True)):
+            if value is None:
+                continue
+            if not math.isfinite(value) or value < least or (strict and value == least):
+                rule = f"> {least:g}" if strict else f">= {least:g}"
+                raise AttitudeSilError(f"{flag} must be a finite number {rule}, got {value}")
+        self.namespace = check_namespace(self.namespace)
 
 
 def remap_topic(topic: str, namespace: str | None) -> str:
@@ -110,10 +128,9 @@ def replay_bag(path: str | Path, options: ReplayOptions, context=None,
     BagError
         Unreadable bag, unknown topic, or subscribers that never came.
     """
+    options.check()
     reader = open_bag(path)
     topics = _select(reader, options.topics)
-    if options.rate < 0:
-        raise BagError(f"--rate must be >= 0, got {options.rate}")
     own = context is None
     if own:
         localhost_environment()

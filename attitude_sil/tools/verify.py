@@ -25,10 +25,11 @@ from rclpy.experimental import EventsExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter, parameter_value_to_python
 
+from attitude_sil.core import yaml12
 from attitude_sil.core.paramfile import sections_for
 from attitude_sil.core.params import GLOBAL_NODE, spec_for
-from attitude_sil.core.scenario import load_scenario, scenario_from_dict
-from attitude_sil.errors import BagError, ScenarioError
+from attitude_sil.core.scenario import load_scenario, scenario_from_dict, yaml_problem
+from attitude_sil.errors import AttitudeSilError, BagError, ScenarioError
 from attitude_sil.nodes.controller_node import ControllerNode
 from attitude_sil.ros.contract import COMMAND_TOPICS, CONTROLLER_INPUTS, STEP_TOPICS, message_class
 from attitude_sil.ros.convert import stamp_to_ns, vector_to_array
@@ -89,19 +90,29 @@ def controller_parameters(bag_path: str | Path, params_file: str | Path | None =
     meta = (path if path.is_dir() else path.parent) / "metadata.yaml"
     snapshot = None
     if meta.is_file():
-        info = yaml.safe_load(meta.read_text()) or {}
-        custom = info.get("rosbag2_bagfile_information", {}).get("custom_data") or {}
-        snapshot = custom.get(PARAMETERS_KEY)
+        try:
+            info = yaml12.load_file(meta)
+        except yaml.YAMLError as exc:
+            raise BagError(f"{meta}: not valid YAML{yaml_problem(exc)}") from None
+        info = info.get("rosbag2_bagfile_information") if isinstance(info, dict) else None
+        custom = (info.get("custom_data") if isinstance(info, dict) else None) or {}
+        snapshot = custom.get(PARAMETERS_KEY) if isinstance(custom, dict) else None
     if not snapshot:
         raise BagError(f"{path}: the bag holds no parameter snapshot (recorded by another tool, or the run "
                        "was killed before its metadata was written); give --params FILE")
-    data = yaml.safe_load(snapshot)
+    try:
+        data = yaml12.load(str(snapshot))
+    except yaml.YAMLError as exc:
+        raise BagError(f"{meta}: the parameter snapshot is not valid YAML{yaml_problem(exc)}") from None
     # "/**/controller" (this version) or "controller" (bags recorded before it)
     sections = dict(sections_for(data, "/controller")) if isinstance(data, dict) else {}
     sections.pop(GLOBAL_NODE, None)
     if not sections:
-        raise BagError(f"{meta}: the parameter snapshot holds no controller section; give --params FILE")
-    return scenario_from_dict(sections, source=f"{meta}", check=False).values["controller"]
+        raise BagError(f"{meta}: the parameter snapshot has no controller section; give --params FILE")
+    try:
+        return scenario_from_dict(sections, source=f"{meta}", check=False).values["controller"]
+    except ScenarioError as exc:
+        raise BagError(f"the parameter snapshot: {exc}") from None
 
 
 def _param_changes(reader) -> list[tuple[int, dict]]:
@@ -127,7 +138,13 @@ def verify_controller(bag_path: str | Path, params_file: str | Path | None = Non
     ------
     BagError
         Unreadable bag, missing topics, or a controller that does not answer.
+    AttitudeSilError
+        A tolerance that is not a finite number >= 0.
     """
+    if not (math.isfinite(tolerance) and tolerance >= 0.0):
+        raise AttitudeSilError(f"--tolerance must be a finite number >= 0, got {tolerance}")
+    if params_file is not None:
+        controller_parameters(bag_path, params_file)  # a bad --params is refused before the bag is read
     reader = open_bag(bag_path)
     names = {}
     for short in INPUTS:

@@ -51,7 +51,7 @@ from .results import TuningResult, write_best_yaml
 from .rootlocus import tune_root_locus
 from .spec import SpecError, TuningSpec, decode
 
-__all__ = ["TuningResult", "run_tuning", "build_algorithm", "write_best_yaml"]
+__all__ = ["TuningResult", "check_output", "run_tuning", "build_algorithm", "write_best_yaml"]
 
 
 def build_algorithm(spec: TuningSpec):
@@ -142,6 +142,23 @@ def _rows(spec: TuningSpec, gen: int, x: np.ndarray, ev: Evaluation) -> list[dic
             "failure": ev.reasons[i],
         })
     return rows
+
+
+def check_output(spec: TuningSpec, resume: bool) -> None:
+    """Refuse an output folder the run cannot use, before anything starts.
+
+    Raises
+    ------
+    SpecError
+        ``resume`` finds nothing to continue, or a fresh run would
+        mix its bags with an earlier run's.
+    """
+    out = spec.output
+    if resume and spec.algorithm["name"] != "root_locus" and not (out / "evaluations.jsonl").is_file():
+        raise SpecError(f"output {out}: nothing to resume (no evaluations.jsonl); run without --resume")
+    bags = out / "bags"
+    if not resume and bags.is_dir() and any(bags.iterdir()):
+        raise SpecError(f"{bags}: results of an earlier run are there; use --resume or another output")
 
 
 def run_tuning(spec: TuningSpec, *, resume: bool = False, evaluator: Callable[[np.ndarray], Evaluation] | None = None,

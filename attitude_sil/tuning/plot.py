@@ -14,17 +14,31 @@ from .spec import SpecError
 __all__ = ["plot_results"]
 
 
+def _json(path: Path):
+    try:
+        return json.loads(path.read_bytes().decode("utf-8"))
+    except (UnicodeDecodeError, json.JSONDecodeError) as exc:
+        raise SpecError(f"{path}: not a results file of attitude-sil tune ({' '.join(str(exc).split())})") from None
+
+
 def _rows(folder: Path) -> list[dict]:
+    """The evaluated candidates (``evaluations.json``, else the log of a run still going or stopped)."""
     path = folder / "evaluations.json"
     if path.is_file():
-        return json.loads(path.read_text())
-    log = folder / "evaluations.jsonl"
-    rows = []
-    for line in log.read_text().splitlines():
-        try:
-            rows.append(json.loads(line))
-        except json.JSONDecodeError:
-            break
+        rows = _json(path)
+    else:
+        path = folder / "evaluations.jsonl"
+        rows = []
+        for line in path.read_bytes().decode("utf-8", errors="replace").splitlines():
+            try:
+                rows.append(json.loads(line))
+            except json.JSONDecodeError:
+                break  # a line torn by a stopped run ends the log
+    good = isinstance(rows, list) and all(
+        isinstance(r, dict) and isinstance(r.get("generation"), int) and isinstance(r.get("cost"), list)
+        and r["cost"] and all(isinstance(c, (int, float)) for c in r["cost"]) for r in rows)
+    if not good:
+        raise SpecError(f"{path}: not a results file of attitude-sil tune (rows of generation, cost, ...)")
     return rows
 
 
@@ -41,7 +55,9 @@ def plot_results(folder: str | Path, out_png: str | Path) -> Path:
     rows = _rows(folder)
     if not rows:
         raise SpecError(f"{folder}: no evaluations to plot")
-    summary = json.loads((folder / "summary.json").read_text()) if (folder / "summary.json").is_file() else {}
+    summary = _json(folder / "summary.json") if (folder / "summary.json").is_file() else {}
+    if not isinstance(summary, dict):
+        raise SpecError(f"{folder / 'summary.json'}: not a results file of attitude-sil tune (expected an object)")
     gens = sorted({r["generation"] for r in rows})
     costs = {g: np.array([r["cost"][0] for r in rows if r["generation"] == g]) for g in gens}
     best_so_far = np.minimum.accumulate([c.min() for c in costs.values()])

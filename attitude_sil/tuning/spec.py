@@ -36,15 +36,98 @@ import yaml
 
 from attitude_sil.core import yaml12
 from attitude_sil.core.params import NODE_PARAMS
-from attitude_sil.core.scenario import Scenario, load_scenario
+from attitude_sil.core.scenario import Scenario, load_scenario, yaml_problem
 from attitude_sil.errors import ScenarioError, SpecError
 
-__all__ = ["SpecError", "Gene", "TuningSpec", "load_spec", "apply_overrides", "decode", "ALGORITHMS", "COSTS"]
+__all__ = ["SpecError", "SECTIONS", "Gene", "TuningSpec", "load_spec", "apply_overrides", "decode", "ALGORITHMS",
+           "COSTS"]
 
 ALGORITHMS = ("ga", "binary_ga", "pso", "mixed_ga", "nsga2", "root_locus")
 COSTS = ("paper000_j", "paper001_fitness", "mse", "paper004_objective", "ts_ce")
 _TOP = {"name", "description", "scenarios", "conditions", "controller", "genome", "cost", "algorithm", "seed",
         "evaluation", "output", "record"}
+
+
+def _real(low: float | None = None, high: float | None = None, low_open: bool = False):
+    def check(v: Any) -> str:
+        rule = "a finite number" + (f" {'>' if low_open else '>='} {low:g}" if low is not None else "") + (
+            f" and <= {high:g}" if high is not None else "")
+        ok = (not isinstance(v, bool) and isinstance(v, (int, float)) and np.isfinite(v)
+              and (low is None or v > low or (not low_open and v == low)) and (high is None or v <= high))
+        return "" if ok else f"must be {rule}, got {v!r}"
+    return check
+
+
+def _integer(low: int, high: int):
+    def check(v: Any) -> str:
+        ok = not isinstance(v, bool) and isinstance(v, int) and low <= v <= high
+        return "" if ok else f"must be an integer in {low}..{high}, got {v!r}"
+    return check
+
+
+def _choice(options: tuple[str, ...]):
+    def check(v: Any) -> str:
+        return "" if isinstance(v, str) and v in options else f"must be one of {', '.join(options)}, got {v!r}"
+    return check
+
+
+def _boolean(v: Any) -> str:
+    return "" if isinstance(v, bool) else f"must be true or false, got {v!r}"
+
+
+#: what each section of a spec may hold, and the rule of each value (unknown keys are refused)
+SECTIONS: dict[str, dict[str, Any]] = {
+    "cost": {"name": _choice(COSTS), "beta": _real(0.0), "limit": _real(0.0, low_open=True),
+             "w1": _real(0.0), "w2": _real(0.0), "w3": _real(0.0), "k1": _real(0.0), "k2": _real(0.0),
+             "K": _real(0.0), "theta_max_deg": _real(0.0, 180.0, low_open=True)},
+    "algorithm": {"name": _choice(ALGORITHMS), "pop_size": _integer(2, 100_000), "generations": _integer(1, 10**9),
+                  "crossover": _real(0.0, 1.0), "mutation": _real(0.0, 1.0), "eta_c": _real(0.0, low_open=True),
+                  "eta_m": _real(0.0, low_open=True), "w": _real(0.0), "c1": _real(0.0), "c2": _real(0.0),
+                  "restarts": _integer(1, 1000), "maxiter": _integer(1, 10**7),
+                  "settling_time_max": _real(0.0, low_open=True)},
+    "evaluation": {"mode": _choice(("batch", "graph")), "workers": _integer(1, 256), "replicas": _integer(1, 64)},
+    "record": {"best_per_generation": _boolean},
+}
+_SEED = _integer(0, 2**32 - 1)  # numpy and pymoo seeds
+
+
+def _section(where: str, section: str, raw: Any) -> dict[str, Any]:
+    """A section checked against :data:`SECTIONS`; ``where`` starts the message (the file, or ``--set k=v``)."""
+    if raw is None and section in ("evaluation", "record"):
+        raw = {}
+    if isinstance(raw, str) and section in ("cost", "algorithm"):
+        raw = {"name": raw}  # cost: paper000_j
+    if not isinstance(raw, dict):
+        raise SpecError(f"{where}: {section} must be a mapping, got {type(raw).__name__} {raw!r}")
+    rules = SECTIONS[section]
+    for key, value in raw.items():
+        if key not in rules:
+            close = difflib.get_close_matches(str(key), list(rules), n=1)
+            hint = f" (did you mean {close[0]!r}?)" if close else ""
+            raise SpecError(f"{where}: unknown key {section}.{key}{hint}; known: {', '.join(rules)}")
+        broken = rules[key](value)
+        if broken:
+            raise SpecError(f"{where}: {section}.{key} {broken}")
+    if section in ("cost", "algorithm") and "name" not in raw:
+        raise SpecError(f"{where}: {section}.name is missing")
+    return dict(raw)
+
+
+def _check_combination(where: str, genome: list, cost: dict, algorithm: dict) -> None:
+    if algorithm["name"] == "binary_ga" and any(g.kind != "bits" for g in genome):
+        raise SpecError(f"{where}: binary_ga needs every gene of kind bits")
+    if algorithm["name"] == "nsga2" and cost["name"] != "ts_ce":
+        raise SpecError(f"{where}: nsga2 needs the two-objective cost ts_ce")
+
+
+def _output(where: str, value: Any) -> Path:
+    if not isinstance(value, str) or not value.strip():
+        raise SpecError(f"{where}: output must be a folder name, got {value!r}")
+    out = Path(value)
+    existing = next((p for p in (out, *out.parents) if p.exists()), None)
+    if existing is not None and not existing.is_dir():
+        raise SpecError(f"{where}: output {out}: {existing} is a file, not a folder")
+    return out
 
 
 @dataclass(frozen=True)
@@ -119,14 +202,22 @@ def _gene(path: Path, i: int, raw: Any, controller: str) -> Gene:
         if key not in raw:
             raise _fail(path, f"{where} needs {key}")
     param = str(raw["param"])
+    kind = raw.get("kind", "real")
+    if kind not in ("real", "int", "bits"):
+        raise _fail(path, f"{where}.kind must be real, int or bits, got {kind!r}")
+    for key, low_limit, high_limit in (("count", 1, 1_000_000), ("bits", 1, 30), ("index", 0, 1_000_000)):
+        value = raw.get(key)
+        if value is not None and (isinstance(value, bool) or not isinstance(value, int)
+                                  or not low_limit <= value <= high_limit):
+            raise _fail(path, f"{where}.{key} must be an integer in {low_limit}..{high_limit}, got {value!r}")
     if param == "final_time":  # paper 004: the final time t_f is searched too
-        try:
-            low, high = float(raw["low"]), float(raw["high"])
-        except (TypeError, ValueError):
-            raise _fail(path, f"{where}: low and high must be numbers") from None
-        if not 0 < low < high:
-            raise _fail(path, f"{where}: need 0 < low < high for final_time")
-        return Gene(param, low, high, str(raw.get("kind", "real")))
+        low, high = raw["low"], raw["high"]
+        if not all(isinstance(v, (int, float)) and not isinstance(v, bool) and np.isfinite(v) for v in (low, high)) \
+                or not 0 < low < high:
+            raise _fail(path, f"{where}: final_time needs finite numbers 0 < low < high, got {low!r} and {high!r}")
+        if kind != "real" or raw.get("count", 1) != 1 or raw.get("index") is not None:
+            raise _fail(path, f"{where}: final_time is one real gene (no kind, count or index)")
+        return Gene(param, float(low), float(high))
     spec = _controller_spec(param)
     if spec is None:
         names = [s.name for s in NODE_PARAMS["controller"]]
@@ -135,24 +226,17 @@ def _gene(path: Path, i: int, raw: Any, controller: str) -> Gene:
         raise _fail(path, f"{where}.param {param!r} is not a controller parameter{hint}")
     if not spec.kind.endswith("array"):
         raise _fail(path, f"{where}.param {param!r} is not an array parameter")
-    try:
-        low, high = float(raw["low"]), float(raw["high"])
-    except (TypeError, ValueError):
-        raise _fail(path, f"{where}: low and high must be numbers") from None
+    low, high = raw["low"], raw["high"]
+    if not all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in (low, high)):
+        raise _fail(path, f"{where}: low and high must be numbers, got {low!r} and {high!r}")
+    low, high = float(low), float(high)
     if not (np.isfinite(low) and np.isfinite(high)):
         raise _fail(path, f"{where}: low and high must be finite, got {low} and {high}")
     if not low < high:
         raise _fail(path, f"{where}: low {low} must be below high {high}")
-    kind = str(raw.get("kind", "real"))
-    if kind not in ("real", "int", "bits"):
-        raise _fail(path, f"{where}.kind must be real, int or bits, got {kind!r}")
     index = raw.get("index")
-    count = int(raw.get("count", 1))
-    bits = int(raw.get("bits", 6))
-    if count < 1 or bits < 1 or bits > 30:
-        raise _fail(path, f"{where}: count >= 1 and 1 <= bits <= 30")
-    if index is not None and (not isinstance(index, int) or index < 0):
-        raise _fail(path, f"{where}.index must be a non-negative integer")
+    count = raw.get("count", 1)
+    bits = raw.get("bits", 6)
     length = spec.lengths[0] if spec.lengths else None
     if length is not None and (index or 0) + count > length:
         raise _fail(path, f"{where}: elements {index or 0}..{(index or 0) + count - 1} exceed {param}'s {length}")
@@ -177,68 +261,69 @@ def load_spec(path: str | Path) -> TuningSpec:
         Missing file, bad YAML, unknown key, bad gene, unknown algorithm or cost.
     """
     p = Path(path)
+    if p.is_dir():
+        raise SpecError(f"{p}: a directory, not a tuning spec")
     if not p.is_file():
         raise SpecError(f"{p}: no such tuning spec")
     try:
-        data = yaml12.load(p.read_text())
-    except yaml.YAMLError:
-        raise SpecError(f"{p}: not valid YAML") from None
+        data = yaml12.load_file(p)
+    except yaml.YAMLError as exc:
+        raise SpecError(f"{p}: not valid YAML{yaml_problem(exc)}") from None
     if not isinstance(data, dict):
-        raise _fail(p, "expected a mapping")
+        raise _fail(p, "expected a mapping of name, scenarios, controller, genome, cost, algorithm, ...")
     unknown = set(data) - _TOP
     if unknown:
-        key = sorted(unknown)[0]
+        key = str(sorted(map(str, unknown))[0])
         close = difflib.get_close_matches(key, _TOP, n=1)
         raise _fail(p, f"unknown key {key!r}" + (f" (did you mean {close[0]!r}?)" if close else ""))
     for key in ("scenarios", "controller", "genome", "cost", "algorithm"):
         if key not in data:
             raise _fail(p, f"missing key {key!r}")
     scen_files = data["scenarios"] if isinstance(data["scenarios"], list) else [data["scenarios"]]
+    if not scen_files or not all(isinstance(f, str) and f for f in scen_files):
+        raise _fail(p, f"scenarios must be a file name or a non-empty list of them, got {data['scenarios']!r}")
     scenarios = []
     for f in scen_files:
-        sp = (p.parent / str(f)).resolve() if not Path(str(f)).is_absolute() else Path(str(f))
+        sp = (p.parent / f).resolve() if not Path(f).is_absolute() else Path(f)
         try:
             scenarios.append(load_scenario(sp))
         except ScenarioError as exc:
-            raise SpecError(str(exc)) from None
-    controller = str(data["controller"])
+            raise _fail(p, f"scenarios: {exc}") from None
+    controller = data["controller"]
     if controller not in ("pid", "fuzzy_pid", "ga_flc", "geometric"):
         raise _fail(p, f"controller must be pid, fuzzy_pid, ga_flc or geometric, got {controller!r}")
     if not isinstance(data["genome"], list) or not data["genome"]:
         raise _fail(p, "genome must be a non-empty list")
     genome = [_gene(p, i, g, controller) for i, g in enumerate(data["genome"])]
-    cost = dict(data["cost"]) if isinstance(data["cost"], dict) else {"name": data["cost"]}
-    if cost.get("name") not in COSTS:
-        raise _fail(p, f"cost.name must be one of {', '.join(COSTS)}, got {cost.get('name')!r}")
-    algorithm = dict(data["algorithm"]) if isinstance(data["algorithm"], dict) else {"name": data["algorithm"]}
-    if algorithm.get("name") not in ALGORITHMS:
-        raise _fail(p, f"algorithm.name must be one of {', '.join(ALGORITHMS)}, got {algorithm.get('name')!r}")
-    if algorithm["name"] == "binary_ga" and any(g.kind != "bits" for g in genome):
-        raise _fail(p, "binary_ga needs every gene of kind bits")
-    if algorithm["name"] == "nsga2" and cost["name"] != "ts_ce":
-        raise _fail(p, "nsga2 needs the two-objective cost ts_ce")
+    cost = _section(str(p), "cost", data["cost"])
+    algorithm = _section(str(p), "algorithm", data["algorithm"])
+    _check_combination(str(p), genome, cost, algorithm)
     conditions = data.get("conditions") or [{}]
     if not isinstance(conditions, list) or not all(isinstance(c, dict) for c in conditions):
         raise _fail(p, "conditions must be a list of mappings node.param: value")
     for c in conditions:
         for key, value in c.items():
             node, _, name = str(key).partition(".")
+            if node not in NODE_PARAMS or not name:
+                raise _fail(p, f"condition {key}: expected node.param with a node of {', '.join(NODE_PARAMS)}")
             try:
                 scenarios[0].with_values(node, **{name: value})
-            except (ScenarioError, KeyError) as exc:
+            except ScenarioError as exc:
                 raise _fail(p, f"condition {key}: {exc}") from None
-    evaluation = dict(data.get("evaluation") or {})
+    evaluation = _section(str(p), "evaluation", data.get("evaluation"))
     evaluation.setdefault("mode", "batch")
-    if evaluation["mode"] not in ("batch", "graph"):
-        raise _fail(p, f"evaluation.mode must be batch or graph, got {evaluation['mode']!r}")
+    record = _section(str(p), "record", data.get("record"))
     seed = data.get("seed", 1)
-    if not isinstance(seed, int) or seed < 0:
-        raise _fail(p, f"seed must be a non-negative integer, got {seed!r}")
-    name = str(data.get("name") or p.stem)
-    out = Path(str(data.get("output") or f"results/{name}"))
+    if _SEED(seed):
+        raise _fail(p, f"seed {_SEED(seed)}")
+    name = data.get("name") or p.stem
+    description = data.get("description", "")
+    if not isinstance(name, str) or not isinstance(description, str):
+        raise _fail(p, f"name and description must be strings, got {name!r} and {description!r}")
+    out = _output(str(p), data.get("output") or f"results/{name}")
     return TuningSpec(path=p, name=name, scenarios=scenarios, conditions=conditions, controller=controller,
                       genome=genome, cost=cost, algorithm=algorithm, seed=seed, evaluation=evaluation, output=out,
-                      record=dict(data.get("record") or {}), description=str(data.get("description", "")))
+                      record=record, description=description)
 
 
 def decode(spec: TuningSpec, x: np.ndarray) -> tuple[dict[str, np.ndarray], np.ndarray]:
@@ -287,20 +372,16 @@ def apply_overrides(spec: TuningSpec, overrides: dict[str, Any]) -> TuningSpec:
     """
     for key, value in overrides.items():
         section, _, name = key.partition(".")
+        where = f"--set {key}={value}" if not isinstance(value, str) else f"--set {key}={value!r}"
         if section == "seed" and not name:
-            spec.seed = int(value)
+            if _SEED(value):
+                raise SpecError(f"{where}: seed {_SEED(value)}")
+            spec.seed = value
         elif section == "output" and not name:
-            spec.output = Path(str(value))
-        elif section in ("algorithm", "cost", "evaluation", "record") and name:
-            getattr(spec, section)[name] = value
+            spec.output = _output(where, value if value is None or not isinstance(value, (int, float)) else str(value))
+        elif section in SECTIONS and name:
+            setattr(spec, section, _section(where, section, {**getattr(spec, section), name: value}))
         else:
             raise SpecError(f"--set {key}: only seed, output, algorithm.*, cost.*, evaluation.*, record.* can be set")
-    for key, least in (("generations", 1), ("pop_size", 2)):
-        value = spec.algorithm.get(key)
-        if value is not None and (isinstance(value, bool) or not isinstance(value, int) or value < least):
-            raise SpecError(f"algorithm.{key} must be an integer >= {least}, got {value!r}")
-    for key, least in (("workers", 1), ("replicas", 1)):
-        value = spec.evaluation.get(key)
-        if value is not None and (isinstance(value, bool) or not isinstance(value, int) or value < least):
-            raise SpecError(f"evaluation.{key} must be an integer >= {least}, got {value!r}")
+    _check_combination("--set", spec.genome, spec.cost, spec.algorithm)
     return spec
