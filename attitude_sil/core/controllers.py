@@ -533,7 +533,7 @@ class ControllerBank:
             "geometric": Geometric(v["geometric.k"], v["geometric.l"], _inertia(v["geometric.inertia"]), dt,
                                    v["geometric.torque_limit"], _environment(v)),
         }
-        self.configure(v)
+        self._set_limits(v)  # the constructors took the gains
         self.active = v["controller_type"]
         self.pending: str | None = None
         self.u_last: np.ndarray | None = None
@@ -542,7 +542,6 @@ class ControllerBank:
     def configure(self, v: dict) -> None:
         """Apply (possibly changed) gains to every controller; states are kept."""
         c = self.controllers
-        lim = v["output_limit"]
         c["pid"].set_gains(v["pid.kp"], v["pid.ki"], v["pid.kd"], v["pid.n"])
         c["fuzzy_pid"].pid.set_gains(v["fuzzy_pid.kp"], v["fuzzy_pid.ki"], v["fuzzy_pid.kd"], v["fuzzy_pid.n"])
         c["fuzzy_pid"].set_params(v["fuzzy_pid.e_scale"], v["fuzzy_pid.de_scale"], v["fuzzy_pid.u_scale"],
@@ -550,6 +549,12 @@ class ControllerBank:
         c["ga_flc"].set_params(v["ga_flc.rules"], v["ga_flc.mf_ratios"], v["ga_flc.scales"])
         c["geometric"].set_params(v["geometric.k"], v["geometric.l"], _inertia(v["geometric.inertia"]),
                                   _environment(v))
+        self._set_limits(v)
+
+    def _set_limits(self, v: dict) -> None:
+        """The command kind, error mode, output limits and bumpless transfer of every controller."""
+        c = self.controllers
+        lim = v["output_limit"]
         self.command = v["command"]
         angle = v["error_mode"] == "angle"
         c["pid"].angle_mode = c["fuzzy_pid"].pid.angle_mode = angle

@@ -126,8 +126,8 @@ class DisturbanceModel:
         self.reset()
 
     def reset(self) -> None:
-        """Restart every episode's noise stream from its seed."""
-        self.rngs = [np.random.Generator(np.random.PCG64(s)) for s in self.seeds]
+        """Restart every episode's noise stream from its seed (streams exist only where noise is on)."""
+        self.rngs = [np.random.Generator(np.random.PCG64(s)) for s in self.seeds] if "noise" in self.models else []
 
     def _lvlh_to_body(self, q_BN: np.ndarray, t_ns: int) -> np.ndarray:
         q_LN = lvlh_attitude(t_ns * 1e-9, self.q_LN0, self.rate)

@@ -123,7 +123,7 @@ def rk4_body(q, w, h, inertia, inertia_inv, tau_c, tau_e, dt, substeps):
     return qo, wo, ho
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def rk4_body_into(q, w, h, inertia, inertia_inv, tau_c, tau_e, dt, substeps, qo, wo, ho):
     """:func:`rk4_body` into given arrays; ``qo``, ``wo``, ``ho`` may be ``q``, ``w``, ``h`` (in place)."""
     for p in range(q.shape[0]):
@@ -187,7 +187,7 @@ def pid_step(q_BN, q_RN, kp, ki, kd, n, a, integral, filt, dt, u_max, angle_mode
     return u
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def pid_step_into(q_BN, q_RN, kp, ki, kd, n, a, integral, filt, dt, u_max, angle_mode, u):
     """:func:`pid_step` writing the command into ``u`` (P, 3)."""
     for p in range(q_BN.shape[0]):
@@ -228,7 +228,7 @@ def wheel_step(x, v_cmd, allocation, axes, phi_T, gamma, j_m, k_b, headroom, spe
     return x_next, tau_c, h0
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def wheel_step_into(x, v_cmd, allocation, axes, phi_T, gamma, j_m, k_b, headroom, speed_max, v_max, dt,
                     torque_mode, k_i, r_a, b_m, x_next, tau_c, h0):
     """:func:`wheel_step` into given arrays (``x_next`` must not be ``x``)."""
@@ -328,7 +328,7 @@ def fuzzy_pid_step(q_BN, q_RN, e_prev, has_prev, kp, ki, kd, n, a, integral, fil
     return out
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def fuzzy_pid_step_into(q_BN, q_RN, e_prev, has_prev, kp, ki, kd, n, a, integral, filt, e_scale, de_scale,
                         u_scale, rules, v, dt, u_max, angle_mode, out):
     """:func:`fuzzy_pid_step` writing the mixed command into ``out`` (P, 3)."""
@@ -378,7 +378,7 @@ def ga_flc_step(q_BN, omega, q_RN, omega_RN_R, rules, vertices, scales, u_max):
     return out
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def ga_flc_step_into(q_BN, omega, q_RN, omega_RN_R, rules, vertices, scales, u_max, out):
     """:func:`ga_flc_step` writing the saturated command into ``out`` (P, 3)."""
     for p in range(q_BN.shape[0]):

@@ -27,6 +27,7 @@ torque on the body about that axis; the wheels are driven the other way
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 
 import numpy as np
@@ -112,6 +113,30 @@ class MotorParams:
         return self.torque_max / self.torque_constant
 
 
+@functools.lru_cache(maxsize=64)
+def _motor_transition(resistance: float, inductance: float, torque_constant: float, back_emf_constant: float,
+                      rotor_inertia: float, viscous_friction: float, dt: float) -> tuple[np.ndarray, np.ndarray]:
+    """Exact one-step transition of the motor state (angle, current, speed) with the voltage held.
+
+    The zero-order-hold discretisation of eq. 15-16 by the matrix exponential of
+    the augmented system: returns ``(phi_T (3, 3), gamma (3,))`` with
+    ``x_next = x @ phi_T + e_a * gamma``. Cached: every episode of a batch and
+    every run of one set of constants shares it (callers copy).
+    """
+    a_m = np.array(
+        [
+            [0.0, 0.0, 1.0],
+            [0.0, -resistance / inductance, -back_emf_constant / inductance],
+            [0.0, torque_constant / rotor_inertia, -viscous_friction / rotor_inertia],
+        ]
+    )
+    aug = np.zeros((4, 4))
+    aug[:3, :3] = a_m
+    aug[:3, 3] = [0.0, 1.0 / inductance, 0.0]
+    e = expm(aug * dt)
+    return e[:3, :3].T.copy(), e[:3, 3].copy()
+
+
 class WheelAssembly:
     """A set of identical PMDC reaction wheels on fixed axes, batch over episodes.
 
@@ -133,20 +158,10 @@ class WheelAssembly:
         # eq. 14: body-axis command -> wheel command
         self.allocation = np.linalg.pinv(self.axes_B)
         m = motor
-        a_m = np.array(
-            [
-                [0.0, 0.0, 1.0],
-                [0.0, -m.resistance / m.inductance, -m.back_emf_constant / m.inductance],
-                [0.0, m.torque_constant / m.rotor_inertia, -m.viscous_friction / m.rotor_inertia],
-            ]
-        )
-        b_m = np.array([0.0, 1.0 / m.inductance, 0.0])
-        aug = np.zeros((4, 4))
-        aug[:3, :3] = a_m
-        aug[:3, 3] = b_m
-        e = expm(aug * self.dt)
-        self.phi_T = e[:3, :3].T.copy()  # x_next = x @ phi_T + e_a * gamma
-        self.gamma = e[:3, 3].copy()
+        phi_T, gamma = _motor_transition(m.resistance, m.inductance, m.torque_constant, m.back_emf_constant,
+                                         m.rotor_inertia, m.viscous_friction, self.dt)
+        self.phi_T = phi_T.copy()  # x_next = x @ phi_T + e_a * gamma
+        self.gamma = gamma.copy()
 
     # -- helpers -------------------------------------------------------------
     def initial_state(self, n_episodes: int, speed0: np.ndarray | None = None) -> np.ndarray:
