@@ -23,7 +23,7 @@ ONE_DEG = np.radians(1.0)
 @pytest.mark.parametrize("controller", CONTROLLER_TYPES)
 def test_each_controller_settles_the_hst_step_in_graph_and_batch(controller):
     scn = load_scenario(CONFIG / "hst_roll_step.yaml")
-    result = run_graph(scn, controller=controller, progress=False)
+    result = run_graph(scn, controller=controller, progress=False, keep_trajectory=True)
     m = result.metrics
     assert m["controller_type"] == controller
     assert m["settling_time_s"] is not None and m["settling_time_s"] < 15.0
@@ -71,7 +71,7 @@ def test_scheduled_swap_in_yaml_runs_through_the_parameter_service(tmp_path):
     path = tmp_path / "swap.yaml"
     path.write_text(yaml.safe_dump(data))
     scn = load_scenario(path)
-    result = run_graph(scn, duration=5.0, record_dir=tmp_path / "bag", progress=False)
+    result = run_graph(scn, duration=5.0, record_dir=tmp_path / "bag", progress=False, keep_trajectory=True)
     tr = simulate(scn, 1, duration=5.0)
     assert np.max(np.abs(result.trajectory.q_BN[0] - tr.q_BN[0])) <= 1e-9
     assert np.max(np.abs(result.trajectory.omega_BN_B[0] - tr.omega_BN_B[0])) <= 1e-9

@@ -33,7 +33,7 @@ def _assert_same_as_batch(scn, result, duration):
 def roll_run(tmp_path_factory):
     scn = load_scenario(CONFIG / "hst_roll_step.yaml")
     bag = tmp_path_factory.mktemp("bags") / "roll"
-    return scn, run_graph(scn, record_dir=bag, progress=False)  # the whole 20 s scenario
+    return scn, run_graph(scn, record_dir=bag, progress=False, keep_trajectory=True)  # the whole 20 s scenario
 
 
 def test_in_process_graph_completes_and_matches_batch(roll_run):
@@ -73,13 +73,13 @@ def test_bag_holds_every_topic_with_types_and_counts(roll_run):
 
 def test_graph_with_disturbances_matches_batch(tmp_path):
     scn = load_scenario(CONFIG / "hst_roll_yaw.yaml")
-    result = run_graph(scn, duration=3.0, record_dir=None, progress=False)
+    result = run_graph(scn, duration=3.0, record_dir=None, progress=False, keep_trajectory=True)
     _assert_same_as_batch(scn, result, 3.0)
 
 
 def test_multi_process_graph_completes_and_matches_batch(tmp_path):
     scn = load_scenario(CONFIG / "hst_roll_step.yaml")
-    result = run_graph(scn, record_dir=tmp_path / "mp", processes=True, progress=False)
+    result = run_graph(scn, record_dir=tmp_path / "mp", processes=True, progress=False, keep_trajectory=True)
     assert result.counts["wheel_torque"] == 2001
     _assert_same_as_batch(scn, result, 20.0)
 

@@ -24,7 +24,7 @@ HST = [31.046, 77.217, 78.754]
 ])
 def test_preset_runs_through_the_graph_as_in_batch(name, duration, topic):
     scn = load_scenario(CONFIG / f"{name}.yaml")
-    result = run_graph(scn, duration=duration, progress=False)
+    result = run_graph(scn, duration=duration, progress=False, keep_trajectory=True)
     tr = simulate(scn, 1, duration=duration)
     steps = scn.steps(duration) + 1
     assert result.counts[topic] == steps

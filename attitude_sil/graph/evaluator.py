@@ -45,7 +45,7 @@ class GraphEpisodes:
 
     def run(self, params: dict, record_dir: Path | None):
         """One episode with these controller parameters; returns the :class:`RunResult`."""
-        return self.session.run_episode(controller_params=params, record_dir=record_dir)
+        return self.session.run_episode(controller_params=params, record_dir=record_dir, keep_trajectory=True)
 
     def score_rows(self, x: np.ndarray, tags: list[str]) -> Evaluation:
         """Costs of candidates ``x`` (P, n_var); ``tags`` name their bags."""

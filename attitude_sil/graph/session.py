@@ -32,6 +32,7 @@ from attitude_sil.core.controllers import OUTPUT_KIND
 from attitude_sil.core.engine import check_episode, schedule_from_scenario, simulate
 from attitude_sil.core.metrics import episode_report
 from attitude_sil.core.params import spec_for
+from attitude_sil.core.running_metrics import EpisodeAccumulator
 from attitude_sil.core.scenario import Scenario
 from attitude_sil.core.trajectory import Trajectory
 from attitude_sil.errors import AttitudeSilError, BagWriteError, RunError
@@ -43,7 +44,7 @@ from attitude_sil.graph.launcher import (
     stop_processes,
     wait_connected,
 )
-from attitude_sil.graph.trajectory import KEPT_TOPICS, trajectory_from_messages
+from attitude_sil.graph.trajectory import KEPT_TOPICS, StepAssembler, trajectory_from_messages
 from attitude_sil.nodes.recorder_node import Recorder
 from attitude_sil.ros.contract import ATTITUDE, COMMAND_TOPICS, STEP_TOPICS, WHEEL_TORQUE, check_namespace
 from attitude_sil.ros.environment import isolated_domain, localhost_environment
@@ -66,14 +67,15 @@ class RunResult:
         The bag recorded, if any.
     counts : dict
         Messages received per topic.
-    trajectory : Trajectory
-        The episode (P = 1), the batch engine's type.
+    trajectory : Trajectory or None
+        The episode (P = 1), the batch engine's type, if it was asked for
+        (``keep_trajectory``).
     """
 
     metrics: dict[str, Any]
     bag: Path | None
     counts: dict[str, int]
-    trajectory: Trajectory
+    trajectory: Trajectory | None
 
 
 def _schedule(scn: Scenario, duration: float) -> list[tuple[float, int, str]]:
@@ -193,8 +195,13 @@ class GraphSession:
         self.executor.spin_once(timeout_sec=timeout_sec)
 
     def run_episode(self, *, record_dir: str | Path | None = None, controller_params: dict | None = None,
-                    progress: bool = False) -> RunResult:
-        """Play one episode; returns its metrics, counts, trajectory and bag.
+                    progress: bool = False, keep_trajectory: bool = False) -> RunResult:
+        """Play one episode; returns its metrics, counts, bag and (if asked) trajectory.
+
+        Without ``keep_trajectory`` the metrics come from running sums
+        (:class:`~attitude_sil.core.running_metrics.EpisodeAccumulator`): the
+        episode's memory does not grow with its length. With it, the episode's
+        messages are kept and decoded into a Trajectory (about 1.5 kB a step).
 
         Raises
         ------
@@ -213,9 +220,13 @@ class GraphSession:
                 writer = BagWriter(record_dir, custom_data={PARAMETERS_KEY: self.scn.parameters_yaml(extra)})
             except (FileExistsError, ValueError, OSError) as exc:
                 raise RunError(str(exc)) from None
-        self.recorder.start_episode(writer)
         prog = _Progress(progress, self.duration)
         schedule = _schedule(self.scn, self.duration)
+        accumulator = EpisodeAccumulator(self.scn.values["scenario"], self.scn.param("guidance", "step_time"),
+                                         self.controller, schedule or None)
+        assembler = StepAssembler(accumulator)
+        self.recorder.start_episode(writer, keeping=keep_trajectory,
+                                    sink=None if keep_trajectory else assembler.add)
         try:
             if controller_params:
                 set_remote_parameters(self.recorder, self.spin, "controller", controller_params)
@@ -236,9 +247,16 @@ class GraphSession:
                 except BagWriteError:
                     if not self.recorder.error:  # else the error is on its way up already
                         raise
-        traj = trajectory_from_messages(self.recorder.kept)
-        metrics = episode_report(self.scn, traj, self.controller, self.duration, wall,
-                                 schedule if schedule else None)
+        self.recorder.sink = None
+        if keep_trajectory:
+            traj = trajectory_from_messages(self.recorder.kept)
+            metrics = episode_report(self.scn, traj, self.controller, self.duration, wall,
+                                     schedule if schedule else None)
+            for kept in self.recorder.kept.values():
+                kept.clear()
+        else:
+            traj = None
+            metrics = assembler.accumulator.report(self.scn.name, self.duration, wall)
         bag = None if writer is None else writer.run_dir
         metrics["bag"] = None if bag is None else str(bag)
         return RunResult(metrics=metrics, bag=bag, counts=dict(self.recorder.counts), trajectory=traj)
@@ -276,6 +294,7 @@ def run_graph(
     namespace: str | None = None,
     controller_params: dict | None = None,
     before_start: Callable[[], None] | None = None,
+    keep_trajectory: bool = False,
 ) -> RunResult:
     """Run one episode of ``scn`` through the ROS graph.
 
@@ -302,6 +321,9 @@ def run_graph(
         Controller parameters set through the parameter service before the episode.
     before_start : callable, optional
         Called once the input is validated, before the graph starts (``run`` announces its domain there).
+    keep_trajectory : bool
+        Keep the episode's messages and return its Trajectory; without it the
+        metrics come from running sums and memory stays flat however long the run.
 
     Returns
     -------
@@ -324,7 +346,8 @@ def run_graph(
     if before_start is not None:
         before_start()
     with session as graph:
-        return graph.run_episode(record_dir=record_dir, controller_params=controller_params, progress=progress)
+        return graph.run_episode(record_dir=record_dir, controller_params=controller_params, progress=progress,
+                                 keep_trajectory=keep_trajectory)
 
 
 def _spin_episode(recorder: Recorder, spin, plant, children, k_steps: int, scn: Scenario, prog: _Progress,

@@ -10,6 +10,7 @@ from __future__ import annotations
 import numpy as np
 from rclpy.serialization import deserialize_message
 
+from attitude_sil.core.running_metrics import EpisodeAccumulator
 from attitude_sil.core.trajectory import Trajectory
 from attitude_sil.ros.contract import (
     ATTITUDE,
@@ -25,8 +26,9 @@ from attitude_sil.ros.contract import (
     message_class,
 )
 from attitude_sil.ros.convert import decode_step_messages
+from attitude_sil.storage.cdr import stamped_values
 
-__all__ = ["KEPT_TOPICS", "trajectory_from_messages"]
+__all__ = ["KEPT_TOPICS", "StepAssembler", "trajectory_from_messages"]
 
 #: the topics an episode keeps in memory to build its trajectory
 KEPT_TOPICS = (ATTITUDE, BODY_RATE, ATTITUDE_SETPOINT, RATE_SETPOINT, WHEEL_TORQUE, WHEEL_MOMENTUM,
@@ -96,3 +98,48 @@ def trajectory_from_messages(kept: dict[str, list[tuple[int, bytes]]]) -> Trajec
         wheel_effort=effort[None, :n],
         omega_RN_R=arrays["omega_RN_R"][1][None, :n],
     )
+
+
+class StepAssembler:
+    """Hands an :class:`EpisodeAccumulator` each step of a live episode once its messages are all in.
+
+    A step needs ``attitude``, ``attitude_setpoint``, ``wheel_torque`` and its
+    command (``voltage_cmd`` or ``torque_cmd``); steps go to the accumulator in
+    stamp order, the first copy of a message counting (as
+    :func:`trajectory_from_messages` takes them). Only the steps not yet
+    complete are held: a few in a lockstep run.
+    """
+
+    _WIDTH = {ATTITUDE: 4, ATTITUDE_SETPOINT: 4, WHEEL_TORQUE: 3}
+
+    def __init__(self, accumulator: EpisodeAccumulator) -> None:
+        self.accumulator = accumulator
+        self.pending: dict[int, dict[str, np.ndarray]] = {}
+        self.done = -1  # stamp of the last step handed on, ns
+        self.steps = 0
+
+    def add(self, topic: str, stamp_ns: int, data: bytes) -> None:
+        """One message of a kept topic (the recorder's sink)."""
+        if topic in COMMAND_TOPIC.values():
+            part = "command"
+            width = 3
+        elif topic in self._WIDTH:
+            part, width = topic, self._WIDTH[topic]
+        else:
+            return
+        if stamp_ns <= self.done:
+            return  # a second copy of a step already handed on
+        values = stamped_values(data, width)
+        if values is None:
+            return
+        self.pending.setdefault(stamp_ns, {}).setdefault(part, values.copy())
+        while self.pending:
+            first = min(self.pending)
+            parts = self.pending[first]
+            if len(parts) < 4:
+                return
+            del self.pending[first]
+            self.accumulator.add(first * 1e-9, parts[ATTITUDE], parts[ATTITUDE_SETPOINT], parts[WHEEL_TORQUE],
+                                 parts["command"])
+            self.done = first
+            self.steps += 1

@@ -7,14 +7,15 @@ read from the CDR bytes, so a bag replays with its simulated timing;
 ``/parameter_events`` (stamped by each node's clock, wall time before
 ``use_sim_time`` takes effect) are logged at the latest lockstep stamp. The
 node also keeps the raw messages of chosen topics in memory for the runner's
-metrics. Stray messages (a /clock that jumps, a stamp far ahead of the clock:
-foreign or corrupt publishers) are not recorded, counted in ``refused`` and
-logged once a second.
+metrics, or hands them to a sink that keeps running sums. Stray messages (a
+/clock that jumps, a stamp far ahead of the clock: foreign or corrupt
+publishers) are not recorded, counted in ``refused`` and logged once a second.
 """
 
 from __future__ import annotations
 
 from collections import defaultdict
+from collections.abc import Callable
 
 import numpy as np
 from rclpy.node import Node
@@ -55,6 +56,8 @@ class Recorder(Node):
         self.clock_ns = 0  # the latest /clock, ns
         self.sim_now = 0  # latest lockstep stamp seen, ns
         self.kept: dict[str, list[tuple[int, bytes]]] = {name: [] for name in keep}
+        self.keeping = True  # False: the kept topics go to ``sink`` only, nothing stays in memory
+        self.sink: Callable[[str, int, bytes], None] | None = None  # (topic, stamp ns, CDR) of kept topics
         self.subs = {}
         for name, type_name in (topics or RECORDED_TOPICS).items():
             qos = PARAMETER_EVENTS_QOS if name == PARAMETER_EVENTS else LOCKSTEP_QOS
@@ -70,8 +73,15 @@ class Recorder(Node):
         if writer is not None:
             self.start_episode(writer)
 
-    def start_episode(self, writer: BagWriter | None) -> None:
-        """Clear counts and kept messages and record to ``writer`` (None: stop recording)."""
+    def start_episode(self, writer: BagWriter | None, keeping: bool = True,
+                      sink: Callable[[str, int, bytes], None] | None = None) -> None:
+        """Clear counts and kept messages and record to ``writer`` (None: stop recording).
+
+        ``keeping``: keep the kept topics' messages in memory (``kept``);
+        ``sink``: also hand each of them to this callable as it comes.
+        """
+        self.keeping = keeping
+        self.sink = sink
         self.counts.clear()
         self.refused.clear()
         self.sim_now = 0
@@ -119,7 +129,10 @@ class Recorder(Node):
                 self.writer = None
         kept = self.kept.get(name)
         if kept is not None:
-            kept.append((t, data))
+            if self.keeping:
+                kept.append((t, data))
+            if self.sink is not None:
+                self.sink(name, t, data)
 
     def _refuse(self, name: str, t: int, why: str) -> None:
         self.refused[name] += 1
