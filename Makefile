@@ -6,7 +6,7 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
-.PHONY: run test lint bench docs clean
+.PHONY: run test lint bench soak docs clean
 
 $(STAMP): setup.py package.xml
 	$(PYTHON) -m venv $(VENV)
@@ -27,6 +27,9 @@ test: $(STAMP) lint
 bench: $(STAMP)
 	$(BIN)/python bench/bench_engine.py
 	$(BIN)/python bench/bench_tuner.py
+
+soak: $(STAMP)
+	$(BIN)/python bench/bench_soak.py
 
 docs: $(STAMP)
 	$(BIN)/python -c "from attitude_sil.core.params import parameters_markdown as p; \
