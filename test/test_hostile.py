@@ -106,5 +106,11 @@ def test_nan_stale_and_future_messages_on_every_input_change_nothing(tmp_path):
     assert quiet.returncode == 0, q_err
     assert _metrics(out) == _metrics(q_out)
     assert "refused" in err or "ignored" in err  # the refusals were said
+    # and the run named the intruder once on each lockstep topic it published on, and nobody else
+    for topic in (*VECTOR_INPUTS, *QUATERNION_INPUTS, CLOCK):
+        name = topic if topic.startswith("/") else f"/{topic}"
+        said = [line for line in err.splitlines() if f"{name} has a second publisher, /intruder" in line]
+        assert len(said) == 1, (topic, said)
+    assert "second publisher" not in q_err
     reader = open_bag(tmp_path / "attacked")
     assert math.isclose(reader.end_ns * 1e-9, 4.0, abs_tol=0.02)  # no stray stamp stretched the bag

@@ -46,7 +46,14 @@ from attitude_sil.graph.launcher import (
 )
 from attitude_sil.graph.trajectory import KEPT_TOPICS, StepAssembler, trajectory_from_messages
 from attitude_sil.nodes.recorder_node import Recorder
-from attitude_sil.ros.contract import ATTITUDE, COMMAND_TOPICS, STEP_TOPICS, WHEEL_TORQUE, check_namespace
+from attitude_sil.ros.contract import (
+    ATTITUDE,
+    COMMAND_TOPICS,
+    PRODUCERS,
+    STEP_TOPICS,
+    WHEEL_TORQUE,
+    check_namespace,
+)
 from attitude_sil.ros.environment import isolated_domain, localhost_environment
 from attitude_sil.ros.services import call_reset, set_remote_parameters
 from attitude_sil.ros.signals import STOP_SIGNALS, Interrupted, StopSignals
@@ -172,6 +179,7 @@ class GraphSession:
         self.children: list[subprocess.Popen] = []
         self.tmpdir = None
         self.recorder = None
+        self.foreign = None
         try:
             kw = namespace_kwargs(self.namespace)
             self.recorder = Recorder(None, keep=KEPT_TOPICS, context=self.context, **kw)
@@ -184,6 +192,7 @@ class GraphSession:
             else:
                 self.plant = start_nodes(self.scn, self.extra, self.context, self.executor, self.nodes, kw)
             wait_connected(self.recorder, self.spin, self.nodes, self.children, self.connect_timeout)
+            self.foreign = ForeignPublishers(self.recorder, self.namespace)
         except BaseException:
             self.__exit__(None, None, None)
             raise
@@ -236,7 +245,7 @@ class GraphSession:
             wall0 = time.monotonic()
             prog.t0 = wall0
             _spin_episode(self.recorder, self.spin, self.plant, self.children, self.scn.steps(self.duration),
-                          self.scn, prog, schedule)
+                          self.scn, prog, schedule, self.foreign)
             wall = time.monotonic() - wall0
             prog.update(self.duration, force=True)
         finally:
@@ -350,8 +359,49 @@ def run_graph(
                                  keep_trajectory=keep_trajectory)
 
 
+class ForeignPublishers:
+    """Warns once for each publisher on a lockstep topic that is not the graph's own producer.
+
+    The lockstep's nodes refuse what is not finite, not stamped for the step
+    they wait for, or a second message for it; a plausible message from a
+    foreign node stamped for the current step is told apart only by who sent
+    it, which needs the message info that rclpy's EventsExecutor does not
+    hand to callbacks. So the run names every foreign publisher it sees on the
+    ROS graph (node and topic), once, as soon as it appears.
+    """
+
+    def __init__(self, node, namespace: str | None, period_s: float = 1.0) -> None:
+        self.node = node
+        self.own = f"/{namespace}" if namespace else "/"
+        self.period_s = period_s
+        self.next_check = 0.0
+        self.warned: set[tuple[str, str]] = set()
+        self.topics = {node.resolve_topic_name(t): producer for t, producer in PRODUCERS.items()}
+
+    def check(self, now: float) -> list[str]:
+        """Look at the graph if a period has passed; returns (and logs) the new warnings."""
+        if now < self.next_check:
+            return []
+        self.next_check = now + self.period_s
+        new = []
+        for topic, producer in self.topics.items():
+            for info in self.node.get_publishers_info_by_topic(topic):
+                ns = info.node_namespace or "/"
+                if info.node_name == producer and ns == self.own:
+                    continue
+                who = f"{ns.rstrip('/')}/{info.node_name}"
+                if (topic, who) not in self.warned:
+                    self.warned.add((topic, who))
+                    text = (f"{topic} has a second publisher, {who} (the graph's is {self.own.rstrip('/')}/"
+                            f"{producer}); a finite message it stamps for the step waited on can be taken for the "
+                            "producer's")
+                    self.node.get_logger().warning(text)
+                    new.append(text)
+        return new
+
+
 def _spin_episode(recorder: Recorder, spin, plant, children, k_steps: int, scn: Scenario, prog: _Progress,
-                  schedule: list[tuple[float, int, str]]) -> None:
+                  schedule: list[tuple[float, int, str]], foreign: ForeignPublishers | None = None) -> None:
     """Spin until every step topic has all K+1 messages; apply scheduled swaps at their holds."""
     counts = recorder.counts
     needed = k_steps + 1
@@ -380,6 +430,8 @@ def _spin_episode(recorder: Recorder, spin, plant, children, k_steps: int, scn: 
         if recorder.error:
             raise RunError(f"{recorder.error}; the bag is readable up to there")
         now = time.monotonic()
+        if foreign is not None:
+            foreign.check(now)
         if n != last_count:
             last_count, last_change = n, now
             prog.update(max(n - 1, 0) * dt)

@@ -18,7 +18,7 @@ __all__ = ["CLOCK", "ATTITUDE", "BODY_RATE", "ATTITUDE_SETPOINT", "RATE_SETPOINT
            "WHEEL_TORQUE", "WHEEL_MOMENTUM", "WHEEL_STATE", "DISTURBANCE_TORQUE", "ATTITUDE_ERROR", "FLEXIBLE_MODE",
            "PLANT_INPUTS", "clock_remap",
            "STEP_TOPICS", "COMMAND_TOPICS", "COMMAND_TOPIC", "CONTROLLER_INPUTS", "MODEL_TOPICS", "RECORDED_TOPICS",
-           "GRAPH_SUBSCRIBERS", "PARAMETER_EVENTS", "message_class", "check_namespace", "check_node_name",
+           "GRAPH_SUBSCRIBERS", "PRODUCERS", "PARAMETER_EVENTS", "message_class", "check_namespace", "check_node_name",
            "check_parameter_name"]
 
 # -- name rules (ROS 2: a token is a letter or _ then letters, digits, _) -----------------
@@ -104,6 +104,13 @@ CONTROLLER_INPUTS = (ATTITUDE, BODY_RATE, ATTITUDE_SETPOINT, RATE_SETPOINT)
 GRAPH_SUBSCRIBERS = {
     ATTITUDE: 2, BODY_RATE: 1, ATTITUDE_SETPOINT: 1, RATE_SETPOINT: 1, VOLTAGE_CMD: 1, TORQUE_CMD: 1,
     WHEEL_TORQUE: 1, WHEEL_MOMENTUM: 1, DISTURBANCE_TORQUE: 1, CLOCK: 1,
+}
+
+#: the one node of the graph that publishes each step topic (docs/architecture.md, "ROS contract")
+PRODUCERS = {
+    CLOCK: "plant", ATTITUDE: "plant", BODY_RATE: "plant", ATTITUDE_SETPOINT: "guidance", RATE_SETPOINT: "guidance",
+    VOLTAGE_CMD: "controller", TORQUE_CMD: "controller", WHEEL_TORQUE: "wheels", WHEEL_MOMENTUM: "wheels",
+    WHEEL_STATE: "wheels", DISTURBANCE_TORQUE: "disturbance", ATTITUDE_ERROR: "controller",
 }
 
 #: published only by some plant models (paper 002's flexible mode: x = alpha rad, y = d alpha/dt rad/s)
