@@ -213,13 +213,8 @@ def _flatten(params: dict, prefix: str = "") -> dict[str, Any]:
     return out
 
 
-def yaml_problem(exc: BaseException) -> str:
-    """`` at line N`` or `` (problem)`` for a YAML error: one line, for the messages of every YAML file."""
-    mark = getattr(exc, "problem_mark", None)
-    if mark is not None:
-        return f" at line {mark.line + 1}"
-    text = " ".join(str(exc).split())
-    return f" ({text})" if text else ""
+#: one line for a YAML error (kept under this name for the modules that import it from here)
+yaml_problem = yaml12.problem
 
 
 def load_scenario(path: str | Path) -> Scenario:
@@ -230,16 +225,8 @@ def load_scenario(path: str | Path) -> Scenario:
     ScenarioError
         Missing file, YAML syntax error, unknown key, wrong type or value.
     """
-    p = Path(path)
-    if not p.is_file():
-        raise ScenarioError(f"{p}: no such scenario file")
-    try:
-        data = yaml12.load_file(p)
-    except yaml.YAMLError as exc:
-        raise ScenarioError(f"{p}: not valid YAML{yaml_problem(exc)}") from None
-    except OSError as exc:
-        raise ScenarioError(f"{p}: cannot read: {exc.strerror or exc}") from None
-    return scenario_from_dict(data, source=str(p))
+    data = yaml12.read(path, "scenario file", ScenarioError)
+    return scenario_from_dict(data, source=str(Path(path)))
 
 
 def with_parameter_file(scn: Scenario, path: str | Path) -> Scenario:
@@ -251,14 +238,7 @@ def with_parameter_file(scn: Scenario, path: str | Path) -> Scenario:
         Missing, empty or malformed file, unknown node or key, wrong value; the message names the file.
     """
     p = Path(path)
-    if not p.is_file():
-        raise ScenarioError(f"{p}: no such parameter file")
-    try:
-        data = yaml12.load_file(p)
-    except yaml.YAMLError as exc:
-        raise ScenarioError(f"{p}: not valid YAML{yaml_problem(exc)}") from None
-    except OSError as exc:
-        raise ScenarioError(f"{p}: cannot read: {exc.strerror or exc}") from None
+    data = yaml12.read(p, "parameter file", ScenarioError)
     if data is None:
         raise ScenarioError(f"{p}: empty parameter file (expected node: ros__parameters: ...)")
     if not isinstance(data, dict):

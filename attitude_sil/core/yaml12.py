@@ -15,7 +15,7 @@ from typing import Any
 
 import yaml
 
-__all__ = ["load", "load_file"]
+__all__ = ["load", "load_file", "problem", "read"]
 
 
 class _Loader(yaml.SafeLoader):
@@ -48,3 +48,36 @@ def load_file(path: str | Path) -> Any:
     except UnicodeDecodeError as exc:
         raise yaml.YAMLError(f"not UTF-8 text (byte 0x{data[exc.start]:02x} at offset {exc.start})") from None
     return load(text)
+
+
+def problem(exc: BaseException) -> str:
+    """`` at line N`` or `` (problem)`` for a YAML error: one line, for the messages of every YAML file."""
+    mark = getattr(exc, "problem_mark", None)
+    if mark is not None:
+        return f" at line {mark.line + 1}"
+    text = " ".join(str(exc).split())
+    return f" ({text})" if text else ""
+
+
+def read(path: str | Path, what: str, error: type[Exception]) -> Any:
+    """The data of a YAML file, or ``error`` with one line that names the file and the problem.
+
+    Parameters
+    ----------
+    path : path
+    what : str
+        What the file is, for the messages (``scenario file``, ``tuning spec``).
+    error : exception class
+        Raised for a missing file, a directory, unreadable or invalid YAML.
+    """
+    p = Path(path)
+    if p.is_dir():
+        raise error(f"{p}: a directory, not a {what}")
+    if not p.is_file():
+        raise error(f"{p}: no such {what}")
+    try:
+        return load_file(p)
+    except yaml.YAMLError as exc:
+        raise error(f"{p}: not valid YAML{problem(exc)}") from None
+    except OSError as exc:
+        raise error(f"{p}: cannot read: {exc.strerror or exc}") from None

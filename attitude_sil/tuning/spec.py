@@ -32,11 +32,10 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-import yaml
 
 from attitude_sil.core import yaml12
 from attitude_sil.core.params import NODE_PARAMS
-from attitude_sil.core.scenario import Scenario, load_scenario, yaml_problem
+from attitude_sil.core.scenario import Scenario, load_scenario
 from attitude_sil.errors import ScenarioError, SpecError
 
 __all__ = ["SpecError", "SECTIONS", "Gene", "TuningSpec", "load_spec", "apply_overrides", "decode", "ALGORITHMS",
@@ -261,14 +260,7 @@ def load_spec(path: str | Path) -> TuningSpec:
         Missing file, bad YAML, unknown key, bad gene, unknown algorithm or cost.
     """
     p = Path(path)
-    if p.is_dir():
-        raise SpecError(f"{p}: a directory, not a tuning spec")
-    if not p.is_file():
-        raise SpecError(f"{p}: no such tuning spec")
-    try:
-        data = yaml12.load_file(p)
-    except yaml.YAMLError as exc:
-        raise SpecError(f"{p}: not valid YAML{yaml_problem(exc)}") from None
+    data = yaml12.read(p, "tuning spec", SpecError)
     if not isinstance(data, dict):
         raise _fail(p, "expected a mapping of name, scenarios, controller, genome, cost, algorithm, ...")
     unknown = set(data) - _TOP
