@@ -49,9 +49,10 @@ from attitude_sil.ros.contract import ATTITUDE, COMMAND_TOPICS, STEP_TOPICS, WHE
 from attitude_sil.ros.environment import isolated_domain, localhost_environment
 from attitude_sil.ros.services import call_reset, set_remote_parameters
 from attitude_sil.ros.signals import STOP_SIGNALS, Interrupted, StopSignals
-from attitude_sil.storage.writer import PARAMETERS_KEY, BagWriter, check_bag_dir
+from attitude_sil.storage.writer import PARAMETERS_KEY, SCENARIO_KEY, BagWriter, check_bag_dir
 
-__all__ = ["RunError", "RunResult", "GraphSession", "Interrupted", "STOP_SIGNALS", "run_graph", "extra_parameters"]
+__all__ = ["RunError", "RunResult", "GraphSession", "Interrupted", "Progress", "STOP_SIGNALS", "run_graph",
+           "extra_parameters", "spin_episode"]
 
 
 @dataclass
@@ -97,8 +98,8 @@ def extra_parameters(scn: Scenario, duration: float | None, controller: str | No
     return extra
 
 
-class _Progress:
-    """A progress line on stderr: sim time, wall time, real-time factor."""
+class Progress:
+    """A progress line on stderr: sim time, wall time, real-time factor (``enabled=False``: none)."""
 
     def __init__(self, enabled: bool, sim_end: float) -> None:
         self.enabled = enabled
@@ -137,7 +138,7 @@ class GraphSession:
 
     def __init__(self, scn: Scenario, *, duration: float | None = None, controller: str | None = None,
                  processes: bool = False, real_time: bool = False, namespace: str | None = None,
-                 connect_timeout: float = 20.0) -> None:
+                 connect_timeout: float = 20.0, live=None) -> None:
         if controller is not None:
             spec_for("controller", "controller_type").validate(controller, "controller")
         self.scn = scn
@@ -152,6 +153,7 @@ class GraphSession:
         self.namespace = check_namespace(namespace)
         self.connect_timeout = connect_timeout
         self.controller = controller or scn.param("controller", "controller_type")
+        self.live = live  # a FoxgloveLive that serves every message, or None
 
     def __enter__(self) -> GraphSession:
         isolated_domain()  # a graph of its own unless the user chose a domain
@@ -172,7 +174,7 @@ class GraphSession:
         self.recorder = None
         try:
             kw = namespace_kwargs(self.namespace)
-            self.recorder = Recorder(None, keep=KEPT_TOPICS, context=self.context, **kw)
+            self.recorder = Recorder(None, keep=KEPT_TOPICS, live=self.live, context=self.context, **kw)
             self.executor = EventsExecutor(context=self.context)
             self.executor.add_node(self.recorder)
             self.plant = None
@@ -210,11 +212,14 @@ class GraphSession:
             if controller_params:
                 extra.update(controller_params)
             try:
-                writer = BagWriter(record_dir, custom_data={PARAMETERS_KEY: self.scn.parameters_yaml(extra)})
+                writer = BagWriter(record_dir, custom_data={PARAMETERS_KEY: self.scn.parameters_yaml(extra),
+                                                            SCENARIO_KEY: self.scn.scenario_yaml()})
             except (FileExistsError, ValueError, OSError) as exc:
                 raise RunError(str(exc)) from None
         self.recorder.start_episode(writer)
-        prog = _Progress(progress, self.duration)
+        if self.live is not None:
+            self.live.set_controller((controller_params or {}).get("controller_type", self.controller), 0)
+        prog = Progress(progress, self.duration)
         schedule = _schedule(self.scn, self.duration)
         try:
             if controller_params:
@@ -224,7 +229,7 @@ class GraphSession:
             call_reset(self.recorder, self.spin, self.connect_timeout)
             wall0 = time.monotonic()
             prog.t0 = wall0
-            _spin_episode(self.recorder, self.spin, self.plant, self.children, self.scn.steps(self.duration),
+            spin_episode(self.recorder, self.spin, self.plant, self.children, self.scn.steps(self.duration),
                           self.scn, prog, schedule)
             wall = time.monotonic() - wall0
             prog.update(self.duration, force=True)
@@ -276,6 +281,7 @@ def run_graph(
     namespace: str | None = None,
     controller_params: dict | None = None,
     before_start: Callable[[], None] | None = None,
+    live=None,
 ) -> RunResult:
     """Run one episode of ``scn`` through the ROS graph.
 
@@ -302,6 +308,10 @@ def run_graph(
         Controller parameters set through the parameter service before the episode.
     before_start : callable, optional
         Called once the input is validated, before the graph starts (``run`` announces its domain there).
+    live : FoxgloveLive or callable, optional
+        Serve every message of the run live too (``run --foxglove``); a callable
+        is called after ``before_start`` for the sink (or None), so a server
+        starts only once the input is validated.
 
     Returns
     -------
@@ -323,13 +333,21 @@ def run_graph(
                            namespace=namespace, connect_timeout=connect_timeout)  # validates
     if before_start is not None:
         before_start()
+    session.live = live() if callable(live) else live
     with session as graph:
         return graph.run_episode(record_dir=record_dir, controller_params=controller_params, progress=progress)
 
 
-def _spin_episode(recorder: Recorder, spin, plant, children, k_steps: int, scn: Scenario, prog: _Progress,
-                  schedule: list[tuple[float, int, str]]) -> None:
-    """Spin until every step topic has all K+1 messages; apply scheduled swaps at their holds."""
+def spin_episode(recorder: Recorder, spin, plant, children, k_steps: int, scn: Scenario, prog: Progress,
+                 schedule: list[tuple[float, int, str]]) -> None:
+    """Spin until every step topic has all K+1 messages; apply scheduled swaps at their holds.
+
+    Raises
+    ------
+    RunError
+        The plant (in this process) failed, recording failed, no step came for
+        ``input_timeout`` + 2 s, or a node process exited.
+    """
     counts = recorder.counts
     needed = k_steps + 1
     dt = scn.dt
