@@ -16,6 +16,7 @@ REQUIRES = [
     "mcap>=1.2",
     "mcap-ros2-support>=0.5",
     "numba>=0.59",
+    "foxglove-sdk>=0.30",  # run --foxglove: the live view (storage/foxglove.py)
 ]
 #: the tuner, its plots and the root-locus design; the attitude-sil command imports them too
 TUNE = ["pymoo>=0.6.1", "control>=0.10", "matplotlib>=3.7"]
@@ -28,6 +29,7 @@ setup(
         ("share/ament_index/resource_index/packages", [f"resource/{PACKAGE}"]),
         (f"share/{PACKAGE}", ["package.xml"]),
         (f"share/{PACKAGE}/config", glob("config/*.yaml")),
+        (f"share/{PACKAGE}/config/foxglove", glob("config/foxglove/*.json")),
         (f"share/{PACKAGE}/launch", glob("launch/*.launch.py")),
     ],
     python_requires=">=3.11",
@@ -35,7 +37,7 @@ setup(
     # are installed by the Makefile; a ROS 2 install provides them instead.
     # a node-only install: pip install . ; everything (the attitude-sil command): pip install '.[tune]'
     install_requires=REQUIRES,
-    extras_require={"tune": TUNE, "test": [*TUNE, "pytest>=8.0", "ruff>=0.5", "rosbags>=0.10"]},
+    extras_require={"tune": TUNE, "test": [*TUNE, "pytest>=8.0", "ruff>=0.5", "rosbags>=0.10", "websockets>=12.0"]},
     zip_safe=True,
     maintainer="attitude_sil developers",
     description="Spacecraft attitude-control software-in-the-loop simulator on ROS 2 Jazzy",

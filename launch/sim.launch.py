@@ -16,9 +16,11 @@ Launch arguments:
 * ``controller_type`` (default: the file's): ``pid``, ``fuzzy_pid``,
   ``ga_flc`` or ``geometric`` (as ``run --controller``).
 
-Unlike ``attitude-sil run``, the plant starts the episode by itself once every
-topic is matched (``autostart``, the nodes' default) and nothing is recorded
-(``ros2 bag record -s mcap -a`` records it) or measured.
+Unlike ``attitude-sil run``, nothing starts the episode: the nodes wait for
+``plant/reset`` (``autostart`` is off by default; ``attitude-sil episode`` or
+``ros2 service call /plant/reset std_srvs/srv/Trigger`` starts it), and nothing
+is recorded (``attitude-sil record`` or ``ros2 bag record -s mcap -a`` records
+it) or measured (``attitude-sil episode`` prints the metrics).
 """
 
 from launch import LaunchDescription

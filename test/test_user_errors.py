@@ -378,6 +378,30 @@ def _flag_cases() -> list:
               _case("run-no-scenario", ["run"], {}, ("scenario",)),
               _case("no-command", [], {}, ("command",)),
               _case("unknown-command", ["rn", SCENARIO], {}, ("invalid choice",))]
+    cases += _number_flag_cases(run, "--foxglove", {"zero": "0", "too-big": "70000", "string": "x",
+                                                    "negative": "-1"}, "--foxglove")
+    cases += [_case("run-foxglove-fast-alone", [*run, "--foxglove-fast"], {}, ("--foxglove",)),
+              _case("run-foxglove-host-alone", [*run, "--foxglove-host", "127.0.0.1"], {}, ("--foxglove",)),
+              _case("run-foxglove-host-not-here", [*run, "--foxglove", "8765", "--foxglove-host", "192.0.2.1"], {},
+                    ("192.0.2.1",))]
+    cases += [_case("record-no-bag", ["record"], {}, ("bag",)),
+              _case("record-unknown-topic", ["record", "{tmp}/b", "--topics", "nope"], {}, ("nope",)),
+              _case("record-topics-then-bag-unknown", ["record", "--topics", "nope", "{tmp}/b"], {}, ("nope",)),
+              _case("record-namespace", ["record", "{tmp}/b", "--namespace", "bad ns"], {}, ("namespace",)),
+              _case("record-existing-bag", ["record", "{tmp}/bag"], {}, ("already contains",), bag=True),
+              _case("record-bag-under-file", ["record", f"{SCENARIO}/b"], {}, ("hst_roll_step.yaml",)),
+              _case("record-episode-no-step-topic", ["record", "{tmp}/b", "--episode", "--topics",
+                                                     "parameter_events"], {}, ("--episode",))]
+    cases += _number_flag_cases(["episode"], "--timeout", {**NONFINITE, **GARBLED, "negative": "-1", "zero": "0"},
+                                "timeout")
+    cases += [_case("episode-namespace", ["episode", "--namespace", "sat-1"], {}, ("namespace",)),
+              _case("episode-scenario-missing", ["episode", "--scenario", "{tmp}/none.yaml"], {}, ("none.yaml",)),
+              _case("metrics-no-snapshot", ["metrics", "{tmp}/bag"], {}, ("--scenario",), bag=True),
+              _case("metrics-scenario-missing", ["metrics", "{tmp}/bag", "--scenario", "{tmp}/none.yaml"], {},
+                    ("none.yaml",), bag=True),
+              _case("metrics-no-episode", ["metrics", "{tmp}/bag", "--scenario", SCENARIO], {}, ("no episode",),
+                    bag=True)]
+    cases += _file_cases(["metrics", "{tmp}/bag", "--scenario", "{f}"], "s.yaml", "metrics")[:3]
     tune = ["tune", str(CONFIG / "tune_hst_pid_ga.yaml")]
     cases += [_case("tune-unknown-flag", [*tune, "--bogus"], {}, ("unrecognized",)),
               _case("tune-resume-nothing", [*tune, "--resume", "--set", "output={tmp}/none"], {}, ("resume",))]
@@ -431,7 +455,8 @@ def _bag_cases() -> list:
                                    "rosbag2_bagfile_information:\n  relative_file_paths: [x.mcap]\n"},
         "dir-of-garbage": {"b/b_0.mcap": GARBAGE},
     }
-    commands = {"info": ["bag", "info"], "plot": ["plot"], "replay": ["replay"], "verify": ["replay"]}
+    commands = {"info": ["bag", "info"], "plot": ["plot"], "replay": ["replay"], "verify": ["replay"],
+                "metrics": ["metrics"]}
     cases = []
     for label, files in broken.items():
         target = "{tmp}/" + ("b" if not files or any(k.startswith("b/") or k == "b" for k in files) else "b.mcap")

@@ -1,8 +1,8 @@
 """The ``attitude-sil`` command: subcommands, their arguments, and one-line errors.
 
 Subcommands (docs/architecture.md, "Command line"): ``run``, ``tune``,
-``replay``, ``bag info``, ``plot``, ``param``, ``linearize`` and
-``robustness``. Any :class:`~attitude_sil.errors.AttitudeSilError` (every user
+``replay``, ``bag info``, ``plot``, ``param``, ``record``, ``episode``,
+``metrics``, ``linearize`` and ``robustness``. Any :class:`~attitude_sil.errors.AttitudeSilError` (every user
 error) prints one line on stderr and exits 2; Ctrl-C exits 130 after the bag is
 closed. A traceback means a bug.
 """
@@ -31,8 +31,10 @@ from attitude_sil.graph.session import run_graph
 from attitude_sil.graph.tuner_node import TunerNode, tune
 from attitude_sil.ros.environment import isolated_domain, localhost_environment
 from attitude_sil.ros.signals import StopSignals
+from attitude_sil.storage.foxglove import DEFAULT_HOST, DEFAULT_PORT, FoxgloveLive, check_port
 from attitude_sil.storage.info import format_info
 from attitude_sil.storage.reader import open_bag
+from attitude_sil.tools.live import bag_metrics, check_topics, play_episode, record_graph, scenario_settings
 from attitude_sil.tools.paramclient import param_command, param_dump, param_load
 from attitude_sil.tools.plot import plot_bag
 from attitude_sil.tools.replay import ReplayOptions, replay_bag
@@ -75,19 +77,94 @@ def _cmd_run(args: argparse.Namespace) -> int:
                                                  "schedule.controller_types": [kinds[i] for i in order]})
         except AttitudeSilError as exc:
             raise AttitudeSilError(f"--swap: {exc}") from None
+    if args.foxglove is None and (args.foxglove_fast or args.foxglove_host is not None):
+        raise AttitudeSilError("--foxglove-fast and --foxglove-host go with --foxglove [PORT]")
+    host = DEFAULT_HOST if args.foxglove_host is None else args.foxglove_host
+    if args.foxglove is not None:
+        check_port(args.foxglove, host)
     record = None
     if not args.no_record:
         record = Path(args.record) if args.record else Path("bags") / (
             f"{scn.name}_{datetime.now().strftime('%Y%m%d_%H%M%S')}")
-    result = run_graph(scn, duration=args.duration, controller=args.controller, record_dir=record,
-                       processes=args.processes, real_time=args.real_time, progress=not args.quiet,
-                       namespace=args.namespace, before_start=_announce_domain)
+    live = None
+
+    def start() -> None:
+        nonlocal live
+        _announce_domain()
+        if args.foxglove is not None:
+            live = FoxgloveLive(args.foxglove, host)
+            pace = "as fast as it runs" if args.foxglove_fast else "at real time"
+            print(f"Foxglove: open connection {live.url} (layout config/foxglove/attitude.json); the run is "
+                  f"paced {pace}", file=sys.stderr, flush=True)
+
+    try:
+        result = run_graph(scn, duration=args.duration, controller=args.controller, record_dir=record,
+                           processes=args.processes, real_time=args.real_time or (
+                               args.foxglove is not None and not args.foxglove_fast),
+                           progress=not args.quiet, namespace=args.namespace, before_start=start,
+                           live=lambda: live)
+    finally:
+        if live is not None:
+            live.close()
     print(format_table(result.metrics))
     if result.metrics.get("segments"):
         print(format_segments(result.metrics["segments"]))
     if args.json:
         print(json.dumps(result.metrics))
     return 0
+
+
+def _check_timeout(timeout: float) -> None:
+    if not (math.isfinite(timeout) and timeout > 0):
+        raise AttitudeSilError(f"--timeout must be a finite number of seconds > 0, got {timeout}")
+
+
+def _cmd_record(args: argparse.Namespace) -> int:
+    topics = list(args.topics or [])
+    bag = args.bag
+    if bag is None and topics:  # "record --topics a b BAG": the list took the bag too
+        bag = topics.pop()
+    if bag is None:
+        raise AttitudeSilError("record: give the bag directory to create, e.g. attitude-sil record bags/live")
+    check_topics(topics)
+    result = record_graph(bag, topics or None, namespace=args.namespace, episode=args.episode,
+                          say=lambda line: print(line, file=sys.stderr, flush=True))
+    total = sum(result.counts.values())
+    print(f"recorded {total} messages on {len(result.counts)} topic(s) to {result.bag}"
+          + ("" if result.snapshot else " (no parameter snapshot: the graph's nodes did not answer)"))
+    return 0
+
+
+def _cmd_episode(args: argparse.Namespace) -> int:
+    _check_timeout(args.timeout)
+    metrics = play_episode(args.namespace, args.scenario, timeout=args.timeout, progress=not args.quiet,
+                           say=lambda line: print(line, file=sys.stderr, flush=True))
+    print(format_table(metrics))
+    if args.json:
+        print(json.dumps(metrics))
+    return 0
+
+
+def _cmd_metrics(args: argparse.Namespace) -> int:
+    scenario_settings(args.scenario)  # a bad file is refused before the bag is read
+    metrics, notes = bag_metrics(args.bag, args.scenario)
+    for note in notes:
+        print(f"note: {note}", file=sys.stderr)
+    print(format_table(metrics))
+    if args.json:
+        print(json.dumps(metrics))
+    return 0
+
+
+def _port(text: str) -> int:
+    """``--foxglove PORT``: an integer in 1..65535."""
+    try:
+        port = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not a port number: {text!r}") from None
+    if not 1 <= port <= 65535:
+        raise argparse.ArgumentTypeError(f"port {port} out of range 1..65535")
+    return port
 
 
 def _cmd_linearize(args: argparse.Namespace) -> int:
@@ -270,7 +347,36 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--namespace", help="run the whole graph, its /clock included, under this namespace")
     run.add_argument("--swap", action="append", metavar="TIME:TYPE",
                      help="swap controller_type at a sim time (repeatable), e.g. --swap 2.0:fuzzy_pid")
+    run.add_argument("--foxglove", nargs="?", const=DEFAULT_PORT, type=_port, metavar="PORT",
+                     help=f"serve every topic live to Foxglove over WebSocket (default port {DEFAULT_PORT}); "
+                     "paces the run at real time")
+    run.add_argument("--foxglove-host", metavar="HOST",
+                     help=f"address the Foxglove server listens on (default {DEFAULT_HOST}: this machine only)")
+    run.add_argument("--foxglove-fast", action="store_true",
+                     help="with --foxglove: do not pace the run at real time")
     run.set_defaults(func=_cmd_run)
+    rec = sub.add_parser("record", help="record a running graph to a bag until Ctrl-C (like ros2 bag record)")
+    rec.add_argument("bag", nargs="?", help="bag directory to create")
+    rec.add_argument("--topics", nargs="+", metavar="T",
+                     help="topics to record (default: every topic of the graph and /parameter_events)")
+    rec.add_argument("--namespace", help="the graph's namespace")
+    rec.add_argument("--episode", action="store_true", help="stop at the end of the next episode")
+    rec.set_defaults(func=_cmd_record)
+    epi = sub.add_parser("episode", help="start an episode on a running graph (plant/reset), wait for its end, "
+                         "print its metrics")
+    epi.add_argument("--namespace", help="the graph's namespace")
+    epi.add_argument("--scenario", metavar="FILE",
+                     help="scenario file whose metrics settings (scenario section) apply; nodes are asked for theirs")
+    epi.add_argument("--json", action="store_true", help="print the metrics as one JSON object, last line")
+    epi.add_argument("--timeout", type=float, default=20.0, help="seconds to wait for the graph (default 20)")
+    epi.add_argument("--quiet", action="store_true", help="no progress line")
+    epi.set_defaults(func=_cmd_episode)
+    met = sub.add_parser("metrics", help="the metrics of the episode a bag holds (as run prints them)")
+    met.add_argument("bag", help="bag directory or .mcap file")
+    met.add_argument("--scenario", metavar="FILE",
+                     help="scenario file for what the bag lacks (its metrics settings, or every parameter)")
+    met.add_argument("--json", action="store_true", help="print the metrics as one JSON object, last line")
+    met.set_defaults(func=_cmd_metrics)
     lin = sub.add_parser("linearize", help="nonlinear vs linearised model RMSE table (paper 000 Table 1)")
     lin.add_argument("scenario", help="rigid-body scenario YAML (e.g. config/hst_roll_step.yaml)")
     lin.add_argument("--angles", type=float, nargs="+", default=[3, 8, 15, 25, 35], help="commands, deg")

@@ -249,8 +249,8 @@ NODE_PARAMS: dict[str, list[ParamSpec]] = {
            min=0.0, max=1000.0, runtime=True),
         _d("input_timeout", 10.0, "wall time the plant waits for a step's inputs before it stops, s",
            min=0.0, min_exclusive=True, runtime=True),
-        ParamSpec("autostart", "bool", True,
-                  "start the episode once every input and output topic is matched"),
+        ParamSpec("autostart", "bool", False,
+                  "start the episode once every input and output topic is matched (default: wait for plant/reset)"),
         _d("hold_at", -1.0, "hold the lockstep before publishing the first step at or after this sim time, s "
            "(negative: never); setting it past the current time releases the hold", runtime=True),
     ],

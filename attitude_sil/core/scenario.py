@@ -123,6 +123,11 @@ class Scenario:
             out[node_key(node)] = {"ros__parameters": values}
         return yaml.safe_dump(out, sort_keys=True)
 
+    def scenario_yaml(self) -> str:
+        """The ``scenario`` section (name, metrics settings) as parameter YAML: what a bag keeps for its metrics."""
+        return yaml.safe_dump({SCENARIO_NODE: {"ros__parameters": dict(self.values[SCENARIO_NODE])}},
+                              sort_keys=True)
+
     def params_file_dict(self) -> dict:
         """The explicit values as a ROS 2 parameter YAML mapping (``/**/node`` keys)."""
         return {

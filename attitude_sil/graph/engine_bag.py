@@ -45,7 +45,7 @@ from attitude_sil.ros.contract import (
 from attitude_sil.ros.convert import ns_to_stamp
 from attitude_sil.ros.qos import offered_qos_yaml
 from attitude_sil.storage.cdr import encode_clocks, encode_joint_states, encode_stamped_vectors
-from attitude_sil.storage.writer import PARAMETERS_KEY, BagWriter
+from attitude_sil.storage.writer import PARAMETERS_KEY, SCENARIO_KEY, BagWriter
 
 __all__ = ["record_episode"]
 
@@ -100,7 +100,8 @@ def record_episode(scn: Scenario, tr: Trajectory, run_dir: str | Path, *, episod
     params = dict(controller_params or {})
     extra = extra_parameters(scn, duration, controller, False)
     try:
-        writer = BagWriter(run_dir, custom_data={PARAMETERS_KEY: scn.parameters_yaml({**extra, **params})})
+        writer = BagWriter(run_dir, custom_data={PARAMETERS_KEY: scn.parameters_yaml({**extra, **params}),
+                                                 SCENARIO_KEY: scn.scenario_yaml()})
     except (FileExistsError, ValueError, OSError) as exc:
         raise RunError(str(exc)) from None
     p = int(episode)

@@ -57,9 +57,10 @@ from attitude_sil.ros.contract import (
 from attitude_sil.ros.environment import isolated_domain, localhost_environment
 from attitude_sil.ros.services import call_reset, set_remote_parameters
 from attitude_sil.ros.signals import STOP_SIGNALS, Interrupted, StopSignals
-from attitude_sil.storage.writer import PARAMETERS_KEY, BagWriter, check_bag_dir
+from attitude_sil.storage.writer import PARAMETERS_KEY, SCENARIO_KEY, BagWriter, check_bag_dir
 
-__all__ = ["RunError", "RunResult", "GraphSession", "Interrupted", "STOP_SIGNALS", "run_graph", "extra_parameters"]
+__all__ = ["RunError", "RunResult", "GraphSession", "Interrupted", "Progress", "STOP_SIGNALS", "run_graph",
+           "extra_parameters", "spin_episode"]
 
 
 @dataclass
@@ -106,8 +107,8 @@ def extra_parameters(scn: Scenario, duration: float | None, controller: str | No
     return extra
 
 
-class _Progress:
-    """A progress line on stderr: sim time, wall time, real-time factor."""
+class Progress:
+    """A progress line on stderr: sim time, wall time, real-time factor (``enabled=False``: none)."""
 
     def __init__(self, enabled: bool, sim_end: float) -> None:
         self.enabled = enabled
@@ -146,7 +147,7 @@ class GraphSession:
 
     def __init__(self, scn: Scenario, *, duration: float | None = None, controller: str | None = None,
                  processes: bool = False, real_time: bool = False, namespace: str | None = None,
-                 connect_timeout: float = 20.0) -> None:
+                 connect_timeout: float = 20.0, live=None) -> None:
         if controller is not None:
             spec_for("controller", "controller_type").validate(controller, "controller")
         self.scn = scn
@@ -161,6 +162,7 @@ class GraphSession:
         self.namespace = check_namespace(namespace)
         self.connect_timeout = connect_timeout
         self.controller = controller or scn.param("controller", "controller_type")
+        self.live = live  # a FoxgloveLive that serves every message, or None
 
     def __enter__(self) -> GraphSession:
         isolated_domain()  # a graph of its own unless the user chose a domain
@@ -182,7 +184,7 @@ class GraphSession:
         self.foreign = None
         try:
             kw = namespace_kwargs(self.namespace)
-            self.recorder = Recorder(None, keep=KEPT_TOPICS, context=self.context, **kw)
+            self.recorder = Recorder(None, keep=KEPT_TOPICS, live=self.live, context=self.context, **kw)
             self.executor = EventsExecutor(context=self.context)
             self.executor.add_node(self.recorder)
             self.plant = None
@@ -226,10 +228,13 @@ class GraphSession:
             if controller_params:
                 extra.update(controller_params)
             try:
-                writer = BagWriter(record_dir, custom_data={PARAMETERS_KEY: self.scn.parameters_yaml(extra)})
+                writer = BagWriter(record_dir, custom_data={PARAMETERS_KEY: self.scn.parameters_yaml(extra),
+                                                            SCENARIO_KEY: self.scn.scenario_yaml()})
             except (FileExistsError, ValueError, OSError) as exc:
                 raise RunError(str(exc)) from None
-        prog = _Progress(progress, self.duration)
+        if self.live is not None:
+            self.live.set_controller((controller_params or {}).get("controller_type", self.controller), 0)
+        prog = Progress(progress, self.duration)
         schedule = _schedule(self.scn, self.duration)
         accumulator = EpisodeAccumulator(self.scn.values["scenario"], self.scn.param("guidance", "step_time"),
                                          self.controller, schedule or None)
@@ -244,8 +249,8 @@ class GraphSession:
             call_reset(self.recorder, self.spin, self.connect_timeout)
             wall0 = time.monotonic()
             prog.t0 = wall0
-            _spin_episode(self.recorder, self.spin, self.plant, self.children, self.scn.steps(self.duration),
-                          self.scn, prog, schedule, self.foreign)
+            spin_episode(self.recorder, self.spin, self.plant, self.children, self.scn.steps(self.duration),
+                         self.scn, prog, schedule, self.foreign)
             wall = time.monotonic() - wall0
             prog.update(self.duration, force=True)
         finally:
@@ -304,6 +309,7 @@ def run_graph(
     controller_params: dict | None = None,
     before_start: Callable[[], None] | None = None,
     keep_trajectory: bool = False,
+    live=None,
 ) -> RunResult:
     """Run one episode of ``scn`` through the ROS graph.
 
@@ -333,6 +339,10 @@ def run_graph(
     keep_trajectory : bool
         Keep the episode's messages and return its Trajectory; without it the
         metrics come from running sums and memory stays flat however long the run.
+    live : FoxgloveLive or callable, optional
+        Serve every message of the run live too (``run --foxglove``); a callable
+        is called after ``before_start`` for the sink (or None), so a server
+        starts only once the input is validated.
 
     Returns
     -------
@@ -354,6 +364,7 @@ def run_graph(
                            namespace=namespace, connect_timeout=connect_timeout)  # validates
     if before_start is not None:
         before_start()
+    session.live = live() if callable(live) else live
     with session as graph:
         return graph.run_episode(record_dir=record_dir, controller_params=controller_params, progress=progress,
                                  keep_trajectory=keep_trajectory)
@@ -400,9 +411,18 @@ class ForeignPublishers:
         return new
 
 
-def _spin_episode(recorder: Recorder, spin, plant, children, k_steps: int, scn: Scenario, prog: _Progress,
-                  schedule: list[tuple[float, int, str]], foreign: ForeignPublishers | None = None) -> None:
-    """Spin until every step topic has all K+1 messages; apply scheduled swaps at their holds."""
+def spin_episode(recorder: Recorder, spin, plant, children, k_steps: int, scn: Scenario, prog: Progress,
+                 schedule: list[tuple[float, int, str]], foreign: ForeignPublishers | None = None) -> None:
+    """Spin until every step topic has all K+1 messages; apply scheduled swaps at their holds.
+
+    ``foreign``, if given, names publishers that are not the graph's own as they appear.
+
+    Raises
+    ------
+    RunError
+        The plant (in this process) failed, recording failed, no step came for
+        ``input_timeout`` + 2 s, or a node process exited.
+    """
     counts = recorder.counts
     needed = k_steps + 1
     dt = scn.dt

@@ -10,6 +10,14 @@ node also keeps the raw messages of chosen topics in memory for the runner's
 metrics, or hands them to a sink that keeps running sums. Stray messages (a
 /clock that jumps, a stamp far ahead of the clock: foreign or corrupt
 publishers) are not recorded, counted in ``refused`` and logged once a second.
+
+Joining a running graph (``attitude-sil record``, ``episode``) it reads
+without the publishers' transient-local history (``history=False``: that
+history is the previous episode) and registers each topic in the bag when its
+first publisher appears, with the QoS its publishers offer (``qos_from_graph``),
+as ``ros2 bag record`` does. A ``live`` sink
+(:class:`~attitude_sil.storage.foxglove.FoxgloveLive`) gets every recorded
+message too, and the active ``controller_type`` from ``/parameter_events``.
 """
 
 from __future__ import annotations
@@ -18,12 +26,14 @@ from collections import defaultdict
 from collections.abc import Callable
 
 import numpy as np
+from rcl_interfaces.msg import ParameterEvent
 from rclpy.node import Node
+from rclpy.serialization import deserialize_message
 
 from attitude_sil.core.quaternion import unit_or_none
 from attitude_sil.errors import BagWriteError
 from attitude_sil.ros.contract import CLOCK, PARAMETER_EVENTS, RECORDED_TOPICS, message_class
-from attitude_sil.ros.qos import LOCKSTEP_QOS, PARAMETER_EVENTS_QOS, offered_qos_yaml
+from attitude_sil.ros.qos import LOCKSTEP_QOS, PARAMETER_EVENTS_QOS, offered_qos_yaml, publishers_qos_yaml, volatile
 from attitude_sil.storage.cdr import stamp_from_cdr, stamped_values
 from attitude_sil.storage.writer import BagWriter
 
@@ -45,13 +55,32 @@ class Recorder(Node):
     topics : dict, optional
         ``name -> type``; default :data:`~attitude_sil.ros.contract.RECORDED_TOPICS`
         (every topic of the contract plus ``/parameter_events``).
+    live : FoxgloveLive, optional
+        A sink that gets every recorded message as well (``add_topic``, ``write``,
+        ``tick``, ``set_controller``).
+    history : bool
+        Take the transient-local history of the lockstep publishers when matching
+        (the runner's own graph); False for a tool that joins a running graph.
+    qos_from_graph : bool
+        Register a topic in the bag when its first publisher appears, with the
+        QoS its publishers offer (:meth:`register_discovered`), instead of the
+        graph's known profiles at the start.
+    name : str
+        Node name.
     """
 
-    def __init__(self, writer: BagWriter | None, keep=(), topics: dict[str, str] | None = None, **kwargs) -> None:
-        super().__init__("recorder", **kwargs)
+    def __init__(self, writer: BagWriter | None, keep=(), topics: dict[str, str] | None = None, *, live=None,
+                 history: bool = True, qos_from_graph: bool = False, name: str = "recorder", **kwargs) -> None:
+        super().__init__(name, **kwargs)
+        self.live = live
+        self.history = history
+        self.qos_from_graph = qos_from_graph
+        self._clock_known = history  # joining a running graph: the first /clock is taken as it comes
+        self._registered: set[str] = set()
         self.writer = writer
         self.error = ""  # why recording stopped, if it did
         self.counts: dict[str, int] = defaultdict(int)
+        self.last_stamp: dict[str, int] = {}  # the latest stamp taken per topic, ns
         self.refused: dict[str, int] = defaultdict(int)  # stray messages not recorded, per topic
         self.clock_ns = 0  # the latest /clock, ns
         self.sim_now = 0  # latest lockstep stamp seen, ns
@@ -60,13 +89,17 @@ class Recorder(Node):
         self.sink: Callable[[str, int, bytes], None] | None = None  # (topic, stamp ns, CDR) of kept topics
         self.subs = {}
         for name, type_name in (topics or RECORDED_TOPICS).items():
-            qos = PARAMETER_EVENTS_QOS if name == PARAMETER_EVENTS else LOCKSTEP_QOS
+            qos = PARAMETER_EVENTS_QOS if name == PARAMETER_EVENTS else (
+                LOCKSTEP_QOS if history else volatile(LOCKSTEP_QOS))
             sub = self.create_subscription(
                 message_class(type_name), name, lambda data, n=name: self._on_message(n, data), qos, raw=True
             )
             self.subs[name] = sub
         self.resolved = {name: sub.topic_name for name, sub in self.subs.items()}
         self.types = dict(topics or RECORDED_TOPICS)
+        if live is not None:  # advertised at once, so a client can subscribe before the first episode
+            for name, sub in self.subs.items():
+                live.add_topic(sub.topic_name, self.types[name])
         # topics whose values are checked before recording: float64 count per message
         self._widths = {name: 4 if t.endswith("QuaternionStamped") else 3 for name, t in self.types.items()
                         if t.endswith(("QuaternionStamped", "Vector3Stamped"))}
@@ -83,16 +116,43 @@ class Recorder(Node):
         self.keeping = keeping
         self.sink = sink
         self.counts.clear()
+        self.last_stamp.clear()
         self.refused.clear()
         self.sim_now = 0
         self.clock_ns = 0
+        self._clock_known = self.history
         self.error = ""
         for kept in self.kept.values():
             kept.clear()
         self.writer = writer
-        if writer is not None:
+        self._registered = set()
+        if writer is not None and not self.qos_from_graph:
             for name, sub in self.subs.items():
                 writer.add_topic(sub.topic_name, self.types[name], offered_qos_yaml(name))
+            self._registered = set(self.subs)
+        if self.live is not None:
+            for name, sub in self.subs.items():
+                self.live.add_topic(sub.topic_name, self.types[name])
+
+    def register_discovered(self) -> list[str]:
+        """Register in the bag each topic that has publishers now, with their offered QoS; returns the new ones.
+
+        Only with ``qos_from_graph``; a topic whose first message comes before
+        this is called is registered then.
+        """
+        new = []
+        if self.writer is None or not self.qos_from_graph:
+            return new
+        for name in self.subs:
+            if name not in self._registered and self.get_publishers_info_by_topic(self.resolved[name]):
+                self._register(name)
+                new.append(name)
+        return new
+
+    def _register(self, name: str) -> None:
+        qos = publishers_qos_yaml(self.get_publishers_info_by_topic(self.resolved[name]))
+        self.writer.add_topic(self.resolved[name], self.types[name], qos or offered_qos_yaml(name), wait=False)
+        self._registered.add(name)
 
     def _on_message(self, name: str, data: bytes) -> None:
         t = stamp_from_cdr(data)
@@ -104,9 +164,10 @@ class Recorder(Node):
             t = self.sim_now
         elif name == CLOCK:
             # the plant's clock goes forward a step at a time, or back to 0 at a reset
-            if t != 0 and not self.clock_ns <= t <= self.clock_ns + MAX_CLOCK_JUMP_NS:
+            if t != 0 and self._clock_known and not self.clock_ns <= t <= self.clock_ns + MAX_CLOCK_JUMP_NS:
                 self._refuse(name, t, "jumps the clock")
                 return
+            self._clock_known = True
             self.clock_ns = t
             self.sim_now = t
         elif t > self.clock_ns + MAX_CLOCK_LEAD_NS:
@@ -121,18 +182,34 @@ class Recorder(Node):
         else:
             self.sim_now = max(self.sim_now, t)
         self.counts[name] += 1
+        self.last_stamp[name] = t
         if self.writer is not None:
             try:
+                if name not in self._registered:
+                    self._register(name)
                 self.writer.write(self.resolved[name], data, t)
             except BagWriteError as exc:  # disk full, file too large: stop recording, keep what is written
                 self.error = f"recording stopped at t={t * 1e-9:.3f} s: {exc}"
                 self.writer = None
+        if self.live is not None:
+            self._to_live(name, data, t)
         kept = self.kept.get(name)
         if kept is not None:
             if self.keeping:
                 kept.append((t, data))
             if self.sink is not None:
                 self.sink(name, t, data)
+
+    def _to_live(self, name: str, data: bytes, t: int) -> None:
+        self.live.write(self.resolved[name], data, t)
+        if name == CLOCK:
+            self.live.tick(t)
+        elif name == PARAMETER_EVENTS:
+            event = deserialize_message(data, ParameterEvent)
+            if event.node == self.get_namespace().rstrip("/") + "/controller":
+                for p in (*event.new_parameters, *event.changed_parameters):
+                    if p.name == "controller_type":
+                        self.live.set_controller(p.value.string_value, t)
 
     def _refuse(self, name: str, t: int, why: str) -> None:
         self.refused[name] += 1

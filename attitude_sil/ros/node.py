@@ -35,7 +35,7 @@ from attitude_sil.ros.parameters import PARAMETER_TYPES, descriptor
 from attitude_sil.ros.qos import LOCKSTEP_QOS
 from attitude_sil.ros.signals import StopSignals
 
-__all__ = ["SchemaNode", "params_file_warning", "run_node", "steady_clock"]
+__all__ = ["SchemaNode", "params_file_warning", "run_node", "sim_time_given", "steady_clock"]
 
 
 def steady_clock() -> Clock:
@@ -176,6 +176,38 @@ def params_file_warning(node: Node, args: Sequence[str]) -> str:
             "or '/**:' apply under any namespace")
 
 
+def sim_time_given(fqn: str, args: Sequence[str]) -> bool:
+    """Whether the command line sets ``use_sim_time`` for node ``fqn`` (``-p`` or a ``--params-file`` section).
+
+    A graph node started by hand runs on the plant's ``/clock`` unless the user
+    says otherwise: :func:`run_node` turns ``use_sim_time`` on when this is False.
+
+    Parameters
+    ----------
+    fqn : str
+        The node's fully qualified name, e.g. ``/sat1/plant``.
+    args : sequence of str
+        The command line the node was given.
+
+    Returns
+    -------
+    bool
+    """
+    for flag, value in zip(args[:-1], args[1:], strict=True):
+        if flag in ("-p", "--param") and value.partition(":=")[0].rsplit(":", 1)[-1] == "use_sim_time":
+            return True
+        if flag == "--params-file":
+            try:
+                data = yaml12.load(Path(value).read_text())
+            except (OSError, yaml.YAMLError):
+                continue
+            if isinstance(data, dict) and any(
+                    isinstance(section, dict) and "use_sim_time" in (section.get("ros__parameters") or {})
+                    for _, section in sections_for(data, fqn)):
+                return True
+    return False
+
+
 def run_node(factory: Callable[[], Node], args: list[str] | None = None) -> int:
     """Spin one node in its own process until Ctrl-C, SIGTERM or SIGHUP; the body of every ``main()``.
 
@@ -184,7 +216,10 @@ def run_node(factory: Callable[[], Node], args: list[str] | None = None) -> int:
     The signals set a flag that the spin loop checks between callbacks, so the
     node stops at a clean point (rclpy's own handler would shut the context
     down under a running callback, whose publish then fails with a stack
-    trace). Bad parameters print one line and exit 2.
+    trace). Bad parameters print one line and exit 2. ``use_sim_time`` is on
+    unless the command line sets it (:func:`sim_time_given`): the plant
+    publishes ``/clock``, and ``ros2 run`` of a graph node needs no ``-p
+    use_sim_time:=true``.
 
     Returns
     -------
@@ -197,9 +232,12 @@ def run_node(factory: Callable[[], Node], args: list[str] | None = None) -> int:
     executor = None
     try:
         node = factory()
-        warning = params_file_warning(node, sys.argv if args is None else args)
+        argv = sys.argv if args is None else args
+        warning = params_file_warning(node, argv)
         if warning:
             node.get_logger().warning(warning)
+        if not sim_time_given(node.get_fully_qualified_name(), argv):
+            node.set_parameters([Parameter("use_sim_time", Parameter.Type.BOOL, True)])
         executor = EventsExecutor()
         executor.add_node(node)
         # spin_once in a loop: EventsExecutor.spin() of rclpy 7.1 left service

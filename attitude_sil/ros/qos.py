@@ -6,12 +6,14 @@ so a recorded bag states the QoS the graph really offered.
 
 from __future__ import annotations
 
+import yaml
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy, qos_profile_parameter_events
 
 from attitude_sil.ros.contract import PARAMETER_EVENTS
 from attitude_sil.storage.writer import parse_qos_profiles, qos_profiles_yaml
 
-__all__ = ["LOCKSTEP_QOS", "PARAMETER_EVENTS_QOS", "offered_qos_yaml", "recorded_qos"]
+__all__ = ["LOCKSTEP_QOS", "PARAMETER_EVENTS_QOS", "offered_qos_yaml", "publishers_qos_yaml", "recorded_qos",
+           "volatile"]
 
 #: Lockstep topics: reliable, deep enough that a slow recorder never loses a
 #: step, and transient-local so a reader whose match completes after the first
@@ -26,6 +28,55 @@ LOCKSTEP_QOS = QoSProfile(
 
 #: ``/parameter_events``: rclpy's own profile
 PARAMETER_EVENTS_QOS = qos_profile_parameter_events
+
+
+def volatile(profile: QoSProfile) -> QoSProfile:
+    """``profile`` with volatile durability: a reader that gets no history from transient-local publishers.
+
+    A tool that joins a running graph (``record``, ``episode``) reads with it,
+    so the samples of earlier episodes the lockstep publishers keep are not
+    taken for the next one.
+    """
+    return QoSProfile(reliability=profile.reliability, durability=DurabilityPolicy.VOLATILE,
+                      history=profile.history, depth=profile.depth)
+
+
+_INFINITE_NS = 9223372036854775807
+
+
+def _duration(ns: int) -> dict:
+    if ns <= 0 or ns >= _INFINITE_NS:  # unspecified or infinite: as the ROS graph reports a default
+        ns = _INFINITE_NS
+    return {"sec": ns // 1_000_000_000, "nsec": ns % 1_000_000_000}
+
+
+def publishers_qos_yaml(infos) -> str:
+    """The ``offered_qos_profiles`` of a topic's publishers, as ``ros2 bag record`` writes it.
+
+    Parameters
+    ----------
+    infos : list of rclpy.topic_endpoint_info.TopicEndpointInfo
+        ``Node.get_publishers_info_by_topic(topic)``.
+
+    Returns
+    -------
+    str
+        A YAML list with one profile per publisher (empty list: ``''``, the default profile).
+    """
+    profiles = []
+    for info in infos:
+        q = info.qos_profile
+        profiles.append({
+            "history": q.history.name.lower(), "depth": int(q.depth),
+            "reliability": q.reliability.name.lower(), "durability": q.durability.name.lower(),
+            "deadline": _duration(q.deadline.nanoseconds), "lifespan": _duration(q.lifespan.nanoseconds),
+            "liveliness": q.liveliness.name.lower(),
+            "liveliness_lease_duration": _duration(q.liveliness_lease_duration.nanoseconds),
+            "avoid_ros_namespace_conventions": bool(q.avoid_ros_namespace_conventions),
+        })
+    if not profiles:
+        return ""
+    return yaml.safe_dump(profiles, sort_keys=False, default_flow_style=False)
 
 
 def offered_qos_yaml(topic: str) -> str:

@@ -1,4 +1,4 @@
-"""Client side of the graph's services: set another node's parameters, reset the plant.
+"""Client side of the graph's services: get and set another node's parameters, reset the plant.
 
 Both wait by condition (the service is ready, the future is done) while a
 caller-supplied ``spin(timeout_s)`` processes callbacks, so they work inside
@@ -12,13 +12,13 @@ from collections.abc import Callable
 from typing import Any
 
 from rclpy.node import Node
-from rclpy.parameter import Parameter
+from rclpy.parameter import Parameter, parameter_value_to_python
 from rclpy.parameter_client import AsyncParameterClient
 from std_srvs.srv import Trigger
 
 from attitude_sil.errors import RunError
 
-__all__ = ["set_remote_parameters", "call_reset", "wait_future"]
+__all__ = ["get_remote_parameters", "set_remote_parameters", "call_reset", "wait_future"]
 
 Spin = Callable[[float], None]
 
@@ -30,6 +30,45 @@ def wait_future(future, spin: Spin, deadline: float, what: str):
             raise RunError(f"{what} did not answer")
         spin(0.02)
     return future.result()
+
+
+def get_remote_parameters(node: Node, spin: Spin, target: str, names: list[str],
+                          timeout: float = 10.0) -> dict[str, Any]:
+    """Values of parameters ``names`` of node ``target``, through its parameter service.
+
+    Returns
+    -------
+    dict
+        ``name -> value`` (arrays as lists) for each name the node has set;
+        a name it does not have is left out.
+
+    Raises
+    ------
+    RunError
+        The service did not appear or answer within ``timeout`` s.
+    """
+    client = AsyncParameterClient(node, target)
+    deadline = time.monotonic() + timeout
+    while not client.services_are_ready():
+        if time.monotonic() > deadline:
+            raise RunError(f"parameter service of {target} did not appear within {timeout:g} s")
+        spin(0.02)
+    what = f"{target} (parameter get)"
+    values = wait_future(client.get_parameters(names), spin, deadline, what).values
+    if len(values) != len(names):
+        # rclpy answers nothing for a batch holding a name declared with a type but no value (an
+        # empty array here) or not declared: ask name by name (one at a time: a service keeps
+        # only its last 10 requests)
+        answers = [wait_future(client.get_parameters([name]), spin, deadline, what).values for name in names]
+        pairs = [(name, a[0]) for name, a in zip(names, answers, strict=True) if a]
+    else:
+        pairs = list(zip(names, values, strict=True))
+    out: dict[str, Any] = {}
+    for name, value in pairs:
+        v = parameter_value_to_python(value)
+        if v is not None:  # None: not set
+            out[name] = v
+    return out
 
 
 def set_remote_parameters(node: Node, spin: Spin, target: str, params: dict[str, Any],

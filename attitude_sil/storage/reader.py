@@ -555,6 +555,12 @@ class BagReader:
         return [f.note for f in self._files if f.note]
 
     @property
+    def custom_data(self) -> dict[str, str]:
+        """``custom_data`` of ``metadata.yaml`` (empty without one)."""
+        custom = self._metadata.get('custom_data')
+        return {str(k): str(v) for k, v in custom.items()} if isinstance(custom, dict) else {}
+
+    @property
     def storage(self) -> str:
         """Storage identifier: always ``'mcap'``."""
         return 'mcap'

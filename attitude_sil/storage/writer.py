@@ -69,6 +69,7 @@ __all__ = [
     'BagWriteError',
     'BagWriter',
     'PARAMETERS_KEY',
+    'SCENARIO_KEY',
     'parse_qos_profiles',
     'qos_profiles_yaml',
 ]
@@ -76,6 +77,8 @@ __all__ = [
 #: metadata.yaml ``custom_data`` key holding every node's parameters at the start of a run
 #: (a ROS 2 parameter YAML string; docs/architecture.md, "Bags")
 PARAMETERS_KEY = 'attitude_sil.parameters'
+#: metadata.yaml ``custom_data`` key holding the scenario section (name and metrics settings) of the run
+SCENARIO_KEY = 'attitude_sil.scenario'
 
 #: metadata.yaml format version written (rosbag2 in ROS 2 Jazzy).
 ROSBAG2_FORMAT_VERSION = 9
@@ -569,6 +572,22 @@ class BagWriter:
             return None
         self._wait(entry.registration)
         return entry.channel_id
+
+    def set_custom_data(self, key: str, value: str) -> None:
+        """Set one ``custom_data`` entry of ``metadata.yaml`` (written at :meth:`close`).
+
+        Raises
+        ------
+        ValueError
+            If ``key`` or ``value`` is not a string.
+        BagClosedError
+            If the bag is closed.
+        """
+        if not isinstance(key, str) or not isinstance(value, str):
+            raise ValueError('custom_data keys and values must be strings')
+        with self._accept_lock:
+            self._check_open()
+            self._custom_data[key] = value
 
     def write(self, topic: str, data: bytes, log_time_ns: int,
               publish_time_ns: int | None = None) -> None:

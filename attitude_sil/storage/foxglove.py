@@ -1,0 +1,166 @@
+"""Serve a run live over the Foxglove WebSocket protocol (``foxglove-sdk``): a sink beside the bag writer.
+
+:class:`FoxgloveLive` takes what :class:`~attitude_sil.storage.writer.BagWriter`
+takes - a topic with its ROS 2 type, then CDR bytes with a log time - and
+serves it to Foxglove clients: one channel per topic with message encoding
+``cdr`` and schema encoding ``ros2msg`` holding the same message definition a
+bag's schema holds (:func:`~attitude_sil.storage.msgdefs.message_definition`),
+so Foxglove decodes the messages exactly as it decodes the bags. The bytes
+are the ones received on the wire, served as they are.
+
+One more channel, ``/attitude_sil/status`` (JSON: ``controller_type`` and
+``sim_time_s``), is sent every 0.1 s of sim time and at every controller swap,
+so a client that connects at any moment sees the active law within 0.1 s of
+sim time (``/parameter_events`` only shows a swap when it happens). It is a
+Foxglove channel only, not a ROS topic: the graph and the bags are unchanged.
+
+Nothing here imports rclpy.
+"""
+
+from __future__ import annotations
+
+import errno
+import json
+import socket
+
+import foxglove
+
+from attitude_sil.errors import AttitudeSilError
+
+from .msgdefs import message_definition, normalize_type_name
+
+__all__ = ["DEFAULT_PORT", "DEFAULT_HOST", "STATUS_TOPIC", "FoxgloveLive", "check_port"]
+
+#: Foxglove's usual WebSocket port
+DEFAULT_PORT = 8765
+#: the run is served on this machine only unless the user asks for another address
+DEFAULT_HOST = "127.0.0.1"
+#: the status channel (JSON), a Foxglove channel only
+STATUS_TOPIC = "/attitude_sil/status"
+#: sim time between two status messages, ns
+STATUS_PERIOD_NS = 100_000_000
+
+_STATUS_SCHEMA = {
+    "type": "object",
+    "title": "attitude_sil status",
+    "properties": {
+        "controller_type": {"type": "string", "description": "the active control law"},
+        "sim_time_s": {"type": "number", "description": "simulation time, s"},
+    },
+}
+
+
+def check_port(port: int, host: str = DEFAULT_HOST) -> None:
+    """Refuse a port out of range or already taken on ``host`` (before any graph starts).
+
+    Raises
+    ------
+    AttitudeSilError
+        The port is not in 1..65535, the host is not an address of this
+        machine, or something listens on the port already.
+    """
+    if isinstance(port, bool) or not isinstance(port, int) or not 1 <= port <= 65535:
+        raise AttitudeSilError(f"--foxglove port must be an integer in 1..65535, got {port}")
+    try:
+        infos = socket.getaddrinfo(host, port, type=socket.SOCK_STREAM)
+    except (socket.gaierror, UnicodeError) as exc:
+        raise AttitudeSilError(f"--foxglove-host {host!r}: not an address ({exc})") from None
+    family, kind, proto, _, address = infos[0]
+    with socket.socket(family, kind, proto) as sock:
+        sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)  # as a server does: TIME_WAIT is no obstacle
+        try:
+            sock.bind(address)
+        except OSError as exc:
+            if exc.errno == errno.EADDRINUSE:
+                raise AttitudeSilError(f"--foxglove {port}: port {port} on {host} is in use; choose another port"
+                                       ) from None
+            raise AttitudeSilError(f"--foxglove {port}: cannot listen on {host}:{port}: "
+                                   f"{exc.strerror or exc}") from None
+
+
+class FoxgloveLive:
+    """A Foxglove WebSocket server fed with serialized ROS 2 messages.
+
+    Parameters
+    ----------
+    port : int
+        TCP port (default 8765).
+    host : str
+        Address to listen on (default ``127.0.0.1``: this machine only).
+    name : str
+        Server name shown by Foxglove.
+
+    Raises
+    ------
+    AttitudeSilError
+        The port is out of range or in use, or the server cannot start.
+    """
+
+    def __init__(self, port: int = DEFAULT_PORT, host: str = DEFAULT_HOST, name: str = "attitude_sil") -> None:
+        check_port(port, host)
+        self._context = foxglove.Context()
+        try:
+            self._server = foxglove.start_server(name=name, host=host, port=port, context=self._context)
+        except RuntimeError as exc:
+            raise AttitudeSilError(f"--foxglove {port}: {str(exc).splitlines()[0]}") from None
+        self.host = host
+        self._channels: dict[str, foxglove.Channel] = {}
+        self._status = foxglove.Channel(STATUS_TOPIC, schema=_STATUS_SCHEMA, message_encoding="json",
+                                        context=self._context)
+        self.controller_type = ""
+        self._last_status_ns: int | None = None
+
+    @property
+    def port(self) -> int:
+        """The port the server listens on."""
+        return self._server.port
+
+    @property
+    def url(self) -> str:
+        """``ws://host:port``, what Foxglove's "Open connection" takes."""
+        return f"ws://{self.host}:{self.port}"
+
+    def add_topic(self, topic: str, type_name: str) -> None:
+        """Advertise ``topic`` (idempotent): message encoding ``cdr``, schema ``ros2msg`` of ``type_name``.
+
+        Raises
+        ------
+        ValueError
+            The type's message definition cannot be found.
+        """
+        if topic in self._channels:
+            return
+        full = normalize_type_name(type_name)
+        schema = foxglove.Schema(name=full, encoding="ros2msg", data=message_definition(full).encode())
+        self._channels[topic] = foxglove.Channel(topic, schema=schema, message_encoding="cdr",
+                                                 context=self._context)
+
+    def write(self, topic: str, data: bytes, log_time_ns: int) -> None:
+        """Send one CDR-serialized message of a topic added before to every subscribed client."""
+        channel = self._channels.get(topic)
+        if channel is not None and channel.has_sinks():
+            channel.log(bytes(data), log_time=int(log_time_ns))
+
+    def set_controller(self, controller_type: str, t_ns: int) -> None:
+        """The active law changed (or is known at last): say so on the status channel now."""
+        if controller_type != self.controller_type:
+            self.controller_type = controller_type
+            self._send_status(t_ns)
+
+    def tick(self, t_ns: int) -> None:
+        """The sim clock reached ``t_ns``: send the status if 0.1 s of sim time passed (or the clock went back)."""
+        last = self._last_status_ns
+        if last is None or t_ns < last or t_ns - last >= STATUS_PERIOD_NS:
+            self._send_status(t_ns)
+
+    def _send_status(self, t_ns: int) -> None:
+        self._last_status_ns = t_ns
+        if self.controller_type:
+            self._status.log(json.dumps({"controller_type": self.controller_type, "sim_time_s": t_ns * 1e-9}),
+                             log_time=int(t_ns))
+
+    def close(self) -> None:
+        """Stop the server (idempotent); clients see the connection close."""
+        if self._server is not None:
+            self._server.stop()
+            self._server = None

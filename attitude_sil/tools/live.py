@@ -1,0 +1,394 @@
+"""Tools for a graph started by hand (``plant_node``, ..., ``controller_node``): record it, play an episode, measure.
+
+* :func:`record_graph` (``attitude-sil record``): records the topics of a running
+  graph to a rosbag2/MCAP bag, as ``ros2 bag record`` does, until a stop
+  signal or (``episode=True``) the end of the next episode. Each topic is
+  registered when its first publisher appears, with the QoS its publishers
+  offer; the bag also keeps a parameter snapshot of the graph's nodes,
+  asked through their parameter services as soon as they answer.
+* :func:`play_episode` (``attitude-sil episode``): starts an episode through
+  ``plant/reset``, follows it on the step topics until the plant's duration is
+  reached (every step topic holds K + 1 messages; the plant then stops
+  publishing) and returns the ``run --json`` metrics.
+* :func:`bag_metrics` (``attitude-sil metrics``): the same metrics from a bag.
+
+Both live tools read without the lockstep publishers' transient-local history
+(that history is the previous episode) and take the node parameters from the
+live graph, so what is measured is what ran. The ``scenario`` section (name,
+metrics settings), which no node holds, comes from ``--scenario FILE``, the
+bag, or the defaults.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import rclpy
+import yaml
+from rclpy.experimental import EventsExecutor
+from rclpy.parameter_client import AsyncParameterClient
+from rclpy.signals import SignalHandlerOptions
+
+from attitude_sil.core import yaml12
+from attitude_sil.core.metrics import episode_report
+from attitude_sil.core.paramfile import node_key, section_node
+from attitude_sil.core.params import NODE_PARAMS, SCENARIO_NODE
+from attitude_sil.core.scenario import GRAPH_NODES, Scenario, load_scenario, scenario_from_dict, yaml_problem
+from attitude_sil.errors import AttitudeSilError, BagError, RunError, ScenarioError
+from attitude_sil.graph.launcher import namespace_kwargs
+from attitude_sil.graph.session import Progress, spin_episode
+from attitude_sil.graph.trajectory import KEPT_TOPICS, trajectory_from_messages
+from attitude_sil.nodes.recorder_node import Recorder
+from attitude_sil.ros.contract import CLOCK, COMMAND_TOPICS, RECORDED_TOPICS, STEP_TOPICS, check_namespace
+from attitude_sil.ros.environment import localhost_environment
+from attitude_sil.ros.services import call_reset, get_remote_parameters
+from attitude_sil.ros.signals import StopSignals
+from attitude_sil.storage.reader import open_bag
+from attitude_sil.storage.writer import PARAMETERS_KEY, SCENARIO_KEY, BagWriter, check_bag_dir
+
+__all__ = ["RecordResult", "bag_metrics", "check_topics", "graph_scenario", "play_episode", "record_graph",
+           "scenario_settings"]
+
+
+def check_topics(topics: list[str] | None) -> dict[str, str]:
+    """``--topics`` -> ``name -> type`` of the contract topics to record (all, plus /parameter_events, by default).
+
+    Raises
+    ------
+    AttitudeSilError
+        A name that is not a topic of the contract.
+    """
+    if not topics:
+        return dict(RECORDED_TOPICS)
+    by_name = {n.strip("/"): n for n in RECORDED_TOPICS}
+    out = {}
+    for t in topics:
+        name = by_name.get(t.strip("/"))
+        if name is None:
+            raise AttitudeSilError(f"--topics: {t!r} is not a topic of the graph (one of: "
+                                   f"{', '.join(sorted(n.strip('/') for n in RECORDED_TOPICS))})")
+        out[name] = RECORDED_TOPICS[name]
+    return out
+
+
+def scenario_settings(path: str | Path | None) -> dict | None:
+    """The ``scenario`` section (name, metrics settings) of a scenario file, or None without one.
+
+    Raises
+    ------
+    ScenarioError
+        The file is missing or not a valid scenario.
+    """
+    return None if path is None else dict(load_scenario(path).values[SCENARIO_NODE])
+
+
+def _target(namespace: str | None, node: str) -> str:
+    return f"/{namespace}/{node}" if namespace else node
+
+
+def graph_scenario(values: dict[str, dict], settings: dict | None, source: str) -> Scenario:
+    """A Scenario from the graph nodes' parameter values (``node -> name -> value``) and a scenario section.
+
+    Raises
+    ------
+    ScenarioError
+        The values break a rule of the schema (the message names ``source``).
+    """
+    data: dict = {node_key(n): {"ros__parameters": v} for n, v in values.items()}
+    if settings:
+        data[SCENARIO_NODE] = {"ros__parameters": settings}
+    return scenario_from_dict(data, source=source)
+
+
+def _ask_graph(node, spin, namespace: str | None, timeout: float,
+               say: Callable[[str], None]) -> dict[str, dict]:
+    """Every graph node's schema parameters, through their parameter services; warns of a node off sim time."""
+    out = {}
+    for name in GRAPH_NODES:
+        # one batch for what always has a value; an empty array is declared without one, and rclpy
+        # answers nothing to a batch holding such a name, so those are asked apart
+        empty = [s.name for s in NODE_PARAMS[name] if isinstance(s.default, list) and not s.default]
+        target = _target(namespace, name)
+        values = get_remote_parameters(node, spin, target, [s.name for s in NODE_PARAMS[name]
+                                                            if s.name not in empty] + ["use_sim_time"], timeout)
+        if empty:
+            values.update(get_remote_parameters(node, spin, target, empty, timeout))
+        if values.pop("use_sim_time", False) is not True:
+            say(f"warning: {_target(namespace, name)} has use_sim_time false: its clock is not the plant's /clock")
+        out[name] = values
+    return out
+
+
+class _Ros:
+    """A private rclpy context with one node on the EventsExecutor; stop signals checked at every spin."""
+
+    def __init__(self, make_node: Callable[..., Recorder]) -> None:
+        localhost_environment()
+        self.context = rclpy.Context()
+        self.stop = StopSignals().__enter__()
+        rclpy.init(args=[], context=self.context, signal_handler_options=SignalHandlerOptions.NO)
+        self.node = None
+        self.executor = None
+        try:
+            self.node = make_node(context=self.context)
+            self.executor = EventsExecutor(context=self.context)
+            self.executor.add_node(self.node)
+        except BaseException:
+            self.close()
+            raise
+
+    def spin(self, timeout_sec: float) -> None:
+        """Process callbacks for up to ``timeout_sec``; raises Interrupted after a stop signal."""
+        self.stop.check()
+        self.executor.spin_once(timeout_sec=timeout_sec)
+
+    def close(self) -> None:
+        if self.executor is not None:
+            self.executor.shutdown()
+        if self.node is not None:
+            self.node.destroy_node()
+        rclpy.try_shutdown(context=self.context)
+        self.stop.__exit__()
+
+
+def _wait_publishers(recorder: Recorder, spin, names, deadline: float, what: str) -> None:
+    while not all(recorder.subs[n].get_publisher_count() > 0 for n in names):
+        if time.monotonic() > deadline:
+            missing = [n for n in names if recorder.subs[n].get_publisher_count() == 0]
+            raise RunError(f"no publisher of {', '.join(missing)} within the timeout: is the graph running{what}?")
+        spin(0.02)
+
+
+def play_episode(namespace: str | None = None, scenario: str | Path | None = None, timeout: float = 20.0,
+                 progress: bool = False, say: Callable[[str], None] = print) -> dict:
+    """Start an episode on a running graph through ``plant/reset``, follow it to its end, return its metrics.
+
+    Parameters
+    ----------
+    namespace : str, optional
+        The graph's namespace.
+    scenario : path, optional
+        A scenario file whose ``scenario`` section (name, metrics settings) the
+        metrics use; the node parameters are read from the live graph.
+    timeout : float
+        Wall seconds to wait for the graph (publishers, parameter and reset services).
+    progress : bool
+        A progress line on stderr.
+    say : callable
+        Where warnings go (a node off sim time).
+
+    Returns
+    -------
+    dict
+        The ``run --json`` object (``bag`` is null).
+
+    Raises
+    ------
+    AttitudeSilError
+        Bad input, a graph that does not answer, a refused reset, a stalled episode.
+    Interrupted
+        A stop signal (nothing is kept).
+    """
+    ns = check_namespace(namespace)
+    settings = scenario_settings(scenario)  # before ROS: a bad file is one line
+    where = f" under /{ns}" if ns else ""
+    ros = _Ros(lambda **kw: Recorder(None, keep=KEPT_TOPICS, history=False, name="episode",
+                                     **kw, **namespace_kwargs(ns)))
+    try:
+        rec = ros.node
+        deadline = time.monotonic() + timeout
+        _wait_publishers(rec, ros.spin, [n for n in STEP_TOPICS if n in rec.subs], deadline, where)
+        scn = graph_scenario(_ask_graph(rec, ros.spin, ns, max(deadline - time.monotonic(), 0.1), say), settings,
+                             f"the graph{where}")
+        if scn.duration <= 0.0:
+            raise RunError(f"plant.duration is 0 on the graph{where} (run until stopped): the episode would not end; "
+                           f"set it, e.g. attitude-sil param set {_target(ns, 'plant')} duration 20.0")
+        rec.start_episode(None)
+        call_reset(rec, ros.spin, max(deadline - time.monotonic(), 0.1), service=_target(ns, "plant") + "/reset")
+        wall0 = time.monotonic()
+        prog = Progress(progress, scn.duration)
+        prog.t0 = wall0
+        spin_episode(rec, ros.spin, None, [], scn.steps(), scn, prog, [])
+        wall = time.monotonic() - wall0
+        prog.update(scn.duration, force=True)
+        traj = trajectory_from_messages(rec.kept)
+    finally:
+        ros.close()
+    metrics = episode_report(scn, traj, scn.param("controller", "controller_type"), scn.duration, wall)
+    metrics["bag"] = None
+    return metrics
+
+
+@dataclass
+class RecordResult:
+    """What ``record`` wrote: the bag, its message count per topic, whether it has a parameter snapshot."""
+
+    bag: Path
+    counts: dict[str, int] = field(default_factory=dict)
+    snapshot: bool = False
+    episode_done: bool = False
+
+
+def record_graph(bag: str | Path, topics: list[str] | None = None, namespace: str | None = None,
+                 episode: bool = False, say: Callable[[str], None] = print) -> RecordResult:
+    """Record a running graph to ``bag`` until a stop signal, or the end of the next episode with ``episode``.
+
+    Parameters
+    ----------
+    bag : path
+        The bag directory to create.
+    topics : list of str, optional
+        Topics of the contract to record (default: all of them and ``/parameter_events``).
+    namespace : str, optional
+        The graph's namespace.
+    episode : bool
+        Stop once an episode has started and reached the plant's duration.
+    say : callable
+        Where the progress lines go (one per topic subscribed, the snapshot).
+
+    Returns
+    -------
+    RecordResult
+
+    Raises
+    ------
+    AttitudeSilError
+        Bad input, a bag that cannot be created, a failed write.
+    """
+    ns = check_namespace(namespace)
+    selected = check_topics(topics)
+    try:
+        check_bag_dir(bag)
+    except (ValueError, OSError) as exc:
+        raise AttitudeSilError(str(exc)) from None
+    per_step = [n for n in selected if n in STEP_TOPICS and n not in COMMAND_TOPICS]
+    if episode and not per_step:
+        raise AttitudeSilError("--episode needs a step topic among --topics (e.g. attitude) to see the episode end")
+    where = f" under /{ns}" if ns else ""
+    ros = _Ros(lambda **kw: Recorder(None, topics=selected, history=False, qos_from_graph=True, name="record",
+                                     **kw, **namespace_kwargs(ns)))
+    writer = None
+    result = RecordResult(Path(bag))
+    try:
+        rec = ros.node
+        try:
+            writer = BagWriter(bag)
+        except (FileExistsError, ValueError, OSError) as exc:
+            raise AttitudeSilError(str(exc)) from None
+        rec.start_episode(writer)
+        say(f"recording {len(selected)} topic(s){where} to {bag}; Ctrl-C to stop")
+        clients = {n: AsyncParameterClient(rec, _target(ns, n)) for n in GRAPH_NODES}
+        scn = None
+        while True:
+            try:  # a stop signal (Ctrl-C, SIGTERM, SIGHUP) ends the recording: the normal way to stop it
+                ros.spin(0.05)
+                for name in rec.register_discovered():
+                    say(f"subscribed to {rec.resolved[name]}")
+                if scn is None and all(c.services_are_ready() for c in clients.values()):
+                    values = _ask_graph(rec, ros.spin, ns, 5.0, say)
+                    scn = graph_scenario(values, None, f"the graph{where}")
+                    writer.set_custom_data(PARAMETERS_KEY, scn.parameters_yaml())
+                    result.snapshot = True
+                    say(f"parameter snapshot of {', '.join(_target(ns, n) for n in GRAPH_NODES)}")
+            except KeyboardInterrupt:
+                break
+            if rec.error:
+                raise RunError(f"{rec.error}; the bag is readable up to there")
+            if episode and scn is not None and scn.duration > 0:
+                # the plant's last step (t = duration) has reached every per-step topic: the plant stops there
+                end_ns = scn.steps() * round(scn.dt * 1e9)
+                if all(rec.last_stamp.get(n) == end_ns for n in per_step):
+                    result.episode_done = True
+                    break
+        result.counts = {rec.resolved[n]: c for n, c in rec.counts.items()}
+    finally:
+        try:
+            if writer is not None:
+                writer.close()
+        finally:
+            ros.close()
+    return result
+
+
+def _snapshot_values(text: str, where: str) -> dict[str, dict]:
+    try:
+        data = yaml12.load(text)
+    except yaml.YAMLError as exc:
+        raise BagError(f"{where}: the parameter snapshot is not valid YAML{yaml_problem(exc)}") from None
+    if not isinstance(data, dict):
+        raise BagError(f"{where}: the parameter snapshot is not a parameter mapping")
+    out: dict[str, dict] = {}
+    for key, section in data.items():
+        node = section_node(str(key))
+        if node in GRAPH_NODES and isinstance(section, dict):
+            out.setdefault(node, {}).update(section.get("ros__parameters") or {})
+    return out
+
+
+def bag_metrics(bag: str | Path, scenario: str | Path | None = None) -> tuple[dict, list[str]]:
+    """The ``run --json`` metrics of the episode a bag holds, and notes on how they were found.
+
+    Node parameters come from the bag's snapshot (``metadata.yaml`` custom
+    data), else from ``scenario``; the ``scenario`` section from ``scenario``,
+    else the bag, else the defaults (said in a note). ``wall_time_s`` and
+    ``real_time_factor`` are null: a bag has no wall time.
+
+    Raises
+    ------
+    AttitudeSilError
+        An unreadable bag, no snapshot and no ``scenario``, no episode in the bag.
+    """
+    settings = scenario_settings(scenario)
+    reader = open_bag(bag)
+    custom = reader.custom_data
+    notes: list[str] = []
+    snapshot = custom.get(PARAMETERS_KEY)
+    if not snapshot and scenario is None:
+        raise BagError(f"{bag}: the bag holds no parameter snapshot (recorded by another tool, or the graph's "
+                       "nodes did not answer); give --scenario FILE")
+    if settings is None and custom.get(SCENARIO_KEY):
+        settings = _scenario_section(custom[SCENARIO_KEY], str(bag))
+    try:
+        if snapshot:
+            scn = graph_scenario(_snapshot_values(snapshot, str(bag)), settings, f"{bag} (parameter snapshot)")
+        else:
+            scn = load_scenario(scenario)
+            notes.append(f"no parameter snapshot in {bag}: node parameters from {scenario}")
+    except ScenarioError as exc:
+        raise BagError(str(exc)) from None
+    if settings is None:
+        notes.append(f"{bag} has no scenario section (metrics settings): defaults used; give --scenario FILE")
+    kept = {}
+    for name in KEPT_TOPICS:
+        full = reader.find_topic(name)
+        kept[name] = [] if full is None else [(m.log_time_ns, m.data) for m in reader.iter_raw(topics=[full])]
+    clock = reader.find_topic(CLOCK)
+    if clock is not None:
+        resets = sum(1 for m in reader.iter_raw(topics=[clock]) if m.log_time_ns == 0)
+        if resets > 1:
+            notes.append(f"{bag} holds {resets} episodes; the first message of each step counts")
+    traj = trajectory_from_messages(kept)
+    if traj.t.size < 2:
+        raise BagError(f"{bag}: holds no episode (fewer than two steps on attitude, body_rate, setpoints, "
+                       "command, wheel and disturbance topics)")
+    duration = float(traj.t[-1] - traj.t[0])
+    if duration + 0.5 * scn.dt < scn.duration:
+        notes.append(f"{bag} holds {duration:g} s of a {scn.duration:g} s episode; metrics over what it holds")
+    metrics = episode_report(scn, traj, scn.param("controller", "controller_type"), duration, 0.0)
+    metrics["wall_time_s"] = None
+    metrics["real_time_factor"] = None
+    metrics["bag"] = str(bag)
+    return metrics, notes
+
+
+def _scenario_section(text: str, where: str) -> dict | None:
+    try:
+        data = yaml12.load(text)
+    except yaml.YAMLError as exc:
+        raise BagError(f"{where}: the scenario section in metadata.yaml is not valid YAML{yaml_problem(exc)}") from None
+    section = data.get(SCENARIO_NODE) if isinstance(data, dict) else None
+    values = section.get("ros__parameters") if isinstance(section, dict) else None
+    return values if isinstance(values, dict) else None

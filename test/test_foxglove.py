@@ -1,0 +1,131 @@
+"""``run --foxglove``: a real Foxglove WebSocket client watches a run live; the shipped layout; bad ports.
+
+The client speaks the protocol itself (``websockets``; it offers the
+subprotocols ``foxglove.websocket.v1`` and ``foxglove.sdk.v1``, the name
+foxglove-sdk 0.30's server accepts, with the same frames): it waits for the
+``advertise`` of ``/attitude``
+(message encoding ``cdr``, schema encoding ``ros2msg`` with the bag's message
+definition), subscribes, and decodes the binary message-data frames (opcode
+1: subscription id, log time, CDR payload) with rclpy's deserializer.
+"""
+
+from __future__ import annotations
+
+import json
+import re
+import socket
+import struct
+import subprocess
+import sys
+import time
+
+import numpy as np
+from geometry_msgs.msg import QuaternionStamped
+from rclpy.serialization import deserialize_message
+from websockets.exceptions import ConnectionClosed
+from websockets.sync.client import connect
+
+from attitude_sil.cli import main
+from attitude_sil.ros.contract import RECORDED_TOPICS
+from attitude_sil.storage.foxglove import STATUS_TOPIC
+from attitude_sil.storage.msgdefs import message_definition
+from conftest import CONFIG, ROOT
+
+SCENARIO = str(CONFIG / "hst_roll_step.yaml")
+LAYOUT = CONFIG / "foxglove" / "attitude.json"
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def _connect(port: int, proc: subprocess.Popen, deadline: float):
+    while True:
+        try:
+            return connect(f"ws://127.0.0.1:{port}", subprotocols=["foxglove.websocket.v1", "foxglove.sdk.v1"],
+                           open_timeout=2)
+        except OSError:
+            assert proc.poll() is None, proc.communicate()[1]
+            assert time.monotonic() < deadline, "the Foxglove server did not come up"
+            time.sleep(0.05)  # polling a port that is not open yet: nothing to wait on but time
+
+
+def test_a_foxglove_client_watches_attitude_live():
+    port = _free_port()
+    proc = subprocess.Popen([sys.executable, "-m", "attitude_sil.cli", "run", SCENARIO, "--duration", "3",
+                             "--no-record", "--quiet", "--foxglove", str(port), "--foxglove-fast"], cwd=ROOT,
+                            stdin=subprocess.DEVNULL, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    deadline = time.monotonic() + 90
+    stamps, norms, status = [], [], []
+    try:
+        subs: dict[int, str] = {}
+        with _connect(port, proc, deadline) as ws:
+            assert ws.subprotocol in ("foxglove.websocket.v1", "foxglove.sdk.v1")
+            try:
+                while time.monotonic() < deadline:
+                    frame = ws.recv(timeout=max(deadline - time.monotonic(), 0.1))
+                    if isinstance(frame, str):
+                        msg = json.loads(frame)
+                        if msg["op"] != "advertise":
+                            continue
+                        for ch in msg["channels"]:
+                            if ch["topic"] == "/attitude":
+                                assert ch["encoding"] == "cdr" and ch["schemaEncoding"] == "ros2msg"
+                                assert ch["schemaName"] == "geometry_msgs/msg/QuaternionStamped"
+                                assert ch["schema"] == message_definition("geometry_msgs/msg/QuaternionStamped")
+                            if ch["topic"] in ("/attitude", STATUS_TOPIC):
+                                subs[len(subs) + 1] = ch["topic"]
+                                ws.send(json.dumps({"op": "subscribe",
+                                                    "subscriptions": [{"id": len(subs), "channelId": ch["id"]}]}))
+                        continue
+                    assert frame[0] == 1  # message data
+                    sub_id, log_time = struct.unpack_from("<IQ", frame, 1)
+                    payload = frame[13:]
+                    if subs[sub_id] == STATUS_TOPIC:
+                        status.append(json.loads(payload))
+                        continue
+                    q = deserialize_message(payload, QuaternionStamped)
+                    t = q.header.stamp.sec * 1_000_000_000 + q.header.stamp.nanosec
+                    assert t == log_time  # the message is logged at its sim-time stamp, as in the bags
+                    stamps.append(t)
+                    norms.append(np.linalg.norm([q.quaternion.x, q.quaternion.y, q.quaternion.z, q.quaternion.w]))
+            except ConnectionClosed:
+                pass  # the run ended and stopped its server
+        out, err = proc.communicate(timeout=max(deadline - time.monotonic(), 1))
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+    assert proc.returncode == 0, err
+    assert f"ws://127.0.0.1:{port}" in err
+    assert len(stamps) >= 100, len(stamps)  # 301 steps; the first may go before the subscription
+    assert np.all(np.diff(stamps) > 0) and stamps[-1] == 3_000_000_000
+    assert np.allclose(norms, 1.0, atol=1e-12)
+    assert status and {s["controller_type"] for s in status} == {"pid"}
+
+
+def test_port_in_use_is_one_line(capfd):
+    with socket.socket() as busy:
+        busy.bind(("127.0.0.1", 0))
+        busy.listen()
+        port = busy.getsockname()[1]
+        code = main(["run", SCENARIO, "--no-record", "--foxglove", str(port)])
+    err = capfd.readouterr().err
+    assert code == 2 and err.count("\n") == 1 and "in use" in err and err.startswith("attitude-sil: error:"), err
+
+
+def test_the_layout_plots_what_the_graph_publishes():
+    layout = json.loads(LAYOUT.read_text())
+    panels = layout["configById"]
+
+    def leaves(node):
+        return [node] if isinstance(node, str) else leaves(node["first"]) + leaves(node["second"])
+
+    assert sorted(leaves(layout["layout"])) == sorted(panels)
+    topics = {re.match(r"(/[a-z_/]+?)[.{]", p["value"]).group(1) for cfg in panels.values() for p in cfg["paths"]}
+    assert topics == {"/attitude_error", "/body_rate", "/wheel_state", "/voltage_cmd", "/parameter_events",
+                      STATUS_TOPIC}
+    assert topics - {STATUS_TOPIC} <= {n if n.startswith("/") else "/" + n for n in RECORDED_TOPICS}
+
