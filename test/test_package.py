@@ -35,6 +35,8 @@ DEPENDENCIES = {
     "matplotlib": ("python3-matplotlib", "matplotlib"),
     "control": ("python-control-pip", "control"),
     "pymoo": (None, "pymoo"),
+    "dask": (None, "dask"),
+    "distributed": (None, "distributed"),
     "pytest": ("python3-pytest", "pytest"),
     "rosbags": ("python3-rosbags-pip", "rosbags"),
     "setuptools": ("python3-setuptools", None),  # builds the package (test_package.py runs setup.py)
