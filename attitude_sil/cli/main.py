@@ -254,14 +254,14 @@ def _cmd_tune(args: argparse.Namespace) -> int:
 
 def _scheduler(args: argparse.Namespace) -> str | None:
     """``--scheduler`` or ``$DASK_SCHEDULER_ADDRESS``, checked (one line if malformed), or None."""
-    address = args.scheduler or os.environ.get("DASK_SCHEDULER_ADDRESS") or None
+    if args.scheduler is not None:
+        return check_scheduler_address(args.scheduler)
+    address = os.environ.get("DASK_SCHEDULER_ADDRESS") or None
     if address is not None:
-        if args.scheduler is None:
-            try:
-                check_scheduler_address(address)
-            except AttitudeSilError as exc:
-                raise AttitudeSilError(f"DASK_SCHEDULER_ADDRESS: {exc}") from None
-        check_scheduler_address(address)
+        try:
+            check_scheduler_address(address)
+        except AttitudeSilError as exc:
+            raise AttitudeSilError(f"DASK_SCHEDULER_ADDRESS: {exc}") from None
     return address
 
 
