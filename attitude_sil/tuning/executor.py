@@ -203,7 +203,7 @@ class DaskCluster(Executor):
         futures = [self.client.submit(fn, *args, pure=False) for args in calls]
         index = {f.key: i for i, f in enumerate(futures)}
         try:
-            for f in as_completed(futures):
+            for f in as_completed(futures, loop=self.client.loop):
                 yield index[f.key], f.result()
                 if should_stop is not None and should_stop():
                     return
