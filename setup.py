@@ -17,6 +17,9 @@ REQUIRES = [
     "mcap-ros2-support>=0.5",
     "numba>=0.59",
     "foxglove-sdk>=0.30",  # run --foxglove: the live view (storage/foxglove.py)
+    # Dask distributed: campaigns and tuning on a cluster; brings the `dask scheduler` / `dask worker` CLI
+    "dask>=2024.1",
+    "distributed>=2024.1",
 ]
 #: the tuner, its plots and the root-locus design; the attitude-sil command imports them too
 TUNE = ["pymoo>=0.6.1", "control>=0.10", "matplotlib>=3.7"]

@@ -37,6 +37,8 @@ DEPENDENCIES = {
     "pymoo": (None, "pymoo"),
     "foxglove": (None, "foxglove-sdk"),
     "websockets": (None, "websockets"),
+    "dask": (None, "dask"),
+    "distributed": (None, "distributed"),
     "pytest": ("python3-pytest", "pytest"),
     "rosbags": ("python3-rosbags-pip", "rosbags"),
     "setuptools": ("python3-setuptools", None),  # builds the package (test_package.py runs setup.py)

@@ -480,8 +480,76 @@ def _bag_cases() -> list:
     return cases
 
 
+MC_TEXT = (CONFIG / "mc_hst_roll_step.yaml").read_text().replace("scenario: ", f"scenario: {CONFIG}/")
+
+
+def _montecarlo_cases() -> list:
+    """The montecarlo command: its spec (file, keys, dispersions, requirements) and its flags."""
+    cases = _file_cases(["montecarlo", "{f}"], "m.yaml", "mc")[:14]
+    mc = ["montecarlo", "{tmp}/m.yaml"]
+
+    def spec(old: str, new: str) -> dict:
+        assert old in MC_TEXT, old
+        return {"m.yaml": MC_TEXT.replace(old, new)}
+
+    bad = {
+        "unknown-key": ("runs: 1000", "runz: 1000", "runz"),
+        "runs-zero": ("runs: 1000", "runs: 0", "runs"),
+        "runs-string": ("runs: 1000", "runs: many", "runs"),
+        "seed-negative": ("seed: 13", "seed: -1", "seed"),
+        "chunk-zero": ("chunk: 100 ", "chunk: 0 ", "chunk"),
+        "no-scenario": ("scenario: ", "scenarioo: ", "scenario"),
+        "scenario-missing": ("hst_roll_step.yaml", "nope.yaml", "nope.yaml"),
+        "set-unknown": ("disturbance.models: [noise]", "disturbance.modelz: [noise]", "modelz"),
+        "set-bad-value": ("disturbance.models: [noise]", "disturbance.models: [wind]", "wind"),
+        "controller": ("controller: pid", "controller: bangbang", "controller"),
+        "dispersion-unknown": ("inertia_pct:", "inertia_pc:", "inertia_pc"),
+        "dispersion-dist": ("{dist: normal, scale: [5.0, 5.0, 5.0]}", "{dist: cauchy, scale: 5}", "dist"),
+        "dispersion-scale-negative": ("scale: [5.0, 5.0, 5.0]", "scale: [-5.0, 5.0, 5.0]", "scale"),
+        "dispersion-scale-two": ("scale: [5.0, 5.0, 5.0]", "scale: [5.0, 5.0]", "scale"),
+        "dispersion-scale-nan": ("scale: [5.0, 5.0, 5.0]", "scale: .nan", "scale"),
+        "failure-probability": ("probability: 0.05", "probability: 1.5", "probability"),
+        "failure-mode": ("modes: [lost, stuck]", "modes: [exploded]", "modes"),
+        "failure-time": ("time: [2.0, 18.0]", "time: [18.0, 2.0]", "time"),
+        "sensor-negative": ("attitude_std_deg: 0.0005", "attitude_std_deg: -1", "attitude_std_deg"),
+        "noise-seeds-string": ("noise_seeds: true", "noise_seeds: yes please", "noise_seeds"),
+        "requirement-unknown": ("settling_time_s: {max: 20.0}", "settling_tim_s: {max: 20.0}", "settling_tim_s"),
+        "requirement-rule": ("settling_time_s: {max: 20.0}", "settling_time_s: {below: 20.0}", "settling_time_s"),
+        "requirement-nan": ("settling_time_s: {max: 20.0}", "settling_time_s: {max: .nan}", "settling_time_s"),
+        "worst-metric": ("worst: {metric: settling_time_s, count: 3}", "worst: {metric: speed, count: 3}", "worst"),
+        "worst-count": ("worst: {metric: settling_time_s, count: 3}", "worst: {metric: settling_time_s, count: -1}",
+                        "worst.count"),
+        "plot-runs": ("plot: {runs: 100, stride: 10}", "plot: {runs: 100000, stride: 10}", "plot.runs"),
+        "output-file": ("output: results/mc_hst_roll_step", f"output: {CONFIG}/hst_roll_step.yaml", "output"),
+    }
+    for label, (old, new, needle) in bad.items():
+        cases.append(_case(f"mc-spec-{label}", mc, spec(old, new), (needle,)))
+    hawaii = (CONFIG / "mc_hawaiisat_lvlh.yaml").read_text().replace("scenario: ", f"scenario: {CONFIG}/")
+    cases += [_case("mc-spec-failure-on-torque-rods", mc, {"m.yaml": hawaii.replace(
+                  "dispersions:\n", "dispersions:\n  wheel_failure: {probability: 0.1}\n")}, ("reaction_wheels",)),
+              _case("mc-spec-motor-on-torque-rods", mc, {"m.yaml": hawaii.replace(
+                  "dispersions:\n", "dispersions:\n  motor_constant_pct: {scale: 3}\n")}, ("reaction_wheels",)),
+              _case("mc-spec-noise-level-without-noise", mc, {"m.yaml": hawaii.replace(
+                  "dispersions:\n", "dispersions:\n  noise_level_pct: {scale: 3}\n")}, ("noise",))]
+    good_text = MC_TEXT.replace("output: results/mc_hst_roll_step", "output: /nonexistent-attitude-sil/out")
+    good = {"m.yaml": good_text}
+    flags = _number_flag_cases(mc, "--runs", {"zero": "0", "negative": "-5", "string": "x", "float": "2.5"}, "runs")
+    flags += _number_flag_cases(mc, "--workers", {"zero": "0", "negative": "-1", "string": "x"}, "workers")
+    flags += _number_flag_cases(mc, "--scheduler", {"no-scheme": "127.0.0.1:8786", "http": "http://h:1",
+                                                    "no-port": "tcp://127.0.0.1", "bad-port": "tcp://h:99999",
+                                                    "empty": "", "garbage": "!!"}, "scheduler")
+    cases += [pytest.param(c.values[0], good, *c.values[2:], id=c.id) for c in flags]  # a good spec, a bad flag
+    cases += [_case("mc-resume-nothing", [*mc, "--resume"], good, ("resume",)),
+              _case("mc-scheduler-and-in-process", [*mc, "--in-process", "--scheduler", "tcp://127.0.0.1:1"], good,
+                    ("not allowed with",)),
+              _case("mc-unknown-flag", [*mc, "--bogus"], good, ("unrecognized",)),
+              _case("tune-scheduler-garbage", ["tune", str(CONFIG / "tune_hst_pid_ga.yaml"), "--scheduler", "x"], {},
+                    ("scheduler",))]
+    return cases
+
+
 CASES = (_scenario_value_cases() + _scenario_structure_cases() + _params_file_cases() + _spec_cases()
-         + _set_cases() + _flag_cases() + _bag_cases())
+         + _set_cases() + _flag_cases() + _bag_cases() + _montecarlo_cases())
 
 
 # ------------------------------------------------------------------ fixtures
@@ -514,6 +582,8 @@ def no_start(monkeypatch):
     monkeypatch.setattr(GraphSession, "__enter__", started)
     monkeypatch.setattr(linearize, "simulate", started)
     monkeypatch.setattr(robustness, "simulate", started)
+    monkeypatch.setattr(sys.modules["attitude_sil.cli.main"], "run_campaign", started)
+    monkeypatch.setattr(sys.modules["attitude_sil.cli.main"], "make_executor", started)
     monkeypatch.setattr(sys.modules["attitude_sil.cli.main"], "isolated_domain", lambda: (77, True))
 
 

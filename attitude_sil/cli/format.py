@@ -3,8 +3,9 @@
 from __future__ import annotations
 
 import math
+from pathlib import Path
 
-__all__ = ["format_table", "format_segments", "format_bar"]
+__all__ = ["format_table", "format_segments", "format_bar", "format_campaign"]
 
 
 def format_table(metrics: dict) -> str:
@@ -67,3 +68,30 @@ def format_bar(stats: dict, width: int = 24) -> str:
     return (f"gen {stats['generation']:>3}/{stats['generations']} [{'#' * fill}{'.' * (width - fill)}] "
             f"best {stats['best']:.5g}  median {med}  failed {stats['failed']}  "
             f"{stats['evals_per_s']:.0f} evals/s" + ("  (from the saved run)" if stats.get("cached") else ""))
+
+
+def format_campaign(summary: dict) -> str:
+    """The end of ``attitude-sil montecarlo``: runs, rate, percentiles, pass rates, worst runs, outputs."""
+    lines = [f"campaign {summary['name']}: {summary['completed_runs']} of {summary['runs']} runs"
+             + (" (interrupted: --resume continues)" if summary.get("interrupted") else "")
+             + (f" in {summary['wall_time_s']:.1f} s on {summary.get('executor')} ({summary.get('workers')} "
+                f"worker(s))" if summary.get("wall_time_s") is not None else "")]
+    if summary.get("metrics"):
+        lines.append(f"  {'metric':<24}{'p50':>12}{'p90':>12}{'p99':>12}{'never':>7}")
+        for key, st in summary["metrics"].items():
+            cells = "".join(f"{st[k]:>12.5g}" if k in st else f"{'-':>12}" for k in ("p50", "p90", "p99"))
+            lines.append(f"  {key:<24}{cells}{st['never']:>7}")
+    for key, req in summary.get("requirements", {}).items():
+        rule = " and ".join(f"{'<=' if b == 'max' else '>='} {req[b]:g}" for b in ("min", "max") if b in req)
+        rate = "n/a" if req.get("pass_rate") is None else f"{100 * req['pass_rate']:.1f} %"
+        lines.append(f"  requirement {key} {rule}: {rate} pass")
+    if "pass_rate" in summary:
+        lines.append(f"  all requirements: {100 * summary['pass_rate']:.1f} % pass, "
+                     f"{summary.get('diverged_runs', 0)} diverged")
+    for w in summary.get("worst", []):
+        lines.append("  worst: " + ", ".join(f"{k} {v:g}" if isinstance(v, float) else f"{k} {v}"
+                                             for k, v in w.items()))
+    lines.append(f"results in {summary.get('output')} (runs.csv/.json, summary.json"
+                 + "".join(f", {Path(p).name}" for p in summary.get("plots", []))
+                 + (", bags/" if summary.get("bags") else "") + ")")
+    return "\n".join(lines)

@@ -1,7 +1,7 @@
 """The ``attitude-sil`` command: subcommands, their arguments, and one-line errors.
 
 Subcommands (docs/architecture.md, "Command line"): ``run``, ``tune``,
-``replay``, ``bag info``, ``plot``, ``param``, ``record``, ``episode``,
+``montecarlo``, ``replay``, ``bag info``, ``plot``, ``param``, ``record``, ``episode``,
 ``metrics``, ``linearize`` and ``robustness``. Any :class:`~attitude_sil.errors.AttitudeSilError` (every user
 error) prints one line on stderr and exits 2; Ctrl-C exits 130 after the bag is
 closed. A traceback means a bug.
@@ -12,6 +12,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import os
 import signal
 import sys
 from datetime import datetime
@@ -21,7 +22,7 @@ import rclpy
 import yaml
 from rclpy.signals import SignalHandlerOptions
 
-from attitude_sil.cli.format import format_bar, format_segments, format_table
+from attitude_sil.cli.format import format_bar, format_campaign, format_segments, format_table
 from attitude_sil.core import yaml12
 from attitude_sil.core.linearize import PAPER_000_COMPARISON_GAINS, rmse_table
 from attitude_sil.core.linearize import format_table as format_rmse_table
@@ -39,6 +40,9 @@ from attitude_sil.tools.paramclient import param_command, param_dump, param_load
 from attitude_sil.tools.plot import plot_bag
 from attitude_sil.tools.replay import ReplayOptions, replay_bag
 from attitude_sil.tools.verify import verify_controller
+from attitude_sil.tuning.executor import check_scheduler_address, make_executor
+from attitude_sil.tuning.mcplot import plot_campaign
+from attitude_sil.tuning.montecarlo import check_campaign_output, load_mc_spec, run_campaign, run_of, worst_runs
 from attitude_sil.tuning.optimize import check_output
 from attitude_sil.tuning.plot import plot_results
 from attitude_sil.tuning.robustness import format_robustness, robustness
@@ -282,6 +286,10 @@ def _cmd_tune(args: argparse.Namespace) -> int:
             raise AttitudeSilError(f"--set {key}: {value!r} is not a YAML value") from None
     spec = apply_overrides(load_spec(args.spec), overrides)  # bad input is refused before ROS starts
     check_output(spec, args.resume)
+    address = _scheduler(args)
+    if address and spec.evaluation.get("mode", "batch") != "batch":
+        raise AttitudeSilError(f"{spec.path}: --scheduler evaluates batch mode only (evaluation.mode is "
+                               f"{spec.evaluation['mode']})")
 
     def on_first(signum: int) -> None:
         print(f"{signal.Signals(signum).name}: stopping after this generation (again to stop now)",
@@ -301,7 +309,7 @@ def _cmd_tune(args: argparse.Namespace) -> int:
     try:
         with StopSignals(on_first=on_first, second_stops_now=True) as stop:
             outcome = tune(spec, resume=args.resume, overrides=overrides, record=not args.no_record,
-                           on_progress=progress, should_stop=lambda: stop.requested)
+                           on_progress=progress, should_stop=lambda: stop.requested, scheduler=address)
     finally:
         node.destroy_node()
         rclpy.try_shutdown(context=context)
@@ -319,6 +327,71 @@ def _cmd_tune(args: argparse.Namespace) -> int:
     if args.json:
         print(json.dumps(summary))
     return (stop.exit_code or 130) if summary.get("interrupted") else 0
+
+
+def _scheduler(args: argparse.Namespace) -> str | None:
+    """``--scheduler`` or ``$DASK_SCHEDULER_ADDRESS``, checked (one line if malformed), or None."""
+    if args.scheduler is not None:
+        return check_scheduler_address(args.scheduler)
+    address = os.environ.get("DASK_SCHEDULER_ADDRESS") or None
+    if address is not None:
+        try:
+            check_scheduler_address(address)
+        except AttitudeSilError as exc:
+            raise AttitudeSilError(f"DASK_SCHEDULER_ADDRESS: {exc}") from None
+    return address
+
+
+def _cmd_montecarlo(args: argparse.Namespace) -> int:
+    if args.workers is not None and args.workers < 1:
+        raise AttitudeSilError(f"--workers must be >= 1, got {args.workers}")
+    if args.runs is not None and args.runs < 1:
+        raise AttitudeSilError(f"--runs must be >= 1, got {args.runs}")
+    spec = load_mc_spec(args.spec, runs=args.runs)  # bad input is refused before anything runs
+    check_campaign_output(spec, args.resume)
+    address = _scheduler(args)
+    workers = args.workers if args.workers is not None else (os.cpu_count() or 1)
+    show = not args.quiet and sys.stderr.isatty()
+
+    def on_first(signum: int) -> None:
+        print(f"\n{signal.Signals(signum).name}: stopping after the running chunks (again to stop now); "
+              "finished runs are kept, --resume continues", file=sys.stderr, flush=True)
+
+    def progress(done: int, total: int, wall: float) -> None:
+        if show:
+            width = 30
+            fill = int(width * done / total)
+            rate = f"  {done / wall:7.0f} runs/s" if wall > 0 and done else ""
+            print(f"\r[{'#' * fill}{'.' * (width - fill)}] {done}/{total} runs{rate}", end="", file=sys.stderr,
+                  flush=True)
+
+    with make_executor(address, workers, in_process=args.in_process) as executor, \
+            StopSignals(on_first=on_first, second_stops_now=True) as stop:
+        result = run_campaign(spec, executor, resume=args.resume, progress=progress,
+                              should_stop=lambda: stop.requested)
+    if show:
+        print(file=sys.stderr)
+    out = spec.output
+    summary = result.summary
+    files = plot_campaign(spec, result.table, out) if result.table else []
+    bags = []
+    if not result.interrupted and not args.no_bags:
+        announced = []
+        for rank, row in enumerate(worst_runs(spec, result.table), start=1):
+            run = int(result.table["run"][row])
+            path = out / "bags" / f"worst_{rank:02d}_run{run:06d}"
+            if path.exists():
+                bags.append(str(path))
+                continue
+            run_graph(run_of(spec, run), controller=spec.controller, record_dir=path, progress=False,
+                      before_start=(lambda: announced or (announced.append(1), _announce_domain())))
+            bags.append(str(path))
+    summary.update(output=str(out), plots=[str(f) for f in files], bags=bags)
+    (out / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
+    print(format_campaign(summary))
+    if args.json:
+        print(json.dumps(summary))
+    return (stop.exit_code or 130) if result.interrupted else 0
 
 
 class _Parser(argparse.ArgumentParser):
@@ -446,7 +519,24 @@ def build_parser() -> argparse.ArgumentParser:
     tune.add_argument("--no-record", action="store_true", help="do not re-run bests through the graph")
     tune.add_argument("--quiet", action="store_true", help="no progress bar")
     tune.add_argument("--json", action="store_true", help="print the summary as one JSON object, last line")
+    tune.add_argument("--scheduler", metavar="ADDRESS",
+                      help="evaluate the populations on a Dask cluster, tcp://HOST:PORT or tls://HOST:PORT "
+                      "(default: $DASK_SCHEDULER_ADDRESS, else the spec's evaluation.workers)")
     tune.set_defaults(func=_cmd_tune)
+    mc = sub.add_parser("montecarlo", help="a Monte Carlo campaign: one scenario and design over dispersed runs")
+    mc.add_argument("spec", help="campaign spec YAML (config/mc_*.yaml)")
+    mc.add_argument("--runs", type=int, help="number of runs (default: the spec's runs)")
+    mc.add_argument("--resume", action="store_true", help="run only what the output folder does not hold yet")
+    where = mc.add_mutually_exclusive_group()
+    where.add_argument("--scheduler", metavar="ADDRESS",
+                       help="run the chunks on a Dask cluster, tcp://HOST:PORT or tls://HOST:PORT "
+                       "(default: $DASK_SCHEDULER_ADDRESS, else local processes)")
+    where.add_argument("--in-process", action="store_true", help="run every chunk in this process")
+    mc.add_argument("--workers", type=int, help="local worker processes (default: one per core)")
+    mc.add_argument("--no-bags", action="store_true", help="do not re-run the worst runs through the graph")
+    mc.add_argument("--quiet", action="store_true", help="no progress bar")
+    mc.add_argument("--json", action="store_true", help="print summary.json as one JSON object, last line")
+    mc.set_defaults(func=_cmd_montecarlo)
     return parser
 
 

@@ -15,7 +15,9 @@ What the compiled driver covers (the tuning and Monte Carlo workhorse: the HST
 and CubeSat presets and their kind): the ``rigid_body`` plant, the
 ``reaction_wheels`` actuator, ``step`` guidance, the ``constant`` and ``step``
 disturbance models (or none), and the ``pid``, ``fuzzy_pid`` and ``ga_flc``
-laws without a swap. :func:`attitude_sil.core.engine.compiled_plan` says
+laws without a swap, with per-episode motor constants, wheel failures and
+sensor noise (the Monte Carlo's dispersions; the same kernels as the nodes').
+:func:`attitude_sil.core.engine.compiled_plan` says
 whether a run fits and, if not, why; everything else runs in the stepwise
 driver, which handles every model.
 """
@@ -27,8 +29,9 @@ import numpy as np
 from numba import njit, prange
 
 from .fuzzy import UNIFORM_VERTICES
-from .kernels import fuzzy_pid_step_into, ga_flc_step_into, pid_step_into, rk4_body_into, wheel_step_into
+from .kernels import fuzzy_pid_step_into, ga_flc_step_into, measure_row, pid_step_into, rk4_body_into, wheel_row
 from .trajectory import Trajectory
+from .wheels import no_failure
 
 __all__ = ["COMPILED_LAWS", "COMPILED_DISTURBANCES", "SUMMARY_COLUMNS", "TRAJECTORY_FIELDS", "run_compiled"]
 
@@ -73,6 +76,7 @@ def _chunk(law, lo, hi, n_steps, stride, dt, dt_ns, substeps, step_time,
            e_scale, de_scale, u_scale, fz_rules, v_uniform,
            g_rules, g_vertices, g_scales,
            allocation, axes, phi_T, gamma, j_m, k_b, headroom, speed_max, v_max, torque_mode, k_i, r_a, b_m,
+           fail_j, fail_k, fail_stuck, e_hold, coast, noisy, s_seeds, s_att, s_rate,
            tau_constant, tau_step, step_ns,
            o_q, o_w, o_qr, o_h, o_u, o_tc, o_te, o_ws, o_wa, o_we,
            m_axis, m_y0, m_r, m_band, o_sum):
@@ -99,6 +103,11 @@ def _chunk(law, lo, hi, n_steps, stride, dt, dt_ns, substeps, step_time,
     gr, gv, gs = g_rules[lo:hi].copy(), g_vertices[lo:hi].copy(), g_scales[lo:hi].copy()
     # private copies of the shared read-only arrays: threads sharing one array would fight over its reference count
     allocation, axes, phi_T, gamma = allocation.copy(), axes.copy(), phi_T.copy(), gamma.copy()
+    k_b, headroom, k_i, r_a, coast = k_b.copy(), headroom.copy(), k_i.copy(), r_a.copy(), coast.copy()
+    fail_j, fail_k, fail_stuck = fail_j.copy(), fail_k.copy(), fail_stuck.copy()
+    s_seeds, s_att, s_rate = s_seeds.copy(), s_att.copy(), s_rate.copy()
+    qm = np.empty((m, 4))
+    wm = np.empty((m, 3))
     tau_constant, tau_step, v_uniform = tau_constant.copy(), tau_step.copy(), v_uniform.copy()
     omega_r = np.zeros((m, 3))
     tau_e = np.zeros((m, 3))
@@ -128,18 +137,23 @@ def _chunk(law, lo, hi, n_steps, stride, dt, dt_ns, substeps, step_time,
                 tau_e[p, i] = 0.0 + tau_constant[i]
                 if t_ns >= step_ns:
                     tau_e[p, i] += tau_step[i]
+        if noisy:  # the law sees the measurements (controllers.ControllerBank.measure)
+            for p in range(m):
+                measure_row(q, w, p, lo + p, k, s_seeds, s_att, s_rate, qm, wm)
+        qs, ws = (qm, wm) if noisy else (q, w)
         if law == 0:
-            pid_step_into(q, q_r, kp_, ki_, kd_, n_, a_, integral, filt, dt, u_max, angle_mode, u)
+            pid_step_into(qs, q_r, kp_, ki_, kd_, n_, a_, integral, filt, dt, u_max, angle_mode, u)
         elif law == 1:
-            fuzzy_pid_step_into(q, q_r, e_prev, k > 0, kp_, ki_, kd_, n_, a_, integral, filt, es, ds, us, fr,
+            fuzzy_pid_step_into(qs, q_r, e_prev, k > 0, kp_, ki_, kd_, n_, a_, integral, filt, es, ds, us, fr,
                                 v_uniform, dt, u_max, angle_mode, u)
             for p in range(m):
                 for i in range(3):
                     u[p, i] = min(max(u[p, i], -u_max), u_max)
         else:
-            ga_flc_step_into(q, w, q_r, omega_r, gr, gv, gs, u_max, u)
-        wheel_step_into(x, u, allocation, axes, phi_T, gamma, j_m, k_b, headroom, speed_max, v_max, dt,
-                        torque_mode, k_i, r_a, b_m, x_next, tau_c, h0)
+            ga_flc_step_into(qs, ws, q_r, omega_r, gr, gv, gs, u_max, u)
+        for p in range(m):
+            wheel_row(x, u, p, lo + p, k, allocation, axes, phi_T, gamma, j_m, k_b, headroom, speed_max, v_max, dt,
+                      torque_mode, k_i, r_a, b_m, fail_j, fail_k, fail_stuck, e_hold, coast, x_next, tau_c, h0)
         if k % stride == 0:
             r = k // stride
             for p in range(m):
@@ -166,7 +180,7 @@ def _chunk(law, lo, hi, n_steps, stride, dt, dt_ns, substeps, step_time,
                     if keep_ws:
                         o_ws[e, r, j] = x[p, j, 2]
                     if keep_we:
-                        o_we[e, r, j] = k_i * x[p, j, 1]
+                        o_we[e, r, j] = k_i[e if k_i.shape[0] > 1 else 0] * x[p, j, 1]
         if sums:
             t = k * dt
             after = t >= step_time - 1e-12
@@ -240,6 +254,7 @@ def _chunks(bounds, law, n_steps, stride, dt, dt_ns, substeps, step_time,
             e_scale, de_scale, u_scale, fz_rules, v_uniform,
             g_rules, g_vertices, g_scales,
             allocation, axes, phi_T, gamma, j_m, k_b, headroom, speed_max, v_max, torque_mode, k_i, r_a, b_m,
+            fail_j, fail_k, fail_stuck, e_hold, coast, noisy, s_seeds, s_att, s_rate,
             tau_constant, tau_step, step_ns,
             o_q, o_w, o_qr, o_h, o_u, o_tc, o_te, o_ws, o_wa, o_we,
             m_axis, m_y0, m_r, m_band, o_sum):
@@ -250,6 +265,7 @@ def _chunks(bounds, law, n_steps, stride, dt, dt_ns, substeps, step_time,
                e_scale, de_scale, u_scale, fz_rules, v_uniform,
                g_rules, g_vertices, g_scales,
                allocation, axes, phi_T, gamma, j_m, k_b, headroom, speed_max, v_max, torque_mode, k_i, r_a, b_m,
+               fail_j, fail_k, fail_stuck, e_hold, coast, noisy, s_seeds, s_att, s_rate,
                tau_constant, tau_step, step_ns,
                o_q, o_w, o_qr, o_h, o_u, o_tc, o_te, o_ws, o_wa, o_we,
                m_axis, m_y0, m_r, m_band, o_sum)
@@ -330,6 +346,7 @@ def run_compiled(plant, wheels, dist, guide, ctrl, n_steps: int, dt: float, stri
     else:
         m_axis, m_y0, m_r, m_band = int(sums[0]), _c(sums[1], (P,)), _c(sums[2], (P,)), float(sums[3])
         o_sum = np.empty((P, len(SUMMARY_COLUMNS)))
+    failure = wheels.failure_arrays() if wheels.failure is not None else no_failure()
     previous = numba.get_num_threads()
     n_threads = previous if threads is None else max(1, min(int(threads), numba.config.NUMBA_NUM_THREADS))
     size = max(1, min(int(chunk), -(-P // n_threads)))  # every thread gets work, chunks stay cache-sized
@@ -346,10 +363,10 @@ def run_compiled(plant, wheels, dist, guide, ctrl, n_steps: int, dt: float, stri
                 np.ascontiguousarray(np.broadcast_to(fz.rules, (P, 7, 7))), UNIFORM_VERTICES,
                 np.ascontiguousarray(np.broadcast_to(ga.rules, (P, 7, 7))),
                 _c(ga.vertices, (P, 3, 7)), _c(ga.scales, shape3),
-                asm.allocation, asm.axes_B, asm.phi_T, asm.gamma, mot.rotor_inertia, mot.back_emf_constant,
-                mot.resistance * mot.current_max, mot.speed_max, mot.v_max, ctrl.kind == "torque",
-                mot.torque_constant, mot.resistance,
-                mot.viscous_friction, tau_constant, tau_step, step_ns, *out.values(),
+                asm.allocation, asm.axes_B, asm.phi_e, asm.gamma_e, mot.rotor_inertia, asm.k_b_e,
+                asm.headroom_e, mot.speed_max, mot.v_max, ctrl.kind == "torque", asm.k_i_e, asm.r_a_e,
+                mot.viscous_friction, *failure, asm.coast, ctrl.noisy, ctrl.sensor_seeds, ctrl.sensor_att_std,
+                ctrl.sensor_rate_std, tau_constant, tau_step, step_ns, *out.values(),
                 m_axis, m_y0, m_r, m_band, o_sum)
         if n_threads > 1 and bounds.shape[0] > 2:
             _chunks(bounds, law, *rest)

@@ -26,7 +26,7 @@ from attitude_sil.errors import ScenarioError
 
 from .disturbance import aerodynamic_torque, gravity_gradient_torque, orbit_rate
 from .fuzzy import FUZZY_PID_DEFAULT_RULES, UNIFORM_VERTICES, vertices_from_ratios
-from .kernels import fuzzy_infer, fuzzy_pid_step, ga_flc_step, geometric_step, pid_step
+from .kernels import fuzzy_infer, fuzzy_pid_step, ga_flc_step, geometric_step, measure, pid_step
 from .quaternion import cross, error_vector, quat_error, quat_to_dcm
 
 __all__ = [
@@ -534,6 +534,7 @@ class ControllerBank:
                                    v["geometric.torque_limit"], _environment(v)),
         }
         self._set_limits(v)  # the constructors took the gains
+        self._set_sensor(v)
         self.active = v["controller_type"]
         self.pending: str | None = None
         self.u_last: np.ndarray | None = None
@@ -550,6 +551,30 @@ class ControllerBank:
         c["geometric"].set_params(v["geometric.k"], v["geometric.l"], _inertia(v["geometric.inertia"]),
                                   _environment(v))
         self._set_limits(v)
+        self._set_sensor(v)
+
+    def _set_sensor(self, v: dict) -> None:
+        """Sensor noise on the law's inputs (``sensor_noise.*``, scalars or per-episode (P,) arrays)."""
+        seeds = np.atleast_1d(np.asarray(v["sensor_noise.seed"])).astype(np.int64)
+        att = np.radians(np.atleast_1d(np.asarray(v["sensor_noise.attitude_std_deg"], dtype=float)))
+        rate = np.radians(np.atleast_1d(np.asarray(v["sensor_noise.rate_std_deg_s"], dtype=float)))
+        m = max(seeds.size, att.size, rate.size)
+        self.sensor_seeds, self.sensor_att_std, self.sensor_rate_std = (
+            np.ascontiguousarray(np.broadcast_to(a, (m,))) for a in (seeds, att, rate))
+        #: the law sees measurements with noise (else the true state, bit for bit)
+        self.noisy = bool(np.any(self.sensor_att_std > 0.0) or np.any(self.sensor_rate_std > 0.0))
+
+    def measure(self, q_BN: np.ndarray, omega_BN_B: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray]:
+        """What the law sees at step ``k``: the state with this step's sensor noise (or the state itself).
+
+        Each draw is a pure function of (``sensor_noise.seed``, k, channel)
+        (:func:`attitude_sil.core.kernels.measure`), so a node that knows its
+        step draws what the batch engine drew for that episode.
+        """
+        if not self.noisy:
+            return q_BN, omega_BN_B
+        return measure(np.ascontiguousarray(q_BN, dtype=float), np.ascontiguousarray(omega_BN_B, dtype=float),
+                       int(k), self.sensor_seeds, self.sensor_att_std, self.sensor_rate_std)
 
     def _set_limits(self, v: dict) -> None:
         """The command kind, error mode, output limits and bumpless transfer of every controller."""
@@ -591,8 +616,16 @@ class ControllerBank:
         return "torque" if controller_type == "geometric" else self.command
 
     def compute(self, q_BN: np.ndarray, omega_BN_B: np.ndarray, q_RN: np.ndarray,
-                omega_RN_R: np.ndarray) -> np.ndarray:
-        """Command (P, 3) of the active controller for this step (V or N m, see :attr:`kind`)."""
+                omega_RN_R: np.ndarray, k: int | None = None) -> np.ndarray:
+        """Command (P, 3) of the active controller for step ``k`` (V or N m, see :attr:`kind`).
+
+        With sensor noise on (:attr:`noisy`) the law sees :meth:`measure` of
+        the state, which needs the step ``k``.
+        """
+        if self.noisy:
+            if k is None:
+                raise ScenarioError("sensor noise needs the step index k")
+            q_BN, omega_BN_B = self.measure(q_BN, omega_BN_B, k)
         inp = StepInput(np.asarray(q_BN, dtype=float), np.asarray(omega_BN_B, dtype=float),
                         np.asarray(q_RN, dtype=float), np.asarray(omega_RN_R, dtype=float))
         if self.pending is not None:

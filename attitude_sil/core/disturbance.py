@@ -128,6 +128,21 @@ class DisturbanceModel:
     def reset(self) -> None:
         """Restart every episode's noise stream from its seed (streams exist only where noise is on)."""
         self.rngs = [np.random.Generator(np.random.PCG64(s)) for s in self.seeds] if "noise" in self.models else []
+        self._block = np.empty((self.n_episodes, 0, 3))
+        self._at = 0
+
+    #: control steps of noise drawn at once per episode (the stream is the same as drawn step by step)
+    NOISE_BLOCK = 64
+
+    def _noise(self) -> np.ndarray:
+        """This step's noise samples, (P, samples_per_step, 3): the next ones of each episode's stream."""
+        n = self.samples_per_step
+        if self._at >= self._block.shape[1]:
+            self._block = np.stack([rng.standard_normal((self.NOISE_BLOCK * n, 3)) for rng in self.rngs])
+            self._at = 0
+        out = self._block[:, self._at:self._at + n]
+        self._at += n
+        return out
 
     def _lvlh_to_body(self, q_BN: np.ndarray, t_ns: int) -> np.ndarray:
         q_LN = lvlh_attitude(t_ns * 1e-9, self.q_LN0, self.rate)
@@ -152,7 +167,8 @@ class DisturbanceModel:
         if "impulse" in self.models:
             tau[:, v["impulse.axis"]] += self._impulse(k) * v["impulse.magnitude"] / self.dt
         if "noise" in self.models:
-            draws = np.stack([rng.standard_normal((self.samples_per_step, 3)).mean(axis=0) for rng in self.rngs])
+            # the mean of the step's samples, summed in order (as ndarray.mean over the sample axis)
+            draws = np.add.reduce(self._noise(), axis=1) / self.samples_per_step
             tau += draws * self.noise_std
         if "gravity_gradient_linear" in self.models:
             rpy = euler_from_quat(q_BN)

@@ -110,20 +110,39 @@ class Plant:
 
 
 class Wheels:
-    """Reaction-wheel assembly driven by a body-axis voltage command."""
+    """Reaction-wheel assembly driven by a body-axis voltage command.
 
-    def __init__(self, assembly: WheelAssembly, n_episodes: int, speed0: np.ndarray | None) -> None:
+    ``failure`` is ``(wheel (P,) int, -1 none; step (P,) int; stuck (P,) bool)``:
+    from that step on the wheel is lost (open circuit) or its drive is stuck at
+    the voltage of the step before (:func:`attitude_sil.core.kernels.wheel_step`).
+    """
+
+    def __init__(self, assembly: WheelAssembly, n_episodes: int, speed0: np.ndarray | None,
+                 failure: tuple | None = None) -> None:
         self.assembly = assembly
         self.n_episodes = n_episodes
         self.speed0 = speed0
+        if failure is None or not np.any(np.asarray(failure[0]) >= 0):
+            self.failure = None
+        else:
+            wheel, step, stuck = (np.atleast_1d(np.asarray(a)) for a in failure)
+            f = n_episodes  # the held voltage is per episode
+            self.failure = (np.broadcast_to(wheel, (f,)).astype(np.int64), np.broadcast_to(step, (f,)).astype(np.int64),
+                            np.broadcast_to(stuck, (f,)).astype(np.bool_))
         self.reset()
 
     def reset(self) -> None:
         self.x = self.assembly.initial_state(self.n_episodes, self.speed0)
+        self.k = 0
+        self.e_hold = None if self.failure is None else np.zeros(len(self.failure[0]))
 
     @property
     def names(self) -> list[str]:
         return [f"wheel_{i + 1}" for i in range(self.assembly.n_wheels)]
+
+    def failure_arrays(self) -> tuple | None:
+        """The kernel's failure arguments (with the held voltages, state), or None."""
+        return None if self.failure is None else (*self.failure, self.e_hold)
 
     def advance(self, cmd_B: np.ndarray, torque_mode: bool = False) -> WheelStep:
         """Hold a body-axis command (P, 3) over one step; return the step's outputs.
@@ -132,7 +151,9 @@ class Wheels:
         that the inverse motor model turns into voltages.
         """
         x = self.x
-        self.x, tau_c, h = self.assembly.advance(x, np.ascontiguousarray(cmd_B, dtype=float), torque_mode)
+        self.x, tau_c, h = self.assembly.advance(x, np.ascontiguousarray(cmd_B, dtype=float), torque_mode,
+                                                 self.k, self.failure_arrays())
+        self.k += 1
         return WheelStep(h, tau_c, x[:, :, 0], x[:, :, 2], self.assembly.motor_torque(x))
 
 
@@ -222,9 +243,28 @@ def motor_params(values: dict) -> MotorParams:
     )
 
 
-def build_wheels(scn: Scenario, n_episodes: int = 1):
-    """The actuator of the scenario's ``wheels`` parameters (``actuator``)."""
+#: per-episode motor constants :func:`build_wheels` takes (``wheels`` parameters)
+EPISODE_MOTOR = ("motor.resistance", "motor.inductance", "motor.torque_constant", "motor.back_emf_constant",
+                 "motor.torque_max")
+#: per-episode wheel failure parameters
+EPISODE_FAILURE = ("failure.wheel", "failure.time", "failure.mode")
+
+
+def build_wheels(scn: Scenario, n_episodes: int = 1, per_episode: dict | None = None):
+    """The actuator of the scenario's ``wheels`` parameters (``actuator``).
+
+    ``per_episode`` maps :data:`EPISODE_MOTOR` and :data:`EPISODE_FAILURE` names
+    to (P,) arrays (reaction wheels only).
+    """
     w = scn.values["wheels"]
+    per_episode = dict(per_episode or {})
+    unknown = sorted(set(per_episode) - set(EPISODE_MOTOR) - set(EPISODE_FAILURE))
+    if unknown:
+        raise ScenarioError(f"wheels.{unknown[0]} cannot vary per episode (known: "
+                            f"{', '.join(EPISODE_MOTOR + EPISODE_FAILURE)})")
+    fails = w["failure.wheel"] != 0 or np.any(np.asarray(per_episode.get("failure.wheel", 0)) != 0)
+    if w["actuator"] != "reaction_wheels" and (fails or per_episode):
+        raise ScenarioError(f"wheels.failure and per-episode motors need actuator reaction_wheels, not {w['actuator']}")
     if w["actuator"] == "torque":
         return TorqueActuator(w["torque_limit"], n_episodes)
     if w["actuator"] == "speed_loop":
@@ -233,7 +273,12 @@ def build_wheels(scn: Scenario, n_episodes: int = 1):
                                w["motor.rotor_inertia"], w["motor.speed_max_rpm"], w["speed_loop.rpm_per_volt"],
                                w["control_period"], n_episodes)
     axes = GEOMETRIES[w["geometry"]]()
-    assembly = WheelAssembly(axes, motor_params(w), w["control_period"])
+    motors = None
+    if any(k in per_episode for k in EPISODE_MOTOR):
+        cols = {k: np.broadcast_to(np.asarray(per_episode.get(k, w[k]), dtype=float), (n_episodes,))
+                for k in EPISODE_MOTOR}
+        motors = [motor_params({**w, **{k: float(cols[k][p]) for k in EPISODE_MOTOR}}) for p in range(n_episodes)]
+    assembly = WheelAssembly(axes, motor_params(w), w["control_period"], motors)
     speed0 = None
     if w["initial_speed_rpm"]:
         if len(w["initial_speed_rpm"]) != assembly.n_wheels:
@@ -241,12 +286,30 @@ def build_wheels(scn: Scenario, n_episodes: int = 1):
                 f"wheels.initial_speed_rpm has {len(w['initial_speed_rpm'])} values for {assembly.n_wheels} wheels"
             )
         speed0 = np.asarray(w["initial_speed_rpm"]) * RPM
-    return Wheels(assembly, n_episodes, speed0)
+    failure = None
+    if fails:
+        wheel = np.atleast_1d(np.asarray(per_episode.get("failure.wheel", w["failure.wheel"]))).astype(np.int64)
+        if np.any(wheel < 0) or np.any(wheel > assembly.n_wheels):
+            raise ScenarioError(f"wheels.failure.wheel must be 0 (none) or 1..{assembly.n_wheels} for "
+                                f"{w['geometry']}, got {wheel[(wheel < 0) | (wheel > assembly.n_wheels)][0]}")
+        t = np.atleast_1d(np.asarray(per_episode.get("failure.time", w["failure.time"]), dtype=float))
+        dt_ns = int(round(w["control_period"] * 1e9))
+        t_ns = np.round(t * 1e9).astype(np.int64)
+        step = t_ns // dt_ns + (t_ns % dt_ns > 0)  # the first step at or after the time
+        mode = np.atleast_1d(np.asarray(per_episode.get("failure.mode", w["failure.mode"])))
+        failure = (wheel - 1, step, mode == "stuck")
+    return Wheels(assembly, n_episodes, speed0, failure)
 
 
-def build_disturbance(scn: Scenario, n_episodes: int = 1, seeds=None, inertia=None) -> DisturbanceModel:
-    """Disturbance model from the ``disturbance`` parameters; seeds default to seed + p."""
+def build_disturbance(scn: Scenario, n_episodes: int = 1, seeds=None, inertia=None,
+                      noise_power=None) -> DisturbanceModel:
+    """Disturbance model from the ``disturbance`` parameters; seeds default to seed + p.
+
+    ``noise_power`` (P, 3) N^2 m^2 s sets each episode's ``noise.power``.
+    """
     d = scn.values["disturbance"]
+    if noise_power is not None:
+        d = {**d, "noise.power": np.broadcast_to(np.asarray(noise_power, dtype=float), (n_episodes, 3))}
     m = inertia_matrix(d["inertia"] if inertia is None else inertia)
     if seeds is None:
         seeds = [d["noise.seed"] + p for p in range(n_episodes)]
@@ -354,6 +417,7 @@ def simulate(
     stride: int = 1,
     threads: int | None = None,
     keep=KEEPABLE,
+    episode_values: dict | None = None,
 ) -> Trajectory:
     """Run P episodes of the scenario in lockstep, vectorised over episodes.
 
@@ -392,6 +456,12 @@ def simulate(
         The trajectory arrays to keep (default all of :data:`KEEPABLE`); the
         others are None. The compiled driver does not compute what is not kept
         into memory; the stepwise driver drops it at the end.
+    episode_values : dict, optional
+        Scenario values per episode, ``{"node.param": (P, ...) array}``: any
+        ``controller`` parameter and those of :data:`EPISODE_VALUES` (inertia,
+        initial attitude and rate, setpoint, noise seed and power, motor
+        constants, wheel failure). Episode p then runs what the graph runs
+        with those values set in the scenario (the Monte Carlo's dispersions).
 
     Returns
     -------
@@ -410,7 +480,7 @@ def simulate(
     if int(stride) < 1:
         raise ScenarioError(f"stride must be >= 1, got {stride!r}")
     run = _Run(scn, n_episodes, duration, controller_params, inertia, seeds, controller, schedule, setpoints_rpy_deg,
-               driver)
+               driver, episode_values)
     if run.compiled:
         tr, _ = run_compiled(*run.models, run.K, run.dt, stride=int(stride), threads=threads, keep=keep)
         return tr
@@ -433,6 +503,7 @@ def simulate_summary(
     setpoints_rpy_deg=None,
     driver: str = "auto",
     threads: int | None = None,
+    episode_values: dict | None = None,
 ) -> EpisodeSummary:
     """The metrics and checks of P episodes, as :func:`attitude_sil.core.metrics.summarize` gives them.
 
@@ -443,7 +514,7 @@ def simulate_summary(
     are those of :func:`simulate`.
     """
     run = _Run(scn, n_episodes, duration, controller_params, inertia, seeds, controller, schedule, setpoints_rpy_deg,
-               driver)
+               driver, episode_values)
     values = scn.values["scenario"]
     if run.compiled and values["metrics.mode"] == "step":
         plant, _, _, guide, _ = run.models
@@ -464,20 +535,48 @@ def simulate_summary(
     return summarize(tr, values, step_time=scn.param("guidance", "step_time"))
 
 
+#: scenario values :func:`simulate` takes per episode (``episode_values``), by node; every ``controller``
+#: parameter may vary per episode too
+EPISODE_VALUES = {
+    "plant": ("inertia", "initial_attitude_rpy_deg", "initial_body_rate"),
+    "guidance": ("setpoint_rpy_deg",),
+    "disturbance": ("inertia", "noise.seed", "noise.power"),
+    "wheels": EPISODE_MOTOR + EPISODE_FAILURE,
+}
+
+
+def split_episode_values(episode_values: dict | None) -> dict[str, dict]:
+    """``{"node.param": (P, ...)}`` -> ``{node: {param: (P, ...)}}``, refusing what cannot vary per episode."""
+    out: dict[str, dict] = {node: {} for node in (*EPISODE_VALUES, "controller")}
+    for key, value in (episode_values or {}).items():
+        node, _, name = key.partition(".")
+        if node != "controller" and name not in EPISODE_VALUES.get(node, ()):
+            known = [f"{n}.{v}" for n, vs in EPISODE_VALUES.items() for v in vs] + ["controller.*"]
+            raise ScenarioError(f"{key} cannot vary per episode in the batch engine (known: {', '.join(known)})")
+        out[node][name] = value
+    return out
+
+
 class _Run:
     """The models of one :func:`simulate` call and the driver that will run them."""
 
     def __init__(self, scn, P, duration, controller_params, inertia, seeds, controller, schedule,
-                 setpoints_rpy_deg, driver) -> None:
+                 setpoints_rpy_deg, driver, episode_values=None) -> None:
         if driver not in DRIVERS:
             raise ScenarioError(f"driver must be one of {', '.join(DRIVERS)}, got {driver!r}")
         self.K = scn.steps(duration)
         self.dt = scn.dt
-        plant = build_plant(scn, P, inertia=inertia)
-        wheels = build_wheels(scn, P)
-        dist = build_disturbance(scn, P, seeds=seeds, inertia=inertia)
-        guide = build_guidance(scn, P, setpoints_rpy_deg)
-        ctrl = build_controller(scn, P, params=controller_params)
+        ev = split_episode_values(episode_values)
+        pv, dv, gv = ev["plant"], ev["disturbance"], ev["guidance"]
+        plant = build_plant(scn, P, inertia=pv.get("inertia", inertia), rpy0_deg=pv.get("initial_attitude_rpy_deg"),
+                            omega0=pv.get("initial_body_rate"))
+        wheels = build_wheels(scn, P, ev["wheels"])
+        if "noise.seed" in dv:
+            seeds = dv["noise.seed"]
+        dist = build_disturbance(scn, P, seeds=seeds, inertia=dv.get("inertia", inertia),
+                                 noise_power=dv.get("noise.power"))
+        guide = build_guidance(scn, P, gv.get("setpoint_rpy_deg", setpoints_rpy_deg))
+        ctrl = build_controller(scn, P, params={**(controller_params or {}), **ev["controller"]} or None)
         if controller is not None:
             ctrl.active = controller
         self.models = (plant, wheels, dist, guide, ctrl)
@@ -517,7 +616,7 @@ def _simulate_stepwise(plant, wheels, dist, guide, ctrl, swaps: dict, K: int, dt
         tau_ext = dist.torque(s.q_BN, k * dt_ns)
         if k in swaps:
             ctrl.request(swaps[k])
-        u = ctrl.compute(s.q_BN, s.omega_BN_B, q_RN, w_RN)
+        u = ctrl.compute(s.q_BN, s.omega_BN_B, q_RN, w_RN, k)
         tr.kind.append(ctrl.kind)
         ws = wheels.advance(u, ctrl.kind == "torque")
         tr.q_BN[:, k] = s.q_BN

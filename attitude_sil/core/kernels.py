@@ -209,56 +209,82 @@ def pid_row(q_BN, q_RN, p, kp, ki, kd, n, a, integral, filt, dt, u_max, angle_mo
 
 
 @njit(cache=True)
-def wheel_step(x, v_cmd, allocation, axes, phi_T, gamma, j_m, k_b, headroom, speed_max, v_max, dt,
-               torque_mode, k_i, r_a, b_m):
-    """Drive limits, exact motor step and mean body torque for every episode.
+def wheel_step(x, v_cmd, k, allocation, axes, phi_T, gamma, j_m, k_b, headroom, speed_max, v_max, dt,
+               torque_mode, k_i, r_a, b_m, fail_j, fail_k, fail_stuck, e_hold, coast):
+    """Drive limits, exact motor step and mean body torque for every episode at step ``k``.
 
     Shapes: x (P, n, 3) wheel state (angle, current, speed) at t_k, v_cmd (P, 3)
     body-axis voltage (or, with ``torque_mode``, body torque in N m), allocation
-    (n, 3) pseudo-inverse, axes (3, n), phi_T (3, 3) and gamma (3,) the exact
-    one-step transition. Returns (x_next, tau_c (P, 3), h_start (P, 3)); see
-    ``wheels.WheelAssembly`` for the rules.
+    (n, 3) pseudo-inverse, axes (3, n). Motor constants per episode (M = 1 for
+    all, or P): phi_T (M, 3, 3) and gamma (M, 3) the exact one-step transition,
+    k_b, headroom (R_a i_max), k_i, r_a (M,). Wheel failures per episode (F = 1 for
+    all, or P): fail_j (F,) the failed wheel (-1: none), fail_k (F,) the step it
+    fails at, fail_stuck (F,) its drive holds the voltage of the step before
+    (else it is lost: open circuit, it coasts), e_hold (F,) that voltage
+    (state, updated until the failure); coast (2,) the coasting wheel's speed
+    decay and angle gain over one step. Returns (x_next, tau_c (P, 3),
+    h_start (P, 3)); see ``wheels.WheelAssembly`` for the rules.
     """
     m = x.shape[0]
     x_next = np.empty_like(x)
     tau_c = np.empty((m, 3))
     h0 = np.empty((m, 3))
-    wheel_step_into(x, v_cmd, allocation, axes, phi_T, gamma, j_m, k_b, headroom, speed_max, v_max, dt,
-                    torque_mode, k_i, r_a, b_m, x_next, tau_c, h0)
+    wheel_step_into(x, v_cmd, k, allocation, axes, phi_T, gamma, j_m, k_b, headroom, speed_max, v_max, dt,
+                    torque_mode, k_i, r_a, b_m, fail_j, fail_k, fail_stuck, e_hold, coast, x_next, tau_c, h0)
     return x_next, tau_c, h0
 
 
 @njit(cache=True, inline="always")
-def wheel_step_into(x, v_cmd, allocation, axes, phi_T, gamma, j_m, k_b, headroom, speed_max, v_max, dt,
-                    torque_mode, k_i, r_a, b_m, x_next, tau_c, h0):
+def wheel_step_into(x, v_cmd, k, allocation, axes, phi_T, gamma, j_m, k_b, headroom, speed_max, v_max, dt,
+                    torque_mode, k_i, r_a, b_m, fail_j, fail_k, fail_stuck, e_hold, coast, x_next, tau_c, h0):
     """:func:`wheel_step` into given arrays (``x_next`` must not be ``x``)."""
     for p in range(x.shape[0]):
-        wheel_row(x, v_cmd, p, allocation, axes, phi_T, gamma, j_m, k_b, headroom, speed_max, v_max, dt,
-                  torque_mode, k_i, r_a, b_m, x_next, tau_c, h0)
+        wheel_row(x, v_cmd, p, p, k, allocation, axes, phi_T, gamma, j_m, k_b, headroom, speed_max, v_max, dt,
+                  torque_mode, k_i, r_a, b_m, fail_j, fail_k, fail_stuck, e_hold, coast, x_next, tau_c, h0)
 
 
 @njit(cache=True, inline="always")
-def wheel_row(x, v_cmd, p, allocation, axes, phi_T, gamma, j_m, k_b, headroom, speed_max, v_max, dt,
-              torque_mode, k_i, r_a, b_m, x_next, tau_c, h0):
-    """:func:`wheel_step_into` for episode ``p`` alone (row ``p`` of every per-episode array)."""
+def wheel_row(x, v_cmd, p, e_idx, k, allocation, axes, phi_T, gamma, j_m, k_b, headroom, speed_max, v_max, dt,
+              torque_mode, k_i, r_a, b_m, fail_j, fail_k, fail_stuck, e_hold, coast, x_next, tau_c, h0):
+    """:func:`wheel_step_into` for row ``p`` of x, v_cmd, x_next, tau_c, h0 alone.
+
+    ``e_idx`` is the episode's row in the per-episode constants and failures
+    (the compiled driver's chunks hold rows ``p`` of episodes ``lo + p``).
+    """
     nw = x.shape[1]
+    pm = e_idx if phi_T.shape[0] > 1 else 0
+    pf = e_idx if fail_j.shape[0] > 1 else 0
+    kb, ki, head, ra = k_b[pm], k_i[pm], headroom[pm], r_a[pm]
     for i in range(3):
         tau_c[p, i] = 0.0
         h0[p, i] = 0.0
     for j in range(nw):
         speed = x[p, j, 2]
         e = -(allocation[j, 0] * v_cmd[p, 0] + allocation[j, 1] * v_cmd[p, 1] + allocation[j, 2] * v_cmd[p, 2])
-        emf = k_b * speed
+        emf = kb * speed
         if torque_mode:
             # inverse motor model: wheel torque -> steady current -> voltage
-            e = r_a * (e + b_m * speed) / k_i + emf
-        e = min(max(e, emf - headroom), emf + headroom)
+            e = ra * (e + b_m * speed) / ki + emf
+        e = min(max(e, emf - head), emf + head)
         if abs(speed) >= speed_max and (e - emf) * speed > 0.0:
             e = emf
         e = min(max(e, -v_max), v_max)
-        for r in range(3):
-            x_next[p, j, r] = (x[p, j, 0] * phi_T[0, r] + x[p, j, 1] * phi_T[1, r]
-                               + x[p, j, 2] * phi_T[2, r] + e * gamma[r])
+        lost = False
+        if j == fail_j[pf]:
+            if k < fail_k[pf]:
+                e_hold[pf] = e
+            elif fail_stuck[pf]:
+                e = e_hold[pf]  # the drive is stuck at its last voltage
+            else:
+                lost = True
+        if lost:  # open circuit: no current, the wheel coasts down on its viscous friction
+            x_next[p, j, 0] = x[p, j, 0] + coast[1] * speed
+            x_next[p, j, 1] = 0.0
+            x_next[p, j, 2] = coast[0] * speed
+        else:
+            for r in range(3):
+                x_next[p, j, r] = (x[p, j, 0] * phi_T[pm, 0, r] + x[p, j, 1] * phi_T[pm, 1, r]
+                                   + x[p, j, 2] * phi_T[pm, 2, r] + e * gamma[pm, r])
         for i in range(3):
             h0[p, i] += axes[i, j] * (speed * j_m)
             tau_c[p, i] += axes[i, j] * (x_next[p, j, 2] * j_m)
@@ -462,4 +488,104 @@ def geometric_step(q_BN, omega, q_RN, w_d, w_d_prev, has_prev, k, l, inertia, dt
             env[2] += aero_coeff * (v[0] * cp_offset[1] - v[1] * cp_offset[0])
         for i in range(3):
             out[p, i] = min(max(tau[i] - env[i], -u_max), u_max)
+    return out
+
+
+# ---------------------------------------------------------------- sensor noise
+# A counter-based generator: draw (seed, k, i) is a pure function of its key (splitmix64, then Box-Muller),
+# so an episode's noise does not depend on the batch, chunk, thread or process that runs it, and a node that
+# knows only its step k draws what the batch engine drew.
+
+@njit(cache=True, inline="always")
+def _mix64(z):
+    z = z + np.uint64(0x9E3779B97F4A7C15)
+    z = (z ^ (z >> np.uint64(30))) * np.uint64(0xBF58476D1CE4E5B9)
+    z = (z ^ (z >> np.uint64(27))) * np.uint64(0x94D049BB133111EB)
+    return z ^ (z >> np.uint64(31))
+
+
+@njit(cache=True, inline="always")
+def normal_draw(seed, k, i):
+    """A standard normal number that depends only on (seed, step k, channel i): splitmix64 and Box-Muller."""
+    h = _mix64(_mix64(np.uint64(seed)) ^ np.uint64(k * 8 + i))
+    h2 = _mix64(h)
+    u1 = (float(h >> np.uint64(11)) + 0.5) * (1.0 / 9007199254740992.0)
+    u2 = float(h2 >> np.uint64(11)) * (1.0 / 9007199254740992.0)
+    return np.sqrt(-2.0 * np.log(u1)) * np.cos(2.0 * np.pi * u2)
+
+
+@njit(cache=True, inline="always")
+def measure_row(q, w, p, e_idx, k, seeds, att_std, rate_std, qm, wm):
+    """Row ``p`` of the measured attitude and rate at step ``k`` (episode row ``e_idx`` of the M = 1 or P
+    noise settings).
+
+    ``q_meas = q ⊗ [d / 2, 1] / |.|`` with d ~ N(0, att_std^2) per body axis (rad),
+    ``w_meas = w + N(0, rate_std^2)`` (rad/s); seeds (M,) int64, att_std and rate_std (M,).
+    """
+    pe = e_idx if seeds.shape[0] > 1 else 0
+    s, sa, sr = seeds[pe], att_std[pe], rate_std[pe]
+    dx = 0.5 * sa * normal_draw(s, k, 0)
+    dy = 0.5 * sa * normal_draw(s, k, 1)
+    dz = 0.5 * sa * normal_draw(s, k, 2)
+    n = np.sqrt(1.0 + dx * dx + dy * dy + dz * dz)
+    dx, dy, dz, dw = dx / n, dy / n, dz / n, 1.0 / n
+    qx, qy, qz, qw = q[p, 0], q[p, 1], q[p, 2], q[p, 3]
+    qm[p, 0] = qw * dx + qx * dw + qy * dz - qz * dy
+    qm[p, 1] = qw * dy - qx * dz + qy * dw + qz * dx
+    qm[p, 2] = qw * dz + qx * dy - qy * dx + qz * dw
+    qm[p, 3] = qw * dw - qx * dx - qy * dy - qz * dz
+    for i in range(3):
+        wm[p, i] = w[p, i] + sr * normal_draw(s, k, 3 + i)
+
+
+@njit(cache=True)
+def measure(q, w, k, seeds, att_std, rate_std):
+    """:func:`measure_row` for every episode: (q_meas (P, 4), w_meas (P, 3))."""
+    qm = np.empty_like(q)
+    wm = np.empty_like(w)
+    for p in range(q.shape[0]):
+        measure_row(q, w, p, p, k, seeds, att_std, rate_std, qm, wm)
+    return qm, wm
+
+
+# ---------------------------------------------------------------- small matrix exponential
+@njit(cache=True, inline="always")
+def _matmul_small(a, b):
+    n = a.shape[0]
+    out = np.zeros((n, n))
+    for i in range(n):
+        for k in range(n):
+            aik = a[i, k]
+            for j in range(n):
+                out[i, j] += aik * b[k, j]
+    return out
+
+
+@njit(cache=True)
+def expm_small(a):
+    """exp(a) of a small square matrix: scaling and squaring of an 18-term Taylor series.
+
+    The 1-norm is scaled below 1/2, where the series' truncation error is below
+    1e-21; plain loops, no BLAS, so it costs microseconds in any process (a
+    per-episode motor transition of a Monte Carlo run calls it once).
+    """
+    n = a.shape[0]
+    norm = 0.0
+    for j in range(n):
+        col = 0.0
+        for i in range(n):
+            col += abs(a[i, j])
+        norm = max(norm, col)
+    s = 0
+    while norm > 0.5:
+        norm *= 0.5
+        s += 1
+    x = a * (0.5 ** s)
+    out = np.eye(n)
+    term = np.eye(n)
+    for k in range(1, 19):
+        term = _matmul_small(term, x) / k
+        out = out + term
+    for _ in range(s):
+        out = _matmul_small(out, out)
     return out

@@ -276,6 +276,12 @@ NODE_PARAMS: dict[str, list[ParamSpec]] = {
         _d("motor.speed_max_rpm", HST_MOTOR["motor.speed_max_rpm"], "wheel speed limit, rpm",
            min=0.0, min_exclusive=True),
         _da("initial_speed_rpm", [], "initial wheel speeds, rpm (empty: all zero)"),
+        ParamSpec("failure.wheel", "integer", 0, "wheel that fails at failure.time: 0 none, 1..n that wheel of "
+                  "the geometry (reaction_wheels only)", min=0),
+        _d("failure.time", 0.0, "sim time the wheel fails (the first step at or after it), s", min=0.0),
+        ParamSpec("failure.mode", "string", "lost", "lost: the drive opens, no current, the wheel coasts on "
+                  "its friction; stuck: the drive holds the voltage of the step before the failure",
+                  choices=("lost", "stuck")),
         ParamSpec("actuator", "string", "reaction_wheels",
                   "reaction_wheels (PMDC motors, paper 000), speed_loop (identified motor with a wheel-speed "
                   "PID, paper 003), torque (ideal torquer saturated at torque_limit: torque rods, paper 001)",
@@ -351,6 +357,12 @@ NODE_PARAMS: dict[str, list[ParamSpec]] = {
             min=0.0, min_exclusive=True, runtime=True),
         _d("output_limit", HST_MOTOR["motor.v_max"], "command saturation of the voltage laws, V",
            min=0.0, min_exclusive=True, runtime=True),
+        _d("sensor_noise.attitude_std_deg", 0.0, "attitude sensor noise: standard deviation of a small "
+           "rotation per body axis on the attitude the law sees, deg (0: none)", min=0.0),
+        _d("sensor_noise.rate_std_deg_s", 0.0, "rate sensor noise: standard deviation per body axis on the "
+           "body rate the law sees, deg/s (0: none)", min=0.0),
+        ParamSpec("sensor_noise.seed", "integer", 0, "sensor noise seed (a draw depends only on the seed, the "
+                  "step and the channel)", min=0),
         # hybrid fuzzy PID, paper 003
         _da("fuzzy_pid.kp", [48.894] * 3, "PID part: proportional gain per axis, V per unit error",
             lengths=(3,), min=0.0, runtime=True),

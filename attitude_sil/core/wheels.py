@@ -31,11 +31,10 @@ import functools
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.linalg import expm
 
 from attitude_sil.errors import ScenarioError
 
-from .kernels import wheel_step
+from .kernels import expm_small, wheel_step
 
 __all__ = [
     "MotorParams",
@@ -43,6 +42,7 @@ __all__ = [
     "orthogonal_triad",
     "GEOMETRIES",
     "WheelAssembly",
+    "no_failure",
 ]
 
 
@@ -119,7 +119,7 @@ def _motor_transition(resistance: float, inductance: float, torque_constant: flo
     """Exact one-step transition of the motor state (angle, current, speed) with the voltage held.
 
     The zero-order-hold discretisation of eq. 15-16 by the matrix exponential of
-    the augmented system: returns ``(phi_T (3, 3), gamma (3,))`` with
+    the augmented system (:func:`attitude_sil.core.kernels.expm_small`): returns ``(phi_T (3, 3), gamma (3,))`` with
     ``x_next = x @ phi_T + e_a * gamma``. Cached: every episode of a batch and
     every run of one set of constants shares it (callers copy).
     """
@@ -133,7 +133,7 @@ def _motor_transition(resistance: float, inductance: float, torque_constant: flo
     aug = np.zeros((4, 4))
     aug[:3, :3] = a_m
     aug[:3, 3] = [0.0, 1.0 / inductance, 0.0]
-    e = expm(aug * dt)
+    e = expm_small(aug * dt)
     return e[:3, :3].T.copy(), e[:3, 3].copy()
 
 
@@ -149,7 +149,8 @@ class WheelAssembly:
         Held-voltage interval, s.
     """
 
-    def __init__(self, axes_B: np.ndarray, motor: MotorParams, dt: float) -> None:
+    def __init__(self, axes_B: np.ndarray, motor: MotorParams, dt: float,
+                 motors: list[MotorParams] | None = None) -> None:
         motor.validate()
         self.axes_B = np.asarray(axes_B, dtype=float)
         self.n_wheels = self.axes_B.shape[1]
@@ -162,6 +163,38 @@ class WheelAssembly:
                                          m.rotor_inertia, m.viscous_friction, self.dt)
         self.phi_T = phi_T.copy()  # x_next = x @ phi_T + e_a * gamma
         self.gamma = gamma.copy()
+        # a lost wheel (open circuit) coasts: speed' = -B_m / J_m speed, exactly over one step
+        decay = float(np.exp(-m.viscous_friction * self.dt / m.rotor_inertia))
+        gain = m.rotor_inertia / m.viscous_friction * (1.0 - decay) if m.viscous_friction > 0.0 else self.dt
+        self.coast = np.array([decay, gain])
+        self.set_motors(motors)
+
+    def set_motors(self, motors: list[MotorParams] | None) -> None:
+        """Per-episode motor constants (one :class:`MotorParams` per episode), or None for the nominal motor.
+
+        Only the electrical constants may differ between episodes (``resistance``,
+        ``inductance``, ``torque_constant``, ``back_emf_constant`` and
+        ``torque_max``, i.e. the current limit): the rotor inertia, friction,
+        bus voltage and speed limit stay the assembly's. Sets the (M, ...) arrays the step kernel reads, M = 1 or P.
+        """
+        base = self.motor
+        motors = [base] if motors is None else list(motors)
+        for mp in motors:
+            mp.validate()
+            for name in ("rotor_inertia", "viscous_friction", "v_max", "speed_max"):
+                if getattr(mp, name) != getattr(base, name):
+                    raise ScenarioError(f"per-episode motors may not change motor {name}")
+        n = len(motors)
+        self.phi_e = np.empty((n, 3, 3))
+        self.gamma_e = np.empty((n, 3))
+        self.k_b_e = np.array([mp.back_emf_constant for mp in motors], dtype=float)
+        self.k_i_e = np.array([mp.torque_constant for mp in motors], dtype=float)
+        self.r_a_e = np.array([mp.resistance for mp in motors], dtype=float)
+        self.headroom_e = np.array([mp.resistance * mp.current_max for mp in motors], dtype=float)
+        for i, mp in enumerate(motors):
+            self.phi_e[i], self.gamma_e[i] = _motor_transition(mp.resistance, mp.inductance, mp.torque_constant,
+                                                               mp.back_emf_constant, mp.rotor_inertia,
+                                                               mp.viscous_friction, self.dt)
 
     # -- helpers -------------------------------------------------------------
     def initial_state(self, n_episodes: int, speed0: np.ndarray | None = None) -> np.ndarray:
@@ -176,8 +209,8 @@ class WheelAssembly:
         return (x[:, :, 2] * self.motor.rotor_inertia) @ self.axes_B.T
 
     def motor_torque(self, x: np.ndarray) -> np.ndarray:
-        """Electromagnetic torque K_i i_a on each wheel, (P, n) N m."""
-        return self.motor.torque_constant * x[:, :, 1]
+        """Electromagnetic torque K_i i_a on each wheel (each episode's K_i), (P, n) N m."""
+        return self.k_i_e[:, None] * x[:, :, 1]
 
     def wheel_voltages(self, v_cmd_B: np.ndarray, x: np.ndarray) -> np.ndarray:
         """Body-axis voltage command to limited per-wheel voltages, (P, n) V.
@@ -220,14 +253,17 @@ class WheelAssembly:
         tau_c_B = -(self.momentum_B(x_next) - h_start) / self.dt
         return x_next, tau_c_B
 
-    def advance(self, x: np.ndarray, v_cmd_B: np.ndarray,
-                torque_mode: bool = False) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """:meth:`wheel_voltages` then :meth:`step`, compiled in one loop.
+    def advance(self, x: np.ndarray, v_cmd_B: np.ndarray, torque_mode: bool = False, k: int = 0,
+                failure: tuple | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """:meth:`wheel_voltages` then :meth:`step`, compiled in one loop, with each episode's motor.
 
         With ``torque_mode`` the command is a body torque (N m): each wheel's
         share ``-A_dagger tau`` becomes a voltage through the inverse motor
         model ``e = R_a (T + B_m omega) / K_i + K_b omega`` (steady state, the
         1 ms electrical lag neglected), then the same drive limits apply.
+        ``failure`` is ``(wheel (F,) int, -1 none; step (F,) int; stuck (F,) bool;
+        held voltage (F,) V, updated in place)`` for step ``k`` (see
+        :func:`attitude_sil.core.kernels.wheel_step`); None: no failure.
 
         Returns
         -------
@@ -236,6 +272,15 @@ class WheelAssembly:
         h_start : (P, 3) N m s, wheel momentum at t_k
         """
         m = self.motor
-        return wheel_step(x, v_cmd_B, self.allocation, self.axes_B, self.phi_T, self.gamma, m.rotor_inertia,
-                          m.back_emf_constant, m.resistance * m.current_max, m.speed_max, m.v_max, self.dt,
-                          torque_mode, m.torque_constant, m.resistance, m.viscous_friction)
+        f = NO_FAILURE if failure is None else failure
+        return wheel_step(x, v_cmd_B, int(k), self.allocation, self.axes_B, self.phi_e, self.gamma_e,
+                          m.rotor_inertia, self.k_b_e, self.headroom_e, m.speed_max, m.v_max, self.dt,
+                          torque_mode, self.k_i_e, self.r_a_e, m.viscous_friction, *f, self.coast)
+
+
+def no_failure() -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The failure arrays of :meth:`WheelAssembly.advance` for "no wheel fails" (F = 1)."""
+    return (np.full(1, -1, dtype=np.int64), np.zeros(1, dtype=np.int64), np.zeros(1, dtype=np.bool_), np.zeros(1))
+
+
+NO_FAILURE = no_failure()  # read-only in use: e_hold is written only for the failed wheel, and there is none

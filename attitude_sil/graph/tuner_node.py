@@ -38,7 +38,8 @@ from attitude_sil.errors import AttitudeSilError, SpecError
 from attitude_sil.graph.engine_bag import record_episode
 from attitude_sil.graph.evaluator import GraphEpisodes, GraphEvaluator, best_parameters
 from attitude_sil.ros.environment import localhost_environment
-from attitude_sil.tuning.evaluate import scenario_for
+from attitude_sil.tuning.evaluate import Evaluator, scenario_for
+from attitude_sil.tuning.executor import DaskCluster
 from attitude_sil.tuning.optimize import check_output, run_tuning
 from attitude_sil.tuning.results import TuningResult
 from attitude_sil.tuning.spec import TuningSpec, apply_overrides, decode, load_spec
@@ -92,11 +93,12 @@ def _record_from_engine(spec: TuningSpec, x: np.ndarray, path: Path) -> bool:
 
 def tune(spec_path: str | Path | TuningSpec, *, resume: bool = False, overrides: dict | None = None,
          record: bool = True, on_progress: Callable[[dict], None] | None = None,
-         should_stop: Callable[[], bool] | None = None) -> TuneOutcome:
+         should_stop: Callable[[], bool] | None = None, scheduler: str | None = None) -> TuneOutcome:
     """Run a tuning spec to its end (or until ``should_stop``), recording bests through the graph.
 
     ``spec_path`` is a spec file, or a spec already loaded (``overrides`` are then applied again, which
-    is harmless, and handed to graph evaluation).
+    is harmless, and handed to graph evaluation). ``scheduler`` (a Dask scheduler address) evaluates
+    the populations of a batch-mode spec on that cluster: the same result as a local run.
 
     Raises
     ------
@@ -126,12 +128,18 @@ def tune(spec_path: str | Path | TuningSpec, *, resume: bool = False, overrides:
         last_recorded[0] = x.copy()
 
     evaluator = None
+    cluster = None
     t0 = time.monotonic()
     try:
         check_output(spec, resume)
         if mode == "graph":
+            if scheduler:
+                raise SpecError(f"{spec.path}: a Dask scheduler evaluates batch mode only (evaluation.mode is graph)")
             evaluator = GraphEvaluator(spec, int(spec.evaluation.get("replicas", 1)), bags if record else None,
                                        overrides).__enter__()
+        elif scheduler:
+            evaluator = Evaluator(spec, executor=DaskCluster(scheduler)).__enter__()
+            cluster = evaluator.executor
         result = run_tuning(spec, resume=resume, evaluator=evaluator, progress=on_progress,
                             should_stop=should_stop, on_generation=record_best)
         if record and mode == "batch" and not result.interrupted and spec.algorithm["name"] != "root_locus":
@@ -143,6 +151,8 @@ def tune(spec_path: str | Path | TuningSpec, *, resume: bool = False, overrides:
     finally:
         if evaluator is not None:
             evaluator.__exit__(None, None, None)
+        if cluster is not None:
+            cluster.close()
         if recorder is not None:
             recorder.close()
     return TuneOutcome(result=result, spec=spec, wall_time_s=time.monotonic() - t0)

@@ -83,7 +83,7 @@ class ControllerNode(SchemaNode):
         # a step went through: anything older can never complete (a stray stamp completes nothing here)
         for stale in [s for s in self._pending if s < t]:
             del self._pending[stale]
-        u = self.core.compute(*(slot[name] for name in INPUTS))
+        u = self.core.compute(*(slot[name] for name in INPUTS), t // self.dt_ns)
         err = euler_from_quat(quat_conjugate(quat_error(slot[ATTITUDE], slot[ATTITUDE_SETPOINT])))
         self.pub_cmd[self.core.kind].publish(vector_msg(u[0], t, "body"))
         self.pub_err.publish(vector_msg(err[0], t, "body"))

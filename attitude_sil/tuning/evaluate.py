@@ -19,12 +19,15 @@ Costs (``cost.name``):
   plus the two-level penalty of eq. 8 on theta(tf), q(tf); tf is the gene
   ``final_time``.
 * ``ts_ce`` — the two objectives (Ts, Ce) for NSGA-II, with the death penalty.
+
+A robust-design cost (the spec's ``robust`` section: ``runs``, ``statistic``
+``mean`` or ``max``, ``seed``, ``dispersions`` as a Monte Carlo spec's) runs
+every candidate on the same ``runs`` dispersed plants and takes the mean or the
+worst of its costs.
 """
 
 from __future__ import annotations
 
-import multiprocessing as mp
-from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass
 
 import numpy as np
@@ -34,6 +37,8 @@ from attitude_sil.core.metrics import summarize
 from attitude_sil.core.quaternion import euler_from_quat
 from attitude_sil.core.trajectory import EpisodeSummary, Trajectory
 
+from .dispersions import episode_values
+from .executor import Executor, InProcess, LocalProcesses
 from .spec import TuningSpec, decode
 
 __all__ = ["PENALTY", "Evaluation", "evaluate", "Evaluator"]
@@ -100,12 +105,19 @@ def evaluate(spec: TuningSpec, x: np.ndarray, first: int = 0, threads: int | Non
         Threads of the compiled engine (1 inside worker processes).
     """
     x = np.atleast_2d(x)
-    if x.shape[0] > EPISODES_PER_SLICE:
-        return Evaluation.concat([evaluate(spec, x[i:i + EPISODES_PER_SLICE], first + i, threads)
-                                  for i in range(0, x.shape[0], EPISODES_PER_SLICE)])
+    per = _slice_size(spec)
+    if x.shape[0] > per:
+        return Evaluation.concat([evaluate(spec, x[i:i + per], first + i, threads)
+                                  for i in range(0, x.shape[0], per)])
     params, values = decode(spec, x)
     final_time = params.pop("final_time", None)
-    n = values.shape[0]
+    n_cand = values.shape[0]
+    robust = spec.robust
+    reps = robust.get("runs", 1) if robust else 1
+    if reps > 1 or robust:  # candidate i's runs are episodes i * reps .. i * reps + reps - 1
+        params = {k: np.repeat(v, reps, axis=0) for k, v in params.items()}
+        final_time = None if final_time is None else np.repeat(final_time, reps, axis=0)
+    n = n_cand * reps
     cost = spec.cost
     name = cost["name"]
     n_obj = 2 if name == "ts_ce" else 1
@@ -125,16 +137,34 @@ def evaluate(spec: TuningSpec, x: np.ndarray, first: int = 0, threads: int | Non
     for base in spec.scenarios:
         for cond in spec.conditions:
             scn = scenario_for(spec, base, cond)
-            seeds = scn.param("disturbance", "noise.seed") + first + np.arange(n)
+            # candidate (first + i)'s noise seed, the same in each of its robust runs unless they disperse it
+            seeds = scn.param("disturbance", "noise.seed") + np.repeat(first + np.arange(n_cand), reps)
+            dispersed = None
+            if robust:  # the same dispersed runs for every candidate (common random numbers)
+                dispersed = {k: np.tile(v, (n_cand,) + (1,) * (np.ndim(v) - 1))
+                             for k, v in episode_values(scn, robust["dispersions"], robust["seed"],
+                                                        np.arange(reps)).items()}
             run = simulate if name == "paper004_objective" else simulate_summary  # eq. 7 needs the series
             result = run(scn, n, controller_params=params, controller=spec.controller, schedule=[], seeds=seeds,
-                         threads=threads)
+                         threads=threads, episode_values=dispersed)
             score(spec, scn, result, final_time, F, terms, fail)
     for p, why in enumerate(reasons):
         if why:
             F[p] = PENALTY
     F = np.nan_to_num(F, nan=PENALTY, posinf=PENALTY)
-    return Evaluation(F=F, terms={k: np.asarray(v) for k, v in terms.items()}, reasons=reasons, values=values)
+    terms = {k: np.asarray(v) for k, v in terms.items()}
+    if robust:  # a candidate's cost: the mean or the worst of its runs
+        reduce = np.max if robust["statistic"] == "max" else np.mean
+        F = reduce(F.reshape(n_cand, reps, -1), axis=1)
+        terms = {k: reduce(np.broadcast_to(v, (n,)).reshape(n_cand, reps), axis=1) for k, v in terms.items()}
+        reasons = [next((f"robust run {j}: {reasons[i * reps + j]}" for j in range(reps) if reasons[i * reps + j]),
+                        "") for i in range(n_cand)]
+    return Evaluation(F=F, terms=terms, reasons=reasons, values=values)
+
+
+def _slice_size(spec: TuningSpec) -> int:
+    """Candidates per slice: :data:`EPISODES_PER_SLICE` episodes, a robust cost's runs counted."""
+    return max(1, EPISODES_PER_SLICE // (spec.robust.get("runs", 1) if spec.robust else 1))
 
 
 def scenario_for(spec: TuningSpec, base, cond: dict):
@@ -221,32 +251,42 @@ def _paper004(tr, scn, cost, final_time, terms) -> np.ndarray:
 
 
 class Evaluator:
-    """Scores populations, splitting them over ``workers`` processes.
+    """Scores populations on an :class:`~attitude_sil.tuning.executor.Executor`.
 
-    Use as a context manager; the pool lives as long as the tuning run.
+    Without one, ``workers`` > 1 forks a pool of local processes (the
+    default of batch mode), else everything runs in this process. A
+    population is cut into consecutive slices that carry their index in the
+    population (:func:`evaluate`'s ``first``), so every back-end gives the
+    same costs bit for bit. Use as a context manager; the pool lives as long
+    as the tuning run.
     """
 
-    def __init__(self, spec: TuningSpec, workers: int = 1) -> None:
+    def __init__(self, spec: TuningSpec, workers: int = 1, executor: Executor | None = None) -> None:
         self.spec = spec
         self.workers = max(1, int(workers))
-        self.pool = None
+        self.executor = executor
+        self.own = executor is None
 
     def __enter__(self) -> Evaluator:
-        if self.workers > 1:
-            self.pool = ProcessPoolExecutor(self.workers, mp_context=mp.get_context("fork"))
+        if self.executor is None:
+            self.executor = LocalProcesses(self.workers) if self.workers > 1 else InProcess()
         return self
 
     def __exit__(self, *exc) -> None:
-        if self.pool is not None:
-            self.pool.shutdown(cancel_futures=True)
+        if self.own and self.executor is not None:
+            self.executor.close()
+            self.executor = None
 
     def __call__(self, x: np.ndarray) -> Evaluation:
         x = np.atleast_2d(x)
-        if self.pool is None or x.shape[0] < 2 * self.workers:
+        ex = self.executor or InProcess()
+        if ex.name == "in-process" or (ex.name == "processes" and x.shape[0] < 2 * ex.workers):
             return evaluate(self.spec, x)
-        chunks = np.array_split(x, self.workers)
+        per = _slice_size(self.spec)
+        n_chunks = min(x.shape[0], max(ex.workers, -(-x.shape[0] // per)))
+        chunks = np.array_split(x, n_chunks)
         firsts = np.cumsum([0] + [len(c) for c in chunks[:-1]]).tolist()
-        # one thread per worker process: the processes are the parallelism (and a forked
+        # one engine thread per task: the workers are the parallelism (and a forked
         # child must not start the parent's OpenMP runtime)
-        return Evaluation.concat(list(self.pool.map(evaluate, [self.spec] * len(chunks), chunks, firsts,
-                                                    [1] * len(chunks))))
+        return Evaluation.concat(ex.map(evaluate, [(self.spec, c, f, ex.threads) for c, f in zip(chunks, firsts,
+                                                                                                  strict=True)]))

@@ -38,13 +38,15 @@ from attitude_sil.core.params import NODE_PARAMS
 from attitude_sil.core.scenario import Scenario, load_scenario
 from attitude_sil.errors import ScenarioError, SpecError
 
+from .dispersions import check_dispersions
+
 __all__ = ["SpecError", "SECTIONS", "Gene", "TuningSpec", "load_spec", "apply_overrides", "decode", "ALGORITHMS",
            "COSTS"]
 
 ALGORITHMS = ("ga", "binary_ga", "pso", "mixed_ga", "nsga2", "root_locus")
 COSTS = ("paper000_j", "paper001_fitness", "mse", "paper004_objective", "ts_ce")
 _TOP = {"name", "description", "scenarios", "conditions", "controller", "genome", "cost", "algorithm", "seed",
-        "evaluation", "output", "record"}
+        "evaluation", "output", "record", "robust"}
 
 
 def _real(low: float | None = None, high: float | None = None, low_open: bool = False):
@@ -170,6 +172,8 @@ class TuningSpec:
     output: Path
     record: dict[str, Any] = field(default_factory=dict)
     description: str = ""
+    #: robust-design cost: {runs, statistic, seed, dispersions}, or empty
+    robust: dict[str, Any] = field(default_factory=dict)
 
     @property
     def n_var(self) -> int:
@@ -313,9 +317,33 @@ def load_spec(path: str | Path) -> TuningSpec:
     if not isinstance(name, str) or not isinstance(description, str):
         raise _fail(p, f"name and description must be strings, got {name!r} and {description!r}")
     out = _output(str(p), data.get("output") or f"results/{name}")
+    robust = _robust(p, data.get("robust"), scenarios)
+    if robust and evaluation["mode"] != "batch":
+        raise _fail(p, "robust needs evaluation.mode batch")
     return TuningSpec(path=p, name=name, scenarios=scenarios, conditions=conditions, controller=controller,
                       genome=genome, cost=cost, algorithm=algorithm, seed=seed, evaluation=evaluation, output=out,
-                      record=record, description=description)
+                      record=record, description=description, robust=robust)
+
+
+def _robust(p: Path, raw: Any, scenarios: list[Scenario]) -> dict[str, Any]:
+    """The ``robust`` section: ``{runs: 8, statistic: mean|max, seed: 1, dispersions: {...}}``."""
+    if raw is None:
+        return {}
+    if not isinstance(raw, dict) or set(raw) - {"runs", "statistic", "seed", "dispersions"}:
+        raise _fail(p, f"robust must be a mapping of runs, statistic, seed, dispersions, got {raw!r}")
+    runs = raw.get("runs", 8)
+    if isinstance(runs, bool) or not isinstance(runs, int) or not 1 <= runs <= 1000:
+        raise _fail(p, f"robust.runs must be an integer in 1..1000, got {runs!r}")
+    statistic = raw.get("statistic", "mean")
+    if statistic not in ("mean", "max"):
+        raise _fail(p, f"robust.statistic must be mean or max, got {statistic!r}")
+    seed = raw.get("seed", 1)
+    if _SEED(seed):
+        raise _fail(p, f"robust.seed {_SEED(seed)}")
+    dispersions = {}
+    for scn in scenarios:
+        dispersions = check_dispersions(f"{p}: robust", raw.get("dispersions"), scn)
+    return {"runs": runs, "statistic": statistic, "seed": seed, "dispersions": dispersions}
 
 
 def decode(spec: TuningSpec, x: np.ndarray) -> tuple[dict[str, np.ndarray], np.ndarray]:

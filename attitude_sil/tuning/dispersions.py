@@ -1,0 +1,236 @@
+"""Dispersions of one scenario: what a Monte Carlo campaign (and a robust-design cost) varies per run.
+
+A ``dispersions`` mapping (in a Monte Carlo spec, or a tuning spec's
+``robust`` section)::
+
+    inertia_pct:          {dist: normal, scale: [5, 5, 5]}     # per principal axis, % (1 sigma)
+    initial_attitude_deg: {dist: uniform, scale: 0.5}          # added to plant.initial_attitude_rpy_deg
+    initial_rate_deg_s:   {dist: normal, scale: 0.01}          # added to plant.initial_body_rate
+    setpoint_deg:         {dist: normal, scale: [0.1, 0, 0]}   # added to guidance.setpoint_rpy_deg
+    motor_constant_pct:   {dist: normal, scale: 3}             # K_i = K_b (and the torque at the current limit)
+    noise_level_pct:      {dist: uniform, scale: 50}           # disturbance noise.power x (1 + d / 100)
+    noise_seeds: true                                          # noise.seed + run (default when noise is on)
+    wheel_failure: {probability: 0.1, modes: [lost, stuck], time: [0, 20]}
+    sensor_noise: {attitude_std_deg: 0.001, rate_std_deg_s: 0.0005}   # seed: sensor_noise.seed + run
+
+``dist: normal`` draws ``scale`` x N(0, 1), ``dist: uniform`` ``scale`` x U(-1, 1);
+``scale`` is one number or one per axis. Run i draws from its own stream,
+``numpy.random.default_rng([seed, i])``, always the same slots in the same
+order, so a run's values depend only on the seed and its index: not on the
+chunk, the worker or which other dispersions are on.
+
+Every dispersed value is a scenario value (:func:`episode_values` gives them
+per run for :func:`attitude_sil.core.engine.simulate`, :func:`run_scenario`
+one run's as a :class:`~attitude_sil.core.scenario.Scenario`), so a run
+re-runs through the node graph exactly.
+"""
+
+from __future__ import annotations
+
+import difflib
+from typing import Any
+
+import numpy as np
+from scipy.special import ndtri
+
+from attitude_sil.core.scenario import Scenario
+from attitude_sil.core.wheels import GEOMETRIES
+from attitude_sil.errors import ScenarioError, SpecError
+
+__all__ = ["DISPERSION_KEYS", "check_dispersions", "draw", "episode_values", "run_scenario", "value_columns"]
+
+#: numeric dispersions: key -> (width, unit)
+_NUMERIC = {"inertia_pct": 3, "initial_attitude_deg": 3, "initial_rate_deg_s": 3, "setpoint_deg": 3,
+            "motor_constant_pct": 1, "noise_level_pct": 1}
+DISPERSION_KEYS = (*_NUMERIC, "noise_seeds", "wheel_failure", "sensor_noise")
+#: the per-run uniform slots, in draw order
+_SLOTS = {"inertia_pct": slice(0, 3), "initial_attitude_deg": slice(3, 6), "initial_rate_deg_s": slice(6, 9),
+          "setpoint_deg": slice(9, 12), "motor_constant_pct": slice(12, 13), "noise_level_pct": slice(13, 14),
+          "failure_happens": 14, "failure_wheel": 15, "failure_time": 16, "failure_mode": 17}
+_N_SLOTS = 18
+
+
+def _number(v: Any) -> bool:
+    return not isinstance(v, bool) and isinstance(v, (int, float)) and bool(np.isfinite(v))
+
+
+def check_dispersions(where: str, raw: Any, scn: Scenario) -> dict:
+    """A ``dispersions`` mapping, validated against the scenario it disperses.
+
+    Raises
+    ------
+    SpecError
+        One line naming ``where``, the key and the rule.
+    """
+    if raw is None:
+        return {}
+    if not isinstance(raw, dict):
+        raise SpecError(f"{where}: dispersions must be a mapping, got {type(raw).__name__}")
+    out: dict = {}
+    for key, value in raw.items():
+        if key not in DISPERSION_KEYS:
+            close = difflib.get_close_matches(str(key), DISPERSION_KEYS, n=1)
+            raise SpecError(f"{where}: unknown dispersion {key!r}" + (f" (did you mean {close[0]!r}?)" if close else "")
+                            + f"; known: {', '.join(DISPERSION_KEYS)}")
+        at = f"{where}: dispersions.{key}"
+        if key in _NUMERIC:
+            if not isinstance(value, dict) or set(value) - {"dist", "scale"} or "scale" not in value:
+                raise SpecError(f"{at} must be a mapping {{dist: normal|uniform, scale: ...}}, got {value!r}")
+            dist = value.get("dist", "normal")
+            if dist not in ("normal", "uniform"):
+                raise SpecError(f"{at}.dist must be normal or uniform, got {dist!r}")
+            scale = value["scale"]
+            width = _NUMERIC[key]
+            vals = scale if isinstance(scale, list) else [scale]
+            if len(vals) not in (1, width) or not all(_number(v) and v >= 0 for v in vals):
+                raise SpecError(f"{at}.scale must be a number >= 0" + (f" or {width} of them" if width > 1 else "")
+                                + f", got {scale!r}")
+            out[key] = {"dist": dist, "scale": np.broadcast_to(np.asarray(vals, dtype=float), (width,)).copy()}
+        elif key == "noise_seeds":
+            if not isinstance(value, bool):
+                raise SpecError(f"{at} must be true or false, got {value!r}")
+            out[key] = value
+        elif key == "wheel_failure":
+            if not isinstance(value, dict) or set(value) - {"probability", "modes", "time"}:
+                raise SpecError(f"{at} must be a mapping of probability, modes, time, got {value!r}")
+            p = value.get("probability", 1.0)
+            if not (_number(p) and 0.0 <= p <= 1.0):
+                raise SpecError(f"{at}.probability must be a number in 0..1, got {p!r}")
+            modes = value.get("modes", ["lost", "stuck"])
+            if not isinstance(modes, list) or not modes or not all(m in ("lost", "stuck") for m in modes):
+                raise SpecError(f"{at}.modes must be a non-empty list of lost, stuck, got {modes!r}")
+            t = value.get("time", [0.0, scn.duration])
+            if not (isinstance(t, list) and len(t) == 2 and all(_number(v) and v >= 0 for v in t) and t[0] <= t[1]):
+                raise SpecError(f"{at}.time must be [earliest, latest] s, 0 <= earliest <= latest, got {t!r}")
+            if scn.param("wheels", "actuator") != "reaction_wheels":
+                raise SpecError(f"{at}: the scenario's actuator is {scn.param('wheels', 'actuator')}; wheel failures "
+                                "need reaction_wheels")
+            out[key] = {"probability": float(p), "modes": list(modes), "time": [float(v) for v in t]}
+        elif key == "sensor_noise":
+            if not isinstance(value, dict) or set(value) - {"attitude_std_deg", "rate_std_deg_s"}:
+                raise SpecError(f"{at} must be a mapping of attitude_std_deg, rate_std_deg_s, got {value!r}")
+            for k, v in value.items():
+                if not (_number(v) and v >= 0):
+                    raise SpecError(f"{at}.{k} must be a number >= 0, got {v!r}")
+            out[key] = {"attitude_std_deg": float(value.get("attitude_std_deg", 0.0)),
+                        "rate_std_deg_s": float(value.get("rate_std_deg_s", 0.0))}
+    if "motor_constant_pct" in out and scn.param("wheels", "actuator") != "reaction_wheels":
+        raise SpecError(f"{where}: dispersions.motor_constant_pct: the scenario's actuator is "
+                        f"{scn.param('wheels', 'actuator')}; motor constants need reaction_wheels")
+    noise_on = "noise" in scn.param("disturbance", "models")
+    if "noise_level_pct" in out and not noise_on:
+        raise SpecError(f"{where}: dispersions.noise_level_pct: the scenario has no noise disturbance "
+                        "(set disturbance.models: [noise])")
+    out.setdefault("noise_seeds", noise_on)
+    return out
+
+
+def draw(seed: int, runs) -> np.ndarray:
+    """The uniform slots of runs ``runs``: (n, 18) in (0, 1), run i from ``default_rng([seed, i])``."""
+    out = np.empty((len(runs), _N_SLOTS))
+    for r, i in enumerate(np.asarray(runs, dtype=np.int64).tolist()):
+        bits = np.random.default_rng([int(seed), i]).integers(0, 2**53, _N_SLOTS)
+        out[r] = (bits + 0.5) / 2.0**53
+    return out
+
+
+def _offsets(d: dict, u: np.ndarray) -> np.ndarray:
+    z = ndtri(u) if d["dist"] == "normal" else 2.0 * u - 1.0
+    return d["scale"] * z
+
+
+def episode_values(scn: Scenario, dispersions: dict, seed: int, runs) -> dict[str, np.ndarray]:
+    """The dispersed scenario values of runs ``runs`` (n,): ``{"node.param": (n, ...)}`` for ``simulate``.
+
+    Only what a dispersion changes is returned (nothing for an empty mapping).
+    """
+    runs = np.asarray(runs, dtype=np.int64)
+    n = len(runs)
+    u = draw(seed, runs)
+    v = scn.values
+    out: dict[str, np.ndarray] = {}
+    if "inertia_pct" in dispersions:
+        f = 1.0 + _offsets(dispersions["inertia_pct"], u[:, _SLOTS["inertia_pct"]]) / 100.0
+        for node in ("plant", "disturbance"):
+            base = np.asarray(v[node]["inertia"], dtype=float)
+            if base.size == 3:
+                out[f"{node}.inertia"] = base * f
+            else:  # J_ij sqrt(f_i f_j): symmetric, principal moments scale by f_i for a diagonal J
+                s = np.sqrt(f)
+                out[f"{node}.inertia"] = (base.reshape(3, 3) * s[:, :, None] * s[:, None, :]).reshape(n, 9)
+    if "initial_attitude_deg" in dispersions:
+        out["plant.initial_attitude_rpy_deg"] = (np.asarray(v["plant"]["initial_attitude_rpy_deg"])
+                                                 + _offsets(dispersions["initial_attitude_deg"], u[:, 3:6]))
+    if "initial_rate_deg_s" in dispersions:
+        out["plant.initial_body_rate"] = (np.asarray(v["plant"]["initial_body_rate"])
+                                          + np.radians(_offsets(dispersions["initial_rate_deg_s"], u[:, 6:9])))
+    if "setpoint_deg" in dispersions:
+        out["guidance.setpoint_rpy_deg"] = (np.asarray(v["guidance"]["setpoint_rpy_deg"])
+                                            + _offsets(dispersions["setpoint_deg"], u[:, 9:12]))
+    if "motor_constant_pct" in dispersions:
+        f = 1.0 + _offsets(dispersions["motor_constant_pct"], u[:, 12]) / 100.0
+        f = np.maximum(f, 1e-3)
+        for name in ("motor.torque_constant", "motor.back_emf_constant", "motor.torque_max"):  # current limit kept
+            out[f"wheels.{name}"] = v["wheels"][name] * f
+    if "noise_level_pct" in dispersions:
+        f = np.maximum(1.0 + _offsets(dispersions["noise_level_pct"], u[:, 13]) / 100.0, 0.0)
+        out["disturbance.noise.power"] = np.asarray(v["disturbance"]["noise.power"], dtype=float) * f[:, None]
+    if dispersions.get("noise_seeds"):
+        out["disturbance.noise.seed"] = v["disturbance"]["noise.seed"] + runs
+    if "wheel_failure" in dispersions:
+        wf = dispersions["wheel_failure"]
+        n_wheels = GEOMETRIES[v["wheels"]["geometry"]]().shape[1]
+        happens = u[:, 14] < wf["probability"]
+        out["wheels.failure.wheel"] = np.where(happens, 1 + np.minimum((u[:, 15] * n_wheels).astype(np.int64),
+                                                                       n_wheels - 1), 0)
+        t0, t1 = wf["time"]
+        # whole milliseconds: a time a scenario file states exactly
+        out["wheels.failure.time"] = np.where(happens, np.round(t0 + (t1 - t0) * u[:, 16], 3), 0.0)
+        modes = np.asarray(wf["modes"])
+        out["wheels.failure.mode"] = np.where(happens, modes[np.minimum((u[:, 17] * len(modes)).astype(np.int64),
+                                                                         len(modes) - 1)], "lost")
+    if "sensor_noise" in dispersions:
+        sn = dispersions["sensor_noise"]
+        out["controller.sensor_noise.attitude_std_deg"] = np.full(n, sn["attitude_std_deg"])
+        out["controller.sensor_noise.rate_std_deg_s"] = np.full(n, sn["rate_std_deg_s"])
+        out["controller.sensor_noise.seed"] = v["controller"]["sensor_noise.seed"] + runs
+    return out
+
+
+def _plain(value) -> Any:
+    a = np.asarray(value)
+    if a.dtype.kind in "US":
+        return str(a)
+    if a.ndim == 0:
+        return int(a) if a.dtype.kind in "iu" else float(a)
+    return [int(x) if a.dtype.kind in "iu" else float(x) for x in a.tolist()]
+
+
+def run_scenario(scn: Scenario, values: dict[str, np.ndarray], row: int) -> Scenario:
+    """Row ``row`` of :func:`episode_values` as a scenario: the run's values set, validated.
+
+    Raises
+    ------
+    ScenarioError
+        A dispersed value the schema refuses (e.g. a negative inertia).
+    """
+    for key, col in values.items():
+        node, _, name = key.partition(".")
+        try:
+            scn = scn.with_values(node, **{name: _plain(col[row])})
+        except ScenarioError as exc:
+            raise ScenarioError(f"run {row}: {exc}") from None
+    return scn
+
+
+def value_columns(values: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+    """Flat table columns of :func:`episode_values`: ``plant.inertia[0]``, ..., one (n,) array each."""
+    cols: dict[str, np.ndarray] = {}
+    for key, col in values.items():
+        a = np.asarray(col)
+        if a.ndim == 1:
+            cols[key] = a
+        else:
+            for j in range(a.shape[1]):
+                cols[f"{key}[{j}]"] = a[:, j]
+    return cols

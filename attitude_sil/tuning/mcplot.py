@@ -1,0 +1,82 @@
+"""Figures of a Monte Carlo campaign: the dispersed responses and histograms of the metrics."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+from matplotlib.figure import Figure
+
+from attitude_sil.core.engine import simulate
+from attitude_sil.core.metrics import principal_angle
+from attitude_sil.core.quaternion import euler_from_quat
+
+from .dispersions import episode_values
+from .montecarlo import METRIC_KEYS, MonteCarloSpec
+
+__all__ = ["plot_campaign"]
+
+_AXES = ("roll", "pitch", "yaw")
+
+
+def plot_campaign(spec: MonteCarloSpec, table: dict[str, np.ndarray], out: Path) -> list[Path]:
+    """Write ``responses.png`` (the first ``plot.runs`` runs, every ``plot.stride``-th step) and
+    ``histograms.png`` (each metric over every completed run, requirement limits dashed) into ``out``.
+
+    The responses are re-simulated here from the runs' dispersions (bit for bit the campaign's runs);
+    only that sample's trajectories are ever held. Returns the files written.
+    """
+    written = []
+    runs = np.asarray(table.get("run", []), dtype=np.int64)
+    sample = np.sort(runs)[:spec.plot["runs"]]
+    scn = spec.scenario
+    if sample.size:
+        values = episode_values(scn, spec.dispersions, spec.seed, sample)
+        seeds = scn.param("disturbance", "noise.seed") + sample
+        tr = simulate(scn, sample.size, controller=spec.controller, seeds=seeds, episode_values=values,
+                      stride=spec.plot["stride"], keep=("q_BN", "q_RN"))
+        fig = Figure(figsize=(9, 5), layout="constrained")
+        ax = fig.add_subplot()
+        if scn.param("scenario", "metrics.mode") == "tracking":
+            err = np.degrees(principal_angle(tr.q_BN, tr.q_RN))
+            for p in range(sample.size):
+                ax.semilogy(tr.t, np.maximum(err[p], 1e-6), lw=0.6, alpha=0.5, color="C0")
+            limit = scn.param("scenario", "metrics.settling_angle_deg")
+            ax.axhline(limit, ls="--", color="k", lw=0.8, label=f"settling {limit:g} deg")
+            ax.set_ylabel("principal error angle, deg")
+        else:
+            axis = scn.param("scenario", "metrics.axis")
+            y = np.degrees(euler_from_quat(tr.q_BN)[..., axis])
+            r = np.degrees(euler_from_quat(tr.q_RN)[..., axis])
+            for p in range(sample.size):
+                ax.plot(tr.t, y[p], lw=0.6, alpha=0.5, color="C0")
+                ax.plot(tr.t, r[p], lw=0.5, alpha=0.4, color="C1", ls="--")
+            ax.set_ylabel(f"{_AXES[axis]}, deg (setpoints dashed)")
+        ax.set_xlabel("t, s")
+        ax.set_title(f"{spec.name}: {sample.size} of {runs.size} dispersed runs")
+        ax.grid(alpha=0.3)
+        path = out / "responses.png"
+        fig.savefig(path, dpi=110)
+        written.append(path)
+    keys = [k for k in spec.requirements if k in table] + [k for k in METRIC_KEYS if k in table and k not in
+                                                            spec.requirements]
+    keys = [k for k in keys if np.isfinite(table[k].astype(float)).any()][:9]
+    if keys:
+        cols = 3
+        rows = -(-len(keys) // cols)
+        fig = Figure(figsize=(11, 3.0 * rows), layout="constrained")
+        for i, key in enumerate(keys):
+            ax = fig.add_subplot(rows, cols, i + 1)
+            v = table[key].astype(float)
+            fin = v[np.isfinite(v)]
+            ax.hist(fin, bins=40, color="C0", alpha=0.8)
+            for bound, value in spec.requirements.get(key, {}).items():
+                ax.axvline(value, color="C3", ls="--", lw=1.0, label=f"{bound} {value:g}")
+            never = v.size - fin.size
+            ax.set_title(key + (f" ({never} never)" if never else ""), fontsize=9)
+            if spec.requirements.get(key):
+                ax.legend(fontsize=7)
+        path = out / "histograms.png"
+        fig.savefig(path, dpi=110)
+        written.append(path)
+    return written
