@@ -376,9 +376,10 @@ class ForeignPublishers:
     The lockstep's nodes refuse what is not finite, not stamped for the step
     they wait for, or a second message for it; a plausible message from a
     foreign node stamped for the current step is told apart only by who sent
-    it, which needs the message info that rclpy's EventsExecutor does not
-    hand to callbacks. So the run names every foreign publisher it sees on the
-    ROS graph (node and topic), once, as soon as it appears.
+    it, and rclpy's message info carries no publisher GID (and the
+    EventsExecutor hands callbacks no message info at all). So the run names
+    every foreign publisher it sees on the ROS graph (node and topic), once,
+    as soon as it appears.
     """
 
     def __init__(self, node, namespace: str | None, period_s: float = 1.0) -> None:
