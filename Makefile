@@ -27,6 +27,7 @@ test: $(STAMP) lint
 bench: $(STAMP)
 	$(BIN)/python bench/bench_engine.py
 	$(BIN)/python bench/bench_tuner.py
+	$(BIN)/python bench/bench_cluster.py
 
 soak: $(STAMP)
 	$(BIN)/python bench/bench_soak.py
