@@ -1,8 +1,8 @@
 """The ``attitude-sil`` command: subcommands, their arguments, and one-line errors.
 
 Subcommands (docs/architecture.md, "Command line"): ``run``, ``tune``,
-``replay``, ``bag info``, ``plot``, ``param``, ``linearize`` and
-``robustness``. Any :class:`~attitude_sil.errors.AttitudeSilError` (every user
+``replay``, ``bag info``, ``plot``, ``param``, ``linearize``,
+``robustness`` and ``fidelity``. Any :class:`~attitude_sil.errors.AttitudeSilError` (every user
 error) prints one line on stderr and exits 2; Ctrl-C exits 130 after the bag is
 closed. A traceback means a bug.
 """
@@ -37,6 +37,7 @@ from attitude_sil.tools.paramclient import param_command, param_dump, param_load
 from attitude_sil.tools.plot import plot_bag
 from attitude_sil.tools.replay import ReplayOptions, replay_bag
 from attitude_sil.tools.verify import verify_controller
+from attitude_sil.tuning.fidelity import PAPERS, check, format_report
 from attitude_sil.tuning.optimize import check_output
 from attitude_sil.tuning.plot import plot_results
 from attitude_sil.tuning.robustness import format_robustness, robustness
@@ -116,6 +117,14 @@ def _cmd_robustness(args: argparse.Namespace) -> int:
     if args.json:
         print(json.dumps(rows))
     return 0
+
+
+def _cmd_fidelity(args: argparse.Namespace) -> int:
+    results = check(tuple(args.paper) if args.paper else PAPERS, args.config)
+    print(format_report(results))
+    if args.json:
+        print(json.dumps([r.as_dict() for r in results]))
+    return 0 if all(r.status != "FAIL" for r in results) else 1
 
 
 def _cmd_param(args: argparse.Namespace) -> int:
@@ -285,6 +294,12 @@ def build_parser() -> argparse.ArgumentParser:
     rob.add_argument("--params", help="controller parameters to evaluate (e.g. a tuner's best.yaml)")
     rob.add_argument("--json", action="store_true", help="also print the rows as JSON")
     rob.set_defaults(func=_cmd_robustness)
+    fid = sub.add_parser("fidelity", help="every published number of papers 000-004 the model fixes, paper vs "
+                         "project, with tolerance and PASS / FAIL / EXPLAINED (exit 1 on any FAIL)")
+    fid.add_argument("--paper", action="append", choices=PAPERS, help="only this paper (repeatable; default: all)")
+    fid.add_argument("--config", help="folder of the presets (default: the package's config/)")
+    fid.add_argument("--json", action="store_true", help="also print the rows as one JSON list, last line")
+    fid.set_defaults(func=_cmd_fidelity)
     param = sub.add_parser("param", help="list, get, set, dump or load parameters of a running node (like ros2 param)")
     param_sub = param.add_subparsers(dest="action", required=True)
     param_actions = {
