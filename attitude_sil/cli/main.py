@@ -23,7 +23,7 @@ from rclpy.signals import SignalHandlerOptions
 
 from attitude_sil.cli.format import format_bar, format_segments, format_table
 from attitude_sil.core import yaml12
-from attitude_sil.core.linearize import PAPER_000_COMPARISON_GAINS, rmse_table
+from attitude_sil.core.linearize import PAPER_000_COMPARISON_GAINS, PAPER_000_TABLE_1_DURATION, rmse_table
 from attitude_sil.core.linearize import format_table as format_rmse_table
 from attitude_sil.core.scenario import load_scenario, with_parameter_file
 from attitude_sil.errors import AttitudeSilError
@@ -97,7 +97,8 @@ def _cmd_linearize(args: argparse.Namespace) -> int:
         raise AttitudeSilError(f"{args.scenario}: linearize needs a rigid-body scenario (plant.model), "
                          f"got {scn.param('plant', 'model')}")
     gains = tuple(args.gains) if args.gains else PAPER_000_COMPARISON_GAINS
-    table = rmse_table(scn, args.angles, gains, duration=args.duration)
+    duration = PAPER_000_TABLE_1_DURATION if args.duration is None else args.duration
+    table = rmse_table(scn, args.angles, gains, duration=duration)
     print(format_rmse_table(args.angles, table))
     if args.json:
         print(json.dumps({"angles_deg": list(args.angles), "rmse_deg": table.tolist(), "gains": list(gains)}))
@@ -285,7 +286,8 @@ def build_parser() -> argparse.ArgumentParser:
     lin.add_argument("--angles", type=float, nargs="+", default=[3, 8, 15, 25, 35], help="commands, deg")
     lin.add_argument("--gains", type=float, nargs=4, metavar=("KP", "KI", "KD", "N"),
                      help="PID of the comparison (default: paper 000's 52.995 2.488 132.442 4.748)")
-    lin.add_argument("--duration", type=float, help="episode length, s (default: the scenario's)")
+    lin.add_argument("--duration", type=float, help=f"episode length, s (default: {PAPER_000_TABLE_1_DURATION:g}, "
+                     "the run length identified from paper 000's Table 1)")
     lin.add_argument("--json", action="store_true", help="also print the table as one JSON object")
     lin.set_defaults(func=_cmd_linearize)
     rob = sub.add_parser("robustness", help="a design on perturbed plants: inertia +-12.5 %% (paper 001) or the "
