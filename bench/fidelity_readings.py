@@ -29,7 +29,12 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from attitude_sil.core.engine import flexible_states, simulate, simulate_summary  # noqa: E402
-from attitude_sil.core.linearize import PAPER_000_TABLE_1, rmse_table  # noqa: E402
+from attitude_sil.core.linearize import (  # noqa: E402
+    PAPER_000_TABLE_1,
+    PAPER_000_TABLE_1_DURATION,
+    euler_eq9_unit_scalar,
+    rmse_table,
+)
 from attitude_sil.core.metrics import flexible_split  # noqa: E402
 from attitude_sil.core.plants import FLEXIBLE_CASES  # noqa: E402
 from attitude_sil.core.quaternion import euler_from_quat  # noqa: E402
@@ -83,7 +88,7 @@ def cmd_hst() -> None:
     for label, r in readings:
         scn = hst_motor(**r)
         f = hst_figures(scn)
-        ratio = rmse_table(scn) / T1
+        ratio = _table1(scn, 20.0, "renormalised") / T1
         print(f"| {label} | {f['J_ga']:.4f} | {f['J_rl']:.4f} | {f['lin_ts']:.2f} | {f['lin_os']:.3f} "
               f"| {ratio.min():.3f}-{ratio.max():.3f} |")
 
@@ -106,8 +111,8 @@ def cmd_hst_fit() -> None:
               f"| {f['lin_ts']:.2f} | {f['lin_os']:.3f} |")
 
 
-def _table1_eq9(scn, duration=None) -> np.ndarray:
-    """Table 1 with the linear model's attitude read by eq. 9 with q4 = 1 (g not renormalised)."""
+def _table1(scn, duration=20.0, reading="eq9") -> np.ndarray:
+    """Table 1 with the linear model's attitude read by eq. 9 of (g, 1) ("eq9", as ``rmse_table``) or renormalised."""
     angles = np.array(list(PAPER_000_TABLE_1), float)
     n = angles.size
     sp = np.zeros((3 * n, 3))
@@ -120,14 +125,8 @@ def _table1_eq9(scn, duration=None) -> np.ndarray:
         s = scn.with_values("plant", model=model)
         tr = simulate(s, 3 * n, duration=duration, controller="pid", schedule=[], setpoints_rpy_deg=sp,
                       controller_params=params, threads=1)
-        if model == "linearized":
-            gv = tr.q_BN[..., :3] / tr.q_BN[..., 3:4]
-            q1, q2, q3 = gv[..., 0], gv[..., 1], gv[..., 2]
-            out[model] = np.degrees(np.stack([np.arctan2(2 * q1 + 2 * q2 * q3, 1 - 2 * (q1**2 + q2**2)),
-                                              np.arcsin(np.clip(2 * q2 - 2 * q3 * q1, -1, 1)),
-                                              np.arctan2(2 * q3 + 2 * q1 * q2, 1 - 2 * (q2**2 + q3**2))], -1))
-        else:
-            out[model] = np.degrees(euler_from_quat(tr.q_BN))
+        eq9 = model == "linearized" and reading == "eq9"
+        out[model] = np.degrees(euler_eq9_unit_scalar(tr.q_BN) if eq9 else euler_from_quat(tr.q_BN))
     tab = np.empty((n, 3))
     for a in range(3):
         d = out["rigid_body"][a * n:(a + 1) * n, :, a] - out["linearized"][a * n:(a + 1) * n, :, a]
@@ -137,20 +136,28 @@ def _table1_eq9(scn, duration=None) -> np.ndarray:
 
 def cmd_table1() -> None:
     fitted = hst_motor(**FITTED)
-    readings = [("preset (identified motor, 20 s, quaternion renormalised)", lambda: rmse_table(fitted)),
-                ("run of 10 s", lambda: rmse_table(fitted, duration=10.0)),
-                ("run of 40 s", lambda: rmse_table(fitted, duration=40.0)),
-                ("motor assumed before (K = R = 1.5, 0.8 N m)", lambda: rmse_table(hst_motor(**OLD))),
-                ("identified motor with the 0.8 N m limit", lambda: rmse_table(hst_motor(**{**FITTED, "tmax": 0.8}))),
-                ("linear attitude read by eq. 9 with q4 = 1, g not renormalised", lambda: _table1_eq9(fitted))]
+    readings = [("identified motor, 20 s, linear attitude renormalised (before)",
+                 lambda: _table1(fitted, 20.0, "renormalised")),
+                ("run of 10 s", lambda: _table1(fitted, 10.0, "renormalised")),
+                ("run of 40 s", lambda: _table1(fitted, 40.0, "renormalised")),
+                ("motor assumed before (K = R = 1.5, 0.8 N m)",
+                 lambda: _table1(hst_motor(**OLD), 20.0, "renormalised")),
+                ("identified motor with the 0.8 N m limit",
+                 lambda: _table1(hst_motor(**{**FITTED, "tmax": 0.8}), 20.0, "renormalised")),
+                ("linear attitude read by eq. 9 with q4 = 1 (not renormalised), 20 s", lambda: _table1(fitted, 20.0)),
+                ("eq. 9 with q4 = 1, 9 s", lambda: _table1(fitted, 9.0)),
+                ("**eq. 9 with q4 = 1, 10.5 s (identified, preset: `rmse_table`)**",
+                 lambda: rmse_table(fitted, duration=PAPER_000_TABLE_1_DURATION)),
+                ("eq. 9 with q4 = 1, 12 s", lambda: _table1(fitted, 12.0)),
+                ("eq. 9 with q4 = 1, 14 s", lambda: _table1(fitted, 14.0))]
     print("| reading | 3 deg roll (6.365e-4) | 35 deg pitch (2.696) | project / paper, all 15 cells "
-          "| 35 deg / 3 deg, roll (paper 1606) |")
-    print("| --- | --- | --- | --- | --- |")
+          "| RMS log ratio | 35 deg / 3 deg, roll (paper 1606) |")
+    print("| --- | --- | --- | --- | --- | --- |")
     for label, fn in readings:
         tab = fn()
         ratio = tab / T1
         print(f"| {label} | {tab[0, 0]:.3g} | {tab[4, 1]:.3g} | {ratio.min():.3f}-{ratio.max():.3f} "
-              f"| {tab[4, 0] / tab[0, 0]:.0f} |")
+              f"| {np.sqrt(np.mean(np.log(ratio) ** 2)):.2f} | {tab[4, 0] / tab[0, 0]:.0f} |")
 
 
 def cmd_cubesat_fit() -> None:
