@@ -109,6 +109,9 @@ def test_running_sums_equal_the_metrics_of_the_trajectory(hst, law, step_time):
     params = {f"{law}.kp" if law != "ga_flc" else "ga_flc.scales":
               np.array([[0.5, 0.5, 0.5], [40.0, 40.0, 40.0], [400.0, 400.0, 400.0]])
               if law != "ga_flc" else np.array([[5.0, 5.0, 0.2], [55.0, 45.0, 2.0], [70.0, 60.0, 2.5]])}
+    if law == "pid":  # with the identified HST motor the derivative kick alone moves the body most of the
+        # way, so the slow design needs a small Kd too
+        params["pid.kd"] = np.array([[1.0] * 3, [106.046] * 3, [106.046] * 3])
     kw = dict(duration=6.0, controller=law, controller_params=params)
     whole = simulate(scn, 3, **kw)
     reference = summarize(whole, scn.values["scenario"], step_time=step_time)

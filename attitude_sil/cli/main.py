@@ -1,10 +1,11 @@
 """The ``attitude-sil`` command: subcommands, their arguments, and one-line errors.
 
 Subcommands (docs/architecture.md, "Command line"): ``run``, ``tune``,
-``montecarlo``, ``replay``, ``bag info``, ``plot``, ``param``, ``record``, ``episode``,
-``metrics``, ``linearize`` and ``robustness``. Any :class:`~attitude_sil.errors.AttitudeSilError` (every user
-error) prints one line on stderr and exits 2; Ctrl-C exits 130 after the bag is
-closed. A traceback means a bug.
+``montecarlo``, ``replay``, ``bag info``, ``plot``, ``param``, ``record``,
+``episode``, ``metrics``, ``linearize``, ``robustness`` and ``fidelity``. Any
+:class:`~attitude_sil.errors.AttitudeSilError` (every user error) prints one
+line on stderr and exits 2; Ctrl-C exits 130 after the bag is closed. A
+traceback means a bug.
 """
 
 from __future__ import annotations
@@ -24,7 +25,7 @@ from rclpy.signals import SignalHandlerOptions
 
 from attitude_sil.cli.format import format_bar, format_campaign, format_segments, format_table
 from attitude_sil.core import yaml12
-from attitude_sil.core.linearize import PAPER_000_COMPARISON_GAINS, rmse_table
+from attitude_sil.core.linearize import PAPER_000_COMPARISON_GAINS, PAPER_000_TABLE_1_DURATION, rmse_table
 from attitude_sil.core.linearize import format_table as format_rmse_table
 from attitude_sil.core.scenario import load_scenario, with_parameter_file
 from attitude_sil.errors import AttitudeSilError
@@ -41,6 +42,7 @@ from attitude_sil.tools.plot import plot_bag
 from attitude_sil.tools.replay import ReplayOptions, replay_bag
 from attitude_sil.tools.verify import verify_controller
 from attitude_sil.tuning.executor import check_scheduler_address, make_executor
+from attitude_sil.tuning.fidelity import PAPERS, check, format_report
 from attitude_sil.tuning.mcplot import plot_campaign
 from attitude_sil.tuning.montecarlo import check_campaign_output, load_mc_spec, run_campaign, run_of, worst_runs
 from attitude_sil.tuning.optimize import check_output
@@ -177,7 +179,8 @@ def _cmd_linearize(args: argparse.Namespace) -> int:
         raise AttitudeSilError(f"{args.scenario}: linearize needs a rigid-body scenario (plant.model), "
                          f"got {scn.param('plant', 'model')}")
     gains = tuple(args.gains) if args.gains else PAPER_000_COMPARISON_GAINS
-    table = rmse_table(scn, args.angles, gains, duration=args.duration)
+    duration = PAPER_000_TABLE_1_DURATION if args.duration is None else args.duration
+    table = rmse_table(scn, args.angles, gains, duration=duration)
     print(format_rmse_table(args.angles, table))
     if args.json:
         print(json.dumps({"angles_deg": list(args.angles), "rmse_deg": table.tolist(), "gains": list(gains)}))
@@ -197,6 +200,14 @@ def _cmd_robustness(args: argparse.Namespace) -> int:
     if args.json:
         print(json.dumps(rows))
     return 0
+
+
+def _cmd_fidelity(args: argparse.Namespace) -> int:
+    results = check(tuple(args.paper) if args.paper else PAPERS, args.config)
+    print(format_report(results))
+    if args.json:
+        print(json.dumps([r.as_dict() for r in results]))
+    return 0 if all(r.status != "FAIL" for r in results) else 1
 
 
 def _cmd_param(args: argparse.Namespace) -> int:
@@ -455,7 +466,8 @@ def build_parser() -> argparse.ArgumentParser:
     lin.add_argument("--angles", type=float, nargs="+", default=[3, 8, 15, 25, 35], help="commands, deg")
     lin.add_argument("--gains", type=float, nargs=4, metavar=("KP", "KI", "KD", "N"),
                      help="PID of the comparison (default: paper 000's 52.995 2.488 132.442 4.748)")
-    lin.add_argument("--duration", type=float, help="episode length, s (default: the scenario's)")
+    lin.add_argument("--duration", type=float, help=f"episode length, s (default: {PAPER_000_TABLE_1_DURATION:g}, "
+                     "the run length identified from paper 000's Table 1)")
     lin.add_argument("--json", action="store_true", help="also print the table as one JSON object")
     lin.set_defaults(func=_cmd_linearize)
     rob = sub.add_parser("robustness", help="a design on perturbed plants: inertia +-12.5 %% (paper 001) or the "
@@ -464,6 +476,12 @@ def build_parser() -> argparse.ArgumentParser:
     rob.add_argument("--params", help="controller parameters to evaluate (e.g. a tuner's best.yaml)")
     rob.add_argument("--json", action="store_true", help="also print the rows as JSON")
     rob.set_defaults(func=_cmd_robustness)
+    fid = sub.add_parser("fidelity", help="every published number of papers 000-004 the model fixes, paper vs "
+                         "project, with tolerance and PASS / FAIL / EXPLAINED (exit 1 on any FAIL)")
+    fid.add_argument("--paper", action="append", choices=PAPERS, help="only this paper (repeatable; default: all)")
+    fid.add_argument("--config", help="folder of the presets (default: the package's config/)")
+    fid.add_argument("--json", action="store_true", help="also print the rows as one JSON list, last line")
+    fid.set_defaults(func=_cmd_fidelity)
     param = sub.add_parser("param", help="list, get, set, dump or load parameters of a running node (like ros2 param)")
     param_sub = param.add_subparsers(dest="action", required=True)
     param_actions = {

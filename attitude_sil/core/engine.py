@@ -47,6 +47,7 @@ __all__ = [
     "simulate_summary",
     "EpisodeSummary",
     "check_episode",
+    "flexible_states",
 ]
 
 RPM = 2.0 * np.pi / 60.0
@@ -226,6 +227,25 @@ def build_plant(scn: Scenario, n_episodes: int = 1, inertia=None, rpy0_deg=None,
     if p["model"] == "linearized":
         return LinearizedPlant(m, dt, q0, w0)
     return Plant(m, dt, p["substeps"], q0, w0)
+
+
+def flexible_states(scn: Scenario, tr) -> tuple[np.ndarray, np.ndarray]:
+    """Rigid angle theta and deflection alpha (rad, (P, K+1) each) of a ``flexible_axis`` run.
+
+    The plant is linear and the run's torques are known, so the trajectory's
+    torques replayed through a fresh plant of the same scenario give its
+    internal states exactly (the published attitude is only ``y = theta + k2 alpha``).
+    """
+    plant = build_plant(scn, tr.tau_c_B.shape[0])
+    theta = np.empty(tr.tau_c_B.shape[:2])
+    alpha = np.empty_like(theta)
+    ext = np.zeros_like(tr.tau_c_B) if tr.tau_ext_B is None else tr.tau_ext_B
+    for k in range(theta.shape[1]):
+        theta[:, k] = plant.x[:, 0]
+        alpha[:, k] = plant.x[:, 2]
+        if k + 1 < theta.shape[1]:
+            plant.advance(tr.tau_c_B[:, k], None, ext[:, k])
+    return theta, alpha
 
 
 def motor_params(values: dict) -> MotorParams:

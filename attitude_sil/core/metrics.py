@@ -33,7 +33,7 @@ PAPER_001_SETTLING_ANGLE = float(2.0 * np.arccos(
 
 __all__ = ["METRIC_KEYS", "episode_report", "summarize", "step_summary",
            "step_metrics", "metrics_from_trajectory", "segment_metrics", "tracking_metrics", "scenario_metrics",
-           "principal_angle", "PAPER_001_SETTLING_ANGLE"]
+           "principal_angle", "PAPER_001_SETTLING_ANGLE", "flexible_split"]
 
 
 def _first_crossing(t: np.ndarray, y: np.ndarray, level: float | np.ndarray) -> np.ndarray:
@@ -229,6 +229,30 @@ def scenario_metrics(t: np.ndarray, q_BN: np.ndarray, q_RN: np.ndarray, tau_c_B:
             if idx.size and idx[-1] < t.size - 1:
                 m["settling_time_s"][p] = t[idx[-1] + 1]
     return m
+
+
+def flexible_split(t: np.ndarray, theta: np.ndarray, alpha: np.ndarray, target: float,
+                   settling_band: float = 0.02) -> dict[str, np.ndarray]:
+    """Paper 002's two responses, settled separately: the rigid body and the appendage.
+
+    ``rigid_settling_time_s``: first time after which the rigid angle theta
+    (P, K+1) stays within ``settling_band`` of its initial distance from
+    ``target``; ``flexible_settling_time_s``: first time after which the
+    deflection alpha (P, K+1) stays within ``settling_band`` of its peak
+    magnitude. NaN: not settled by the end of the run.
+    """
+    out = {}
+    for key, err, scale in (("rigid_settling_time_s", theta - target, np.abs(theta[:, 0] - target)),
+                            ("flexible_settling_time_s", alpha, np.max(np.abs(alpha), axis=1))):
+        settle = np.full(err.shape[0], np.nan)
+        for p in range(err.shape[0]):
+            idx = np.nonzero(np.abs(err[p]) > settling_band * scale[p])[0]
+            if idx.size == 0:
+                settle[p] = t[0]
+            elif idx[-1] < t.size - 1:
+                settle[p] = t[idx[-1] + 1]
+        out[key] = settle
+    return out
 
 
 def summarize(tr: Trajectory, scenario_values: dict, step_time: float = 0.0) -> EpisodeSummary:

@@ -10,8 +10,12 @@ Algorithms (``algorithm.name``), configured from pymoo to match the papers:
 * ``pso`` — canonical PSO with fixed inertia ``w`` and ``c1``, ``c2`` (paper 002:
   100 particles, 100 iterations, 0.729, 1.55, 1.55; pymoo's adaptive variant
   and best-perturbation switched off).
-* ``mixed_ga`` — pymoo's mixed-variable GA: integer crossover/mutation on the
-  integer genes (paper 004's 49 rules), real ones on the rest.
+* ``mixed_ga`` — mixed-variable GA with paper 004's operators (the Chipperfield
+  GA toolbox it names): linear ranking (selective pressure 2) with roulette-wheel
+  selection of whole individuals; single-point crossover on the integer genes
+  (the 49 rules) and SBX on the real ones, each with probability ``crossover``
+  (0.7); per-gene mutation with probability ``mutation`` (0.01): a random
+  reset of an integer gene, polynomial mutation of a real one.
 * ``nsga2`` — NSGA-II on (Ts, Ce): the trade-off front paper 001 probes with two beta.
 * ``root_locus`` — :mod:`attitude_sil.tuning.rootlocus` (no population).
 
@@ -36,14 +40,17 @@ import numpy as np
 from pymoo.algorithms.moo.nsga2 import NSGA2
 from pymoo.algorithms.soo.nonconvex.ga import GA
 from pymoo.algorithms.soo.nonconvex.pso import PSO
-from pymoo.core.mixed import MixedVariableGA
+from pymoo.core.mixed import MixedVariableDuplicateElimination, MixedVariableGA, MixedVariableMating
+from pymoo.core.mutation import Mutation
 from pymoo.core.problem import Problem
+from pymoo.core.selection import Selection
 from pymoo.core.variable import Integer
 from pymoo.core.variable import Real as RealVariable
-from pymoo.operators.crossover.pntx import TwoPointCrossover
+from pymoo.operators.crossover.pntx import SinglePointCrossover, TwoPointCrossover
 from pymoo.operators.crossover.sbx import SBX
 from pymoo.operators.mutation.bitflip import BitflipMutation
 from pymoo.operators.mutation.pm import PM
+from pymoo.operators.repair.rounding import RoundingRepair
 from pymoo.operators.sampling.rnd import BinaryRandomSampling
 
 from .evaluate import PENALTY, Evaluation, Evaluator
@@ -52,6 +59,35 @@ from .rootlocus import tune_root_locus
 from .spec import SpecError, TuningSpec, decode
 
 __all__ = ["TuningResult", "check_output", "run_tuning", "build_algorithm", "write_best_yaml"]
+
+
+class RankingRoulette(Selection):
+    """Linear ranking (selective pressure ``sp``) and roulette-wheel sampling, as the GA toolbox of paper 004."""
+
+    def __init__(self, sp: float = 2.0) -> None:
+        super().__init__()
+        self.sp = float(sp)
+
+    def _do(self, _, pop, n_select, n_parents, random_state=None, **kwargs):
+        f = pop.get("F")[:, 0]
+        n = len(pop)
+        rank = np.empty(n)
+        rank[np.argsort(-f, kind="stable")] = np.arange(n)  # worst 0 ... best n-1
+        fitness = 2.0 - self.sp + 2.0 * (self.sp - 1.0) * rank / max(n - 1, 1)
+        return random_state.choice(n, size=(n_select, n_parents), p=fitness / fitness.sum())
+
+
+class IntegerReset(Mutation):
+    """Each integer gene reset to a uniform value of its range with probability ``prob_var``."""
+
+    def _do(self, problem, X, random_state=None, **kwargs):
+        X = np.array(X, dtype=float)
+        prob = np.asarray(self.get_prob_var(problem, size=len(X)), dtype=float).reshape(-1, 1)
+        hit = random_state.random(X.shape) < prob
+        lo, hi = problem.xl.astype(float), problem.xu.astype(float)
+        draws = np.floor(lo + random_state.random(X.shape) * (hi - lo + 1.0))
+        X[hit] = draws[hit]
+        return X
 
 
 def build_algorithm(spec: TuningSpec):
@@ -73,7 +109,13 @@ def build_algorithm(spec: TuningSpec):
             def __init__(self):
                 super().__init__(vars=variables, n_obj=n_obj)
 
-        return MixedVariableGA(pop_size=pop), Mixed(), gens
+        xo, mut = float(a.get("crossover", 0.7)), float(a.get("mutation", 0.01))
+        mating = MixedVariableMating(
+            selection=RankingRoulette(), eliminate_duplicates=MixedVariableDuplicateElimination(),
+            crossover={RealVariable: SBX(prob=xo), Integer: SinglePointCrossover(prob=xo)},
+            mutation={RealVariable: PM(prob=1.0, prob_var=mut),
+                      Integer: IntegerReset(prob=1.0, prob_var=mut, repair=RoundingRepair())})
+        return MixedVariableGA(pop_size=pop, mating=mating), Mixed(), gens
     if name == "binary_ga":
         class Binary(Problem):
             def __init__(self):

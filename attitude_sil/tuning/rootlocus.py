@@ -6,14 +6,20 @@ and the linear part of the wheel motors (eq. 15-16 through the allocation of
 eq. 14) as a python-control state-space model. The paper moved the
 closed-loop poles along the root locus in MATLAB's Control System Designer
 until the linear step response met its requirements (time constant 1.5 s,
-overshoot under 2 %, settling under 6 s). Here the same requirements are met
-numerically on the same kind of model: Nelder-Mead over log(Kp, Ki, Kd, N)
-within the spec's bounds, on ``|tau - tau_d| + 10 max(0, OS - 2) +
-0.5 max(0, Ts - 6)`` of the linear closed-loop step response
-(python-control). The design is then scored with the nonlinear model's cost
-J, so the two tuning methods compare as in the paper's Results, and the
-closed-loop poles as the PID gain is scaled (the root locus through the
-design) are plotted next to the results.
+overshoot under 2 %, settling under 6 s). Here the same is done as a
+pole-placement design on the root locus: the PID
+``Kp (1 + 1/(Ti s)) + Kd N s/(s + N)`` with its derivative filter ``N`` and
+integral time ``Ti`` fixed (spec ``algorithm.n``, ``algorithm.ti``) has two
+free gains, which the root-locus condition ``C(s) P(s) = -1`` at two real
+closed-loop poles fixes exactly: the dominant pole at ``s1 = -1/tau_d`` and
+a second one at ``s2 = -m/tau_d``. ``m`` is the designer's one knob (how far
+the second pole is dragged along the locus): it is stepped over a grid and the
+design whose linear step response (python-control) has its 63.2 % time
+nearest ``tau_d`` with overshoot under 2 % and settling under
+``settling_time_max`` is kept. The closed-loop poles are reported, the design
+is scored with the nonlinear model's cost J (as the paper's Results do), and
+the root locus through the design (``control.root_locus_map`` of the loop
+with the PID's overall gain as the locus parameter) is plotted next to the results.
 """
 
 from __future__ import annotations
@@ -23,15 +29,15 @@ import json
 import control
 import numpy as np
 from matplotlib.figure import Figure
-from scipy.optimize import minimize
 
 from attitude_sil.core.engine import build_wheels, inertia_matrix, simulate
 from attitude_sil.core.linear import linear_model
 from attitude_sil.core.metrics import scenario_metrics
+from attitude_sil.errors import SpecError
 
 from .results import TuningResult, write_best_yaml
 
-__all__ = ["roll_loop", "closed_loop", "tune_root_locus"]
+__all__ = ["roll_loop", "reduced_roll_loop", "closed_loop", "place_poles", "tune_root_locus"]
 
 
 def roll_loop(scn, axis: int = 0):
@@ -77,6 +83,73 @@ def closed_loop(plant, kp, ki, kd, n):
     return control.feedback(pid * plant, 1)
 
 
+def reduced_roll_loop(scn, axis: int = 0):
+    """:func:`roll_loop` with the states this input cannot reach removed (the other axes' free integrators)."""
+    return control.ss(control.tf(roll_loop(scn, axis)).minreal(tol=1e-6))
+
+
+def _step_figures(cl, t: np.ndarray) -> tuple[float, float, float]:
+    """(63.2 % time, overshoot %, 2 % settling time) of a closed loop's unit step."""
+    y = np.asarray(control.step_response(cl, T=t).outputs).ravel()
+    if not np.all(np.isfinite(y)) or y[-1] <= 0:
+        return np.inf, np.inf, np.inf
+    tc = float(t[np.argmax(y >= 0.632 * y[-1])])
+    os_pct = max(0.0, (float(y.max()) / y[-1] - 1.0) * 100.0)
+    outside = np.nonzero(np.abs(y - y[-1]) > 0.02 * abs(y[-1]))[0]
+    ts = float(t[outside[-1]]) if outside.size else 0.0
+    return tc, os_pct, ts
+
+
+def place_poles(plant, tau_d: float, n: float = 10.0, ti: float = 100.0, settling_max: float = 6.0,
+                overshoot_max: float = 2.0, ratios=None) -> dict:
+    """PID gains that put two real closed-loop poles at ``-1/tau_d`` and ``-m/tau_d`` (module docstring).
+
+    Parameters
+    ----------
+    plant : python-control LTI, the loop from the command to the controlled output
+    tau_d : desired time constant, s
+    n, ti : the PID's derivative filter (rad/s) and integral time (s), fixed
+    settling_max, overshoot_max : requirements on the linear step response (s, %)
+    ratios : the grid of ``m`` (default 1.2 ... 8)
+
+    Returns
+    -------
+    dict: ``gains`` (Kp, Ki, Kd, N), ``m``, ``placed`` (the two placed poles),
+    ``poles`` (every closed-loop pole, slowest first), ``time_constant_s``,
+    ``overshoot_pct``, ``settling_time_s`` of the linear step, ``meets`` (both requirements met).
+    """
+    t = np.linspace(0.0, 8.0 * settling_max, 2401)
+    best = None
+    for m in (np.linspace(1.2, 8.0, 35) if ratios is None else ratios):
+        s_pts = (-1.0 / tau_d, -m / tau_d)
+        if any(abs(sp + n) < 1e-9 for sp in s_pts):
+            continue
+        # C(s) P(s) = -1 at both poles, linear in (Kp, Kd) with Ki = Kp / Ti
+        rows = [[((1.0 + 1.0 / (ti * sp)) * complex(plant(sp))).real, (n * sp / (sp + n) * complex(plant(sp))).real]
+                for sp in s_pts]
+        try:
+            kp, kd = np.linalg.solve(np.array(rows), [-1.0, -1.0])
+        except np.linalg.LinAlgError:
+            continue
+        if not (kp > 0 and kd > 0):
+            continue
+        cl = closed_loop(plant, kp, kp / ti, kd, n)
+        poles = cl.poles()
+        if np.any(poles.real > 1e-9):
+            continue
+        tc, os_pct, ts = _step_figures(cl, t)
+        meets = os_pct < overshoot_max and ts < settling_max
+        key = (not meets, abs(tc - tau_d))
+        if best is None or key < best[0]:
+            best = (key, {"gains": (float(kp), float(kp / ti), float(kd), float(n)), "m": float(m),
+                          "placed": [float(s_pts[0]), float(s_pts[1])],
+                          "poles": [[float(p.real), float(p.imag)] for p in sorted(poles, key=lambda p: -p.real)],
+                          "time_constant_s": tc, "overshoot_pct": os_pct, "settling_time_s": ts, "meets": meets})
+    if best is None:
+        raise SpecError(f"no positive PID places a closed-loop pole at {-1.0 / tau_d:.4g} with N = {n}, Ti = {ti}")
+    return best[1]
+
+
 def _targets(scn):
     s = scn.values["scenario"]
     tau = s["metrics.tau_d"]
@@ -91,42 +164,14 @@ def tune_root_locus(spec, progress=None):
     scn = spec.scenarios[0]
     axis = scn.values["scenario"]["metrics.axis"]
     # the other axes are uncontrollable from this input (free integrators): drop them
-    plant = control.ss(control.tf(roll_loop(scn, axis)).minreal(tol=1e-6))
+    plant = reduced_roll_loop(scn, axis)
     tau, zeta = _targets(scn)
-    sigma = 1.0 / tau
-    target = complex(-sigma, sigma * np.sqrt(1 - zeta**2) / zeta)
-    t = np.linspace(0.0, 30.0, 1501)
+    target = complex(-1.0 / tau, 0.0)
     max_settle = float(spec.algorithm.get("settling_time_max", 6.0))
 
-    def objective(logk):
-        kp, ki, kd, n = np.exp(logk)
-        cl = closed_loop(plant, kp, ki, kd, n)
-        if np.any(cl.poles().real >= 0):
-            return 1e6
-        y = control.step_response(cl, T=t).outputs
-        y = np.asarray(y).ravel()
-        if not np.all(np.isfinite(y)) or y[-1] <= 0:
-            return 1e6
-        tc = t[np.argmax(y >= 0.632 * y[-1])]
-        os_pct = max(0.0, (y.max() / y[-1] - 1.0) * 100.0)
-        outside = np.nonzero(np.abs(y - y[-1]) > 0.02 * abs(y[-1]))[0]
-        ts = t[outside[-1]] if outside.size else 0.0
-        return abs(tc - tau) + 10.0 * max(0.0, os_pct - 2.0) + 0.5 * max(0.0, ts - max_settle)
-
-    genes = {g.param: g for g in spec.genome}
-    names = ("pid.kp", "pid.ki", "pid.kd", "pid.n")
-    lo = np.log([max(genes[k].low, 1e-3) if k in genes else 1e-3 for k in names])
-    hi = np.log([genes[k].high if k in genes else 1e3 for k in names])
-    best = None
-    rng = np.random.default_rng(spec.seed)
-    for _ in range(int(spec.algorithm.get("restarts", 4))):
-        start = rng.uniform(lo, hi)
-        res = minimize(lambda z: objective(np.clip(z, lo, hi)), start, method="Nelder-Mead",
-                       options={"xatol": 1e-4, "fatol": 1e-5, "maxiter": int(spec.algorithm.get("maxiter", 400))})
-        if best is None or res.fun < best.fun:
-            best = res
-    best.x = np.clip(best.x, lo, hi)
-    kp, ki, kd, n = np.exp(best.x)
+    design = place_poles(plant, tau, n=float(spec.algorithm.get("n", 10.0)),
+                         ti=float(spec.algorithm.get("ti", 100.0)), settling_max=max_settle)
+    kp, ki, kd, n = design["gains"]
     cl = closed_loop(plant, kp, ki, kd, n)
     info = control.step_info(cl, T=np.linspace(0, 40, 8001))
     gains = {"pid.kp": [[kp] * 3], "pid.ki": [[ki] * 3], "pid.kd": [[kd] * 3], "pid.n": [[n] * 3]}
@@ -142,7 +187,7 @@ def tune_root_locus(spec, progress=None):
                      "overshoot_pct": float(m["overshoot_pct"][0]),
                      "linear_rise_time_s": float(info["RiseTime"]),
                      "linear_settling_time_s": float(info["SettlingTime"]),
-                     "linear_overshoot_pct": float(info["Overshoot"]), "design_objective": float(best.fun)},
+                     "linear_overshoot_pct": float(info["Overshoot"]), "placed_poles": design["placed"]},
            "failure": ""}
     (out / "evaluations.jsonl").write_text(json.dumps(row) + "\n")
     (out / "evaluations.json").write_text(json.dumps([row], indent=1))
@@ -155,6 +200,7 @@ def tune_root_locus(spec, progress=None):
     summary = {"name": spec.name, "spec": str(spec.path), "algorithm": spec.algorithm, "cost": spec.cost,
                "seed": spec.seed, "best_cost": row["cost"], "best_parameters": best_values,
                "target_pole": [target.real, target.imag], "zeta": zeta, "tau_d": tau,
+               "placed_poles": design["placed"], "second_pole_ratio": design["m"],
                "closed_loop_poles": [[p.real, p.imag] for p in sorted(poles, key=lambda p: -p.real)],
                "linear_step_info": {k: float(v) for k, v in info.items()}, "generations": [],
                "nonlinear": {"time_constant_s": row["terms"]["time_constant_s"],
@@ -171,16 +217,15 @@ def tune_root_locus(spec, progress=None):
 def _plot_locus(plant, kp, ki, kd, n, target, path) -> None:
     """Closed-loop poles as the PID's overall gain k sweeps 0.05-20 x the design, the design marked."""
 
-    ks = np.logspace(-1.3, 1.3, 200)
+    s = control.tf("s")
+    loop = (kp + ki / s + kd * n * s / (s + n)) * control.tf(plant)
+    loci = control.root_locus_map(loop, np.logspace(-1.3, 1.3, 200)).loci
     fig = Figure(figsize=(7, 5.5), dpi=110)
     ax = fig.subplots()
-    for k in ks:
-        poles = closed_loop(plant, k * kp, k * ki, k * kd, n).poles()
-        ax.plot(poles.real, poles.imag, ".", color="0.6", ms=2)
+    ax.plot(loci.real.ravel(), loci.imag.ravel(), ".", color="0.6", ms=2)
     design = closed_loop(plant, kp, ki, kd, n).poles()
     ax.plot(design.real, design.imag, "x", color="C3", ms=9, mew=2, label="design")
-    ax.plot([target.real] * 2, [target.imag, -target.imag], "o", mfc="none", color="C0", ms=11,
-            label="target (tau_d, 2 % overshoot)")
+    ax.plot([target.real], [0.0], "o", mfc="none", color="C0", ms=11, label="dominant pole -1/tau_d")
     lim = 6 * abs(target.real)
     ax.set_xlim(-lim, 0.2 * lim)
     ax.set_ylim(-lim, lim)

@@ -85,7 +85,8 @@ SECTIONS: dict[str, dict[str, Any]] = {
                   "crossover": _real(0.0, 1.0), "mutation": _real(0.0, 1.0), "eta_c": _real(0.0, low_open=True),
                   "eta_m": _real(0.0, low_open=True), "w": _real(0.0), "c1": _real(0.0), "c2": _real(0.0),
                   "restarts": _integer(1, 1000), "maxiter": _integer(1, 10**7),
-                  "settling_time_max": _real(0.0, low_open=True)},
+                  "settling_time_max": _real(0.0, low_open=True), "n": _real(0.0, low_open=True),
+                  "ti": _real(0.0, low_open=True)},
     "evaluation": {"mode": _choice(("batch", "graph")), "workers": _integer(1, 256), "replicas": _integer(1, 64)},
     "record": {"best_per_generation": _boolean},
 }
