@@ -517,7 +517,7 @@ def _montecarlo_cases() -> list:
         "failure-probability": ("probability: 0.05", "probability: 1.5", "probability"),
         "failure-mode": ("modes: [lost, stuck]", "modes: [exploded]", "modes"),
         "failure-time": ("time: [2.0, 18.0]", "time: [18.0, 2.0]", "time"),
-        "sensor-negative": ("attitude_std_deg: 0.0005", "attitude_std_deg: -1", "attitude_std_deg"),
+        "sensor-negative": ("attitude_std_deg: 0.0002", "attitude_std_deg: -1", "attitude_std_deg"),
         "noise-seeds-string": ("noise_seeds: true", "noise_seeds: yes please", "noise_seeds"),
         "requirement-unknown": ("settling_time_s: {max: 20.0}", "settling_tim_s: {max: 20.0}", "settling_tim_s"),
         "requirement-rule": ("settling_time_s: {max: 20.0}", "settling_time_s: {below: 20.0}", "settling_time_s"),
