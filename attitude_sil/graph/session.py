@@ -370,6 +370,10 @@ def run_graph(
                                  keep_trajectory=keep_trajectory)
 
 
+#: the name rmw gives an endpoint whose node is not discovered yet (a node of another process, just started)
+UNKNOWN_NODE = "_NODE_NAME_UNKNOWN_"
+
+
 class ForeignPublishers:
     """Warns once for each publisher on a lockstep topic that is not the graph's own producer.
 
@@ -401,6 +405,8 @@ class ForeignPublishers:
                 ns = info.node_namespace or "/"
                 if info.node_name == producer and ns == self.own:
                     continue
+                if info.node_name == UNKNOWN_NODE:
+                    continue  # its node's name is not discovered yet (another process): look again next time
                 who = f"{ns.rstrip('/')}/{info.node_name}"
                 if (topic, who) not in self.warned:
                     self.warned.add((topic, who))
