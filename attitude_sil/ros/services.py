@@ -47,12 +47,7 @@ def get_remote_parameters(node: Node, spin: Spin, target: str, names: list[str],
     RunError
         The service did not appear or answer within ``timeout`` s.
     """
-    client = AsyncParameterClient(node, target)
-    deadline = time.monotonic() + timeout
-    while not client.services_are_ready():
-        if time.monotonic() > deadline:
-            raise RunError(f"parameter service of {target} did not appear within {timeout:g} s")
-        spin(0.02)
+    client, deadline = _parameter_client(node, spin, target, timeout)
     what = f"{target} (parameter get)"
     values = wait_future(client.get_parameters(names), spin, deadline, what).values
     if len(values) != len(names):
@@ -71,6 +66,17 @@ def get_remote_parameters(node: Node, spin: Spin, target: str, names: list[str],
     return out
 
 
+def _parameter_client(node: Node, spin: Spin, target: str, timeout: float) -> tuple[AsyncParameterClient, float]:
+    """A parameter client of ``target`` once its services are there, and the deadline of the whole call."""
+    client = AsyncParameterClient(node, target)
+    deadline = time.monotonic() + timeout
+    while not client.services_are_ready():
+        if time.monotonic() > deadline:
+            raise RunError(f"parameter service of {target} did not appear within {timeout:g} s")
+        spin(0.02)
+    return client, deadline
+
+
 def set_remote_parameters(node: Node, spin: Spin, target: str, params: dict[str, Any],
                           timeout: float = 10.0) -> None:
     """Set parameters of node ``target`` through its parameter service.
@@ -81,12 +87,7 @@ def set_remote_parameters(node: Node, spin: Spin, target: str, params: dict[str,
         The service did not appear or answer within ``timeout`` s, or ``target``
         refused a value (the message names the parameter and the node's reason).
     """
-    client = AsyncParameterClient(node, target)
-    deadline = time.monotonic() + timeout
-    while not client.services_are_ready():
-        if time.monotonic() > deadline:
-            raise RunError(f"parameter service of {target} did not appear")
-        spin(0.02)
+    client, deadline = _parameter_client(node, spin, target, timeout)
     result = wait_future(client.set_parameters([Parameter(k, value=v) for k, v in params.items()]), spin, deadline,
                          f"{target} (parameter set)")
     for name, r in zip(params, result.results, strict=True):

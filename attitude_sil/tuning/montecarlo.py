@@ -41,12 +41,11 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-import yaml
 
 from attitude_sil.core import yaml12
 from attitude_sil.core.engine import check_episode, simulate_summary
 from attitude_sil.core.params import NODE_PARAMS
-from attitude_sil.core.scenario import Scenario, load_scenario, with_parameter_file, yaml_problem
+from attitude_sil.core.scenario import Scenario, load_scenario, with_parameter_file
 from attitude_sil.errors import ScenarioError, SpecError
 
 from .dispersions import check_dispersions, episode_values, run_scenario, value_columns
@@ -110,15 +109,8 @@ def load_mc_spec(path: str | Path, runs: int | None = None) -> MonteCarloSpec:
         Missing file, bad YAML, unknown key, bad dispersion or requirement; one line naming the file and key.
     """
     p = Path(path)
-    if p.is_dir():
-        raise SpecError(f"{p}: a directory, not a Monte Carlo spec")
-    if not p.is_file():
-        raise SpecError(f"{p}: no such Monte Carlo spec")
-    try:
-        text = p.read_bytes()
-        data = yaml12.load_file(p)
-    except yaml.YAMLError as exc:
-        raise SpecError(f"{p}: not valid YAML{yaml_problem(exc)}") from None
+    data = yaml12.read(p, "Monte Carlo spec", SpecError)
+    text = p.read_bytes()
     if not isinstance(data, dict):
         raise _fail(p, "expected a mapping of name, scenario, runs, seed, dispersions, requirements, ...")
     unknown = set(map(str, data)) - _TOP
