@@ -501,14 +501,7 @@ def simulate(
         raise ScenarioError(f"stride must be >= 1, got {stride!r}")
     run = _Run(scn, n_episodes, duration, controller_params, inertia, seeds, controller, schedule, setpoints_rpy_deg,
                driver, episode_values)
-    if run.compiled:
-        tr, _ = run_compiled(*run.models, run.K, run.dt, stride=int(stride), threads=threads, keep=keep)
-        return tr
-    tr = _simulate_stepwise(*run.models, run.swaps, run.K, run.dt)
-    tr = tr if stride == 1 else tr.every(int(stride))
-    for name in set(KEEPABLE) - set(keep):
-        setattr(tr, name, None)
-    return tr
+    return run.trajectory(threads, int(stride), keep)
 
 
 def simulate_summary(
@@ -540,19 +533,15 @@ def simulate_summary(
         plant, _, _, guide, _ = run.models
         axis = values["metrics.axis"]
         # metrics_from_trajectory's start and end of the step: the setpoint before it (or the initial
-        # attitude if the step is at t = 0) and the setpoint at the last step
+        # attitude if the step is at t = 0) and the setpoint at the last step, by the guidance's own rule
         y0 = euler_from_quat(guide.q_initial if guide.step_time > 1e-12 else plant.q0)[..., axis]
         y0 = np.broadcast_to(y0, (n_episodes,))
-        end = guide.q_final if run.K * int(round(run.dt * 1e9)) * 1e-9 >= guide.step_time - 1e-12 else guide.q_initial
+        end, _ = guide.setpoint(run.K * int(round(run.dt * 1e9)) * 1e-9)
         r = np.broadcast_to(euler_from_quat(end)[..., axis], (n_episodes,))
         _, sums = run_compiled(*run.models, run.K, run.dt, threads=threads, keep=(),
                                sums=(axis, y0, r, values["metrics.settling_band"]))
         return step_summary(sums, values, r - y0)
-    if run.compiled:
-        tr, _ = run_compiled(*run.models, run.K, run.dt, threads=threads)
-    else:
-        tr = _simulate_stepwise(*run.models, run.swaps, run.K, run.dt)
-    return summarize(tr, values, step_time=scn.param("guidance", "step_time"))
+    return summarize(run.trajectory(threads), values, step_time=scn.param("guidance", "step_time"))
 
 
 #: scenario values :func:`simulate` takes per episode (``episode_values``), by node; every ``controller``
@@ -607,6 +596,17 @@ class _Run:
             if driver == "compiled" and why:
                 raise ScenarioError(f"the compiled driver does not run this scenario ({why}); use driver='auto'")
             self.compiled = not why
+
+    def trajectory(self, threads: int | None, stride: int = 1, keep=KEEPABLE) -> Trajectory:
+        """Run the models in the chosen driver; the arrays not in ``keep`` are None."""
+        if self.compiled:
+            tr, _ = run_compiled(*self.models, self.K, self.dt, stride=stride, threads=threads, keep=keep)
+            return tr
+        tr = _simulate_stepwise(*self.models, self.swaps, self.K, self.dt)
+        tr = tr if stride == 1 else tr.every(stride)
+        for name in set(KEEPABLE) - set(keep):
+            setattr(tr, name, None)
+        return tr
 
 
 def _simulate_stepwise(plant, wheels, dist, guide, ctrl, swaps: dict, K: int, dt: float) -> Trajectory:
