@@ -36,6 +36,7 @@ from conftest import CONFIG, ROOT
 
 SCENARIO = CONFIG / "hst_roll_step.yaml"
 DURATION = 5.0
+STEPS = round(DURATION / 0.01) + 1  # t = 0 .. DURATION at the 100 Hz control period
 DEADLINE = 90.0  # wall s for the whole module's graph work
 
 
@@ -111,7 +112,10 @@ def test_hand_started_graph_record_episode_metrics(tmp_path, capfd):
         # record --episode stops by itself at the episode's end; the other one on Ctrl-C
         rec, _ = recorders[0]
         assert rec.wait(timeout=max(deadline - time.monotonic(), 1)) == 0, rec.stderr.read()
-        ctrl_c, _ = recorders[1]
+        ctrl_c, ctrl_c_lines = recorders[1]
+        # the other one has taken the whole episode (it may lag the graph on a loaded machine): then Ctrl-C
+        whole = f"episode recorded to t={DURATION:.3f} s: {STEPS} of {STEPS} steps"
+        ctrl_c_lines.wait_for(lambda ls: any(whole in ln for ln in ls), deadline)
         ctrl_c.send_signal(signal.SIGINT)
         assert ctrl_c.wait(timeout=max(deadline - time.monotonic(), 1)) == 0
         out, err = ref.communicate(timeout=max(deadline - time.monotonic(), 1))
@@ -129,7 +133,7 @@ def test_hand_started_graph_record_episode_metrics(tmp_path, capfd):
         reader = open_bag(bag)
         assert "attitude_sil.parameters" in reader.custom_data
         assert set(reader.topics) <= {n if n.startswith("/") else "/" + n for n in RECORDED_TOPICS}
-        assert reader.topics["/attitude"].count == round(DURATION / 0.01) + 1
+        assert reader.topics["/attitude"].count == STEPS
         assert "transient_local" in reader.topics["/attitude"].offered_qos_profiles
     for bag, extra in ((rec_bag, ["--scenario", str(SCENARIO)]), (tmp_path / "run_bag", [])):
         assert main(["metrics", str(bag), "--json", *extra]) == 0

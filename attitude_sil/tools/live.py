@@ -247,7 +247,8 @@ def record_graph(bag: str | Path, topics: list[str] | None = None, namespace: st
     episode : bool
         Stop once an episode has started and reached the plant's duration.
     say : callable
-        Where the progress lines go (one per topic subscribed, the snapshot).
+        Where the progress lines go (one per topic subscribed, the snapshot,
+        one at the end of each episode recorded).
 
     Returns
     -------
@@ -282,6 +283,7 @@ def record_graph(bag: str | Path, topics: list[str] | None = None, namespace: st
         say(f"recording {len(selected)} topic(s){where} to {bag}; Ctrl-C to stop")
         clients = {n: AsyncParameterClient(rec, _target(ns, n)) for n in GRAPH_NODES}
         scn = None
+        reported_end, counted = False, 0  # counted: messages of per_step[0] in the episodes reported
         while True:
             try:  # a stop signal (Ctrl-C, SIGTERM, SIGHUP) ends the recording: the normal way to stop it
                 ros.spin(0.05)
@@ -297,12 +299,20 @@ def record_graph(bag: str | Path, topics: list[str] | None = None, namespace: st
                 break
             if rec.error:
                 raise RunError(f"{rec.error}; the bag is readable up to there")
-            if episode and scn is not None and scn.duration > 0:
+            if per_step and scn is not None and scn.duration > 0:
                 # the plant's last step (t = duration) has reached every per-step topic: the plant stops there
                 end_ns = scn.steps() * round(scn.dt * 1e9)
-                if all(rec.last_stamp.get(n) == end_ns for n in per_step):
-                    result.episode_done = True
-                    break
+                ended = all(rec.last_stamp.get(n) == end_ns for n in per_step)
+                if ended and not reported_end:
+                    steps = rec.counts.get(per_step[0], 0) - counted
+                    counted += steps
+                    say(f"episode recorded to t={end_ns * 1e-9:.3f} s: {steps} of {scn.steps() + 1} steps on "
+                        f"{rec.resolved[per_step[0]]}" + ("" if steps == scn.steps() + 1 else
+                                                         " (started recording after the episode began)"))
+                    if episode:
+                        result.episode_done = True
+                        break
+                reported_end = ended  # a new episode (stamps back at its start) is reported again at its end
         result.counts = {rec.resolved[n]: c for n, c in rec.counts.items()}
     finally:
         try:
