@@ -13,10 +13,13 @@ ROOT = Path(__file__).resolve().parents[1]
 CONFIG = ROOT / "config"
 sys.path.insert(0, str(ROOT))
 
-from attitude_sil.ros.environment import isolated_domain  # noqa: E402 - ROS-free, imports no rclpy
+from attitude_sil.ros.environment import discovery_profile, isolated_domain  # noqa: E402 - ROS-free, no rclpy
 
 # a domain no other attitude-sil process holds (runs started without ROS_DOMAIN_ID take free ones too)
 os.environ.pop("ROS_DOMAIN_ID", None)
 isolated_domain()
 os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
+for var in ("FASTDDS_DEFAULT_PROFILES_FILE", "FASTRTPS_DEFAULT_PROFILES_FILE"):
+    os.environ.pop(var, None)
+discovery_profile()  # the package's profile, as every attitude-sil process uses it
 os.environ.pop("ROS_STATIC_PEERS", None)

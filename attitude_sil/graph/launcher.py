@@ -105,10 +105,15 @@ def start_processes(scn: Scenario, extra: dict[str, Any], tmp: Path,
 
 
 def stop_processes(children: list[subprocess.Popen], timeout: float = 5.0) -> None:
-    """SIGINT every node process, then kill what has not exited after ``timeout`` s."""
+    """SIGINT every node process, then kill what has not exited after ``timeout`` s.
+
+    A stopped process (SIGSTOP, a debugger, Ctrl-Z) is continued after the
+    SIGINT, so it takes it at once instead of being killed at the timeout.
+    """
     for child in children:
         if child.poll() is None:
             child.send_signal(signal.SIGINT)
+            child.send_signal(signal.SIGCONT)
     deadline = time.monotonic() + timeout
     for child in children:
         try:

@@ -31,6 +31,7 @@ from attitude_sil.core.scenario import Scenario, scenario_from_dict
 from attitude_sil.errors import AttitudeSilError, ScenarioError
 from attitude_sil.ros.contract import RECORDED_TOPICS as TOPIC_TYPES
 from attitude_sil.ros.contract import message_class
+from attitude_sil.ros.environment import discovery_profile
 from attitude_sil.ros.parameters import PARAMETER_TYPES, descriptor
 from attitude_sil.ros.qos import LOCKSTEP_QOS
 from attitude_sil.ros.signals import StopSignals
@@ -226,6 +227,7 @@ def run_node(factory: Callable[[], Node], args: list[str] | None = None) -> int:
     int
         0, 2 for bad parameters, or 128 + the signal that stopped it (130 for Ctrl-C).
     """
+    discovery_profile()  # before the first participant: found by, and finding, the graph in < 1 s
     rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
     stop = StopSignals().__enter__()
     node = None
