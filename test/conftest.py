@@ -9,6 +9,8 @@ import os
 import sys
 from pathlib import Path
 
+import pytest
+
 ROOT = Path(__file__).resolve().parents[1]
 CONFIG = ROOT / "config"
 sys.path.insert(0, str(ROOT))
@@ -23,3 +25,29 @@ for var in ("FASTDDS_DEFAULT_PROFILES_FILE", "FASTRTPS_DEFAULT_PROFILES_FILE"):
     os.environ.pop(var, None)
 discovery_profile()  # the package's profile, as every attitude-sil process uses it
 os.environ.pop("ROS_STATIC_PEERS", None)
+
+
+@pytest.fixture
+def cli(capfd, monkeypatch):
+    """``cli(*args)``: ``attitude_sil.cli.main(args)`` in this process, as a CompletedProcess.
+
+    The code of a real ``attitude-sil`` process without its 2 s of interpreter
+    and import start-up; the working directory is the repository, as for the
+    tests' subprocesses (``cwd=ROOT``).
+    """
+    import subprocess
+
+    from attitude_sil.cli import main
+
+    monkeypatch.chdir(ROOT)
+
+    def call(*args) -> subprocess.CompletedProcess:
+        capfd.readouterr()
+        try:
+            code = main([str(a) for a in args])
+        except SystemExit as exc:  # argparse's own errors
+            code = exc.code
+        out, err = capfd.readouterr()
+        return subprocess.CompletedProcess(list(args), code, out, err)
+
+    return call

@@ -1,4 +1,10 @@
-"""Bad input reaches the user as one line and a non-zero exit, never a traceback."""
+"""Bad input reaches the user as one line and a non-zero exit, never a traceback.
+
+Input errors found before anything runs go through ``cli.main`` in this process
+(``cli`` fixture: the same code, without 2 s of interpreter and import start-up
+per case; test_user_errors.py checks that a real process prints the same one
+line). Runs that record, fill a disk or print JSON run as real processes.
+"""
 
 import subprocess
 import sys
@@ -25,8 +31,8 @@ def assert_one_line_error(proc, *needles):
         assert n in lines[0], lines[0]
 
 
-def test_missing_file():
-    assert_one_line_error(run_cli("run", "config/nope.yaml"), "config/nope.yaml", "no such scenario file")
+def test_missing_file(cli):
+    assert_one_line_error(cli("run", "config/nope.yaml"), "config/nope.yaml", "no such scenario file")
 
 
 @pytest.mark.parametrize(
@@ -42,25 +48,25 @@ def test_missing_file():
         ("    duration: 20.0", "    duration: 20.005", ("whole number of control periods",)),
     ],
 )
-def test_bad_scenario_values(tmp_path, old, new, needles):
+def test_bad_scenario_values(tmp_path, old, new, needles, cli):
     assert old in GOOD
     path = tmp_path / "bad.yaml"
     path.write_text(GOOD.replace(old, new))
     with pytest.raises(ScenarioError):
         load_scenario(path)
-    assert_one_line_error(run_cli("run", str(path), "--no-record", "--quiet"), str(path), *needles)
+    assert_one_line_error(cli("run", str(path), "--no-record", "--quiet"), str(path), *needles)
 
 
-def test_not_yaml(tmp_path):
+def test_not_yaml(tmp_path, cli):
     path = tmp_path / "broken.yaml"
     path.write_text("plant: [unclosed\n")
-    assert_one_line_error(run_cli("run", str(path)), "not valid YAML")
+    assert_one_line_error(cli("run", str(path)), "not valid YAML")
 
 
-def test_bad_flags():
-    assert_one_line_error(run_cli("run", "config/hst_roll_step.yaml", "--duration", "-1", "--no-record"),
+def test_bad_flags(cli):
+    assert_one_line_error(cli("run", "config/hst_roll_step.yaml", "--duration", "-1", "--no-record"),
                           "--duration")
-    assert_one_line_error(run_cli("run", "config/hst_roll_step.yaml", "--controller", "bangbang", "--no-record"),
+    assert_one_line_error(cli("run", "config/hst_roll_step.yaml", "--controller", "bangbang", "--no-record"),
                           "controller_type")
 
 
@@ -95,10 +101,10 @@ def test_run_json_is_last_stdout_line(tmp_path):
     ("flat.yaml", "controller: 3\n", "ros__parameters"),
     ("badvalue.yaml", "controller:\n  ros__parameters:\n    pid.kp: [1.0, .nan, 1.0]\n", "pid.kp"),
 ])
-def test_bad_parameter_files(tmp_path, name, content, needle):
+def test_bad_parameter_files(tmp_path, name, content, needle, cli):
     path = tmp_path / name
     path.write_text(content)
-    assert_one_line_error(run_cli("run", "config/hst_roll_step.yaml", "--params", str(path), "--no-record"),
+    assert_one_line_error(cli("run", "config/hst_roll_step.yaml", "--params", str(path), "--no-record"),
                           str(path), needle)
 
 
@@ -111,8 +117,8 @@ def test_bad_parameter_files(tmp_path, name, content, needle):
     (("tune", "config/tune_hst_pid_ga.yaml", "--set", "output=config/hst_roll_step.yaml/out", "--no-record"),
      "hst_roll_step.yaml is a file"),
 ])
-def test_bad_values_on_the_command_line(args, needle):
-    assert_one_line_error(run_cli(*args), needle)
+def test_bad_values_on_the_command_line(args, needle, cli):
+    assert_one_line_error(cli(*args), needle)
 
 
 def test_tuning_genes_must_lie_inside_the_parameters_range(tmp_path):
@@ -158,6 +164,6 @@ def test_a_full_disk_stops_the_run_with_one_line_and_a_readable_bag(tmp_path):
     assert not list(bag.glob("*.tmp"))
 
 
-def test_an_unwritable_bag_directory_is_found_at_start(tmp_path):
-    assert_one_line_error(run_cli("run", "config/hst_roll_step.yaml", "--record", "config/hst_roll_step.yaml/bag",
+def test_an_unwritable_bag_directory_is_found_at_start(tmp_path, cli):
+    assert_one_line_error(cli("run", "config/hst_roll_step.yaml", "--record", "config/hst_roll_step.yaml/bag",
                                   "--quiet"), "hst_roll_step.yaml")

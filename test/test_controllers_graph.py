@@ -11,7 +11,6 @@ import yaml
 from mcap.reader import make_reader
 from mcap_ros2.decoder import DecoderFactory
 
-from attitude_sil.cli import main
 from attitude_sil.core.controllers import CONTROLLER_TYPES, OUTPUT_KIND
 from attitude_sil.core.engine import simulate
 from attitude_sil.core.scenario import load_scenario
@@ -100,25 +99,13 @@ def _param(*args, timeout=60.0):
                           capture_output=True, text=True, timeout=timeout + 60, stdin=subprocess.DEVNULL)
 
 
-class _InProcess:
-    """``param`` through ``cli.main`` in this process: the calls of a real process without its start-up."""
-
-    def __init__(self, capsys) -> None:
-        self.capsys = capsys
-
-    def __call__(self, *args, timeout=60.0) -> subprocess.CompletedProcess:
-        if "--timeout" not in args:
-            args = (*args, "--timeout", str(timeout))
-        self.capsys.readouterr()
-        code = main(["param", *args])
-        out, err = self.capsys.readouterr()
-        return subprocess.CompletedProcess(["param", *args], code, out, err)
-
-
-def test_live_param_list_get_set_dump_load_from_a_second_process(tmp_path, capsys):
+def test_live_param_list_get_set_dump_load_from_a_second_process(tmp_path, cli):
     # the first calls run as real processes (what a user types in a second terminal); the rest
     # run cli.main in this process, which is the same code without 2 s of start-up per call
-    here = _InProcess(capsys)
+
+    def here(*args):
+        return cli("param", *args, *(() if "--timeout" in args else ("--timeout", "60")))
+
     bag = tmp_path / "live"
     # the episode outlasts any test run (it is stopped with Ctrl-C below), so a slow machine
     # cannot end it before the parameter calls are done: each call waits by condition only
