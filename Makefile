@@ -13,6 +13,7 @@ $(STAMP): setup.py package.xml
 	$(BIN)/pip install --quiet --upgrade pip
 	$(BIN)/pip install --quiet 'ros-jazzy-rclpy[fastrtps]' ros-jazzy-common-interfaces ros-jazzy-std-srvs ros-jazzy-rosgraph-msgs
 	$(BIN)/pip install --quiet -e '.[test]'
+	$(BIN)/python -m attitude_sil.tools.warm
 	touch $(STAMP)
 
 run: $(STAMP)

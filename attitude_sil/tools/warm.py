@@ -1,0 +1,55 @@
+"""Compile the step kernels once, into numba's on-disk cache, before anything else needs them.
+
+The kernels (:mod:`attitude_sil.core.kernels`, :mod:`attitude_sil.core.batch`)
+are compiled on first use and cached next to their modules (``cache=True``). On
+a fresh install that first use is typically a graph run: five node processes
+and the runner, started together on a machine with fewer cores, each
+compiling the same kernels before the cache exists. ``python -m
+attitude_sil.tools.warm`` (run by ``make`` right after installing) compiles
+them in one process: every preset through both batch drivers and every
+control law, which are the signatures the nodes, the engine and the tuner use.
+"""
+
+from __future__ import annotations
+
+import sys
+import time
+from pathlib import Path
+
+from attitude_sil.core.controllers import CONTROLLER_TYPES
+from attitude_sil.core.engine import simulate
+from attitude_sil.core.scenario import ScenarioError, load_scenario
+
+#: the presets whose plants and laws the kernels serve (the tuning and Monte Carlo specs use the same)
+PRESETS = ("hst_roll_step", "cubesat_1u", "flexible_axis", "hawaiisat_lvlh", "pitch_axis")
+
+
+def warm(config_dir: str | Path | None = None) -> float:
+    """Compile and cache the kernels; returns the wall seconds it took.
+
+    Parameters
+    ----------
+    config_dir : path, optional
+        Where the preset scenarios are (default: the repository's ``config/``).
+    """
+    folder = Path(config_dir) if config_dir is not None else Path(__file__).resolve().parents[2] / "config"
+    t0 = time.perf_counter()
+    for name in PRESETS:
+        scn = load_scenario(folder / f"{name}.yaml")
+        for controller in CONTROLLER_TYPES:
+            for driver in ("auto", "stepwise"):
+                try:
+                    simulate(scn, 1, duration=2 * scn.dt, controller=controller, driver=driver)
+                except ScenarioError:  # a law the preset's plant cannot take: nothing to compile for it
+                    break
+    return time.perf_counter() - t0
+
+
+def main() -> int:
+    took = warm()
+    print(f"attitude_sil kernels compiled and cached in {took:.1f} s", file=sys.stderr)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
