@@ -84,6 +84,7 @@ class Recorder(Node):
         self.refused: dict[str, int] = defaultdict(int)  # stray messages not recorded, per topic
         self.clock_ns = 0  # the latest /clock, ns
         self.sim_now = 0  # latest lockstep stamp seen, ns
+        self.newest_ns = 0  # the latest stamp taken on any topic this episode, ns
         self.kept: dict[str, list[tuple[int, bytes]]] = {name: [] for name in keep}
         self.keeping = True  # False: the kept topics go to ``sink`` only, nothing stays in memory
         self.sink: Callable[[str, int, bytes], None] | None = None  # (topic, stamp ns, CDR) of kept topics
@@ -119,6 +120,7 @@ class Recorder(Node):
         self.last_stamp.clear()
         self.refused.clear()
         self.sim_now = 0
+        self.newest_ns = 0
         self.clock_ns = 0
         self._clock_known = self.history
         self.error = ""
@@ -170,9 +172,11 @@ class Recorder(Node):
             self._clock_known = True
             self.clock_ns = t
             self.sim_now = t
-        elif t > self.clock_ns + MAX_CLOCK_LEAD_NS:
-            # far ahead of the clock (a step's messages may overtake its /clock, never by
-            # seconds): a stray (foreign or corrupt) message, which would stretch the bag
+        elif t > max(self.clock_ns, self.newest_ns) + MAX_CLOCK_LEAD_NS:
+            # far ahead of the clock and of every topic taken (a step's messages may overtake
+            # its /clock, never by seconds; a tool that joins a graph reads each topic on a
+            # subscription of its own, and on a loaded machine its /clock can lag the others
+            # by more): a stray (foreign or corrupt) message, which would stretch the bag
             self._refuse(name, t, "is ahead of the clock")
             return
         elif name in self._widths and not self._valid(name, data):
@@ -183,6 +187,7 @@ class Recorder(Node):
             self.sim_now = max(self.sim_now, t)
         self.counts[name] += 1
         self.last_stamp[name] = t
+        self.newest_ns = max(self.newest_ns, t)
         if self.writer is not None:
             try:
                 if name not in self._registered:
