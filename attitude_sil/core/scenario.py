@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import copy
 import difflib
+import sys
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -33,7 +34,19 @@ from .paramfile import node_key, section_node
 from .params import GLOBAL_NODE, NODE_PARAMS, SCENARIO_NODE
 
 __all__ = ["ScenarioError", "Scenario", "load_scenario", "scenario_from_dict", "with_parameter_file", "yaml_problem",
-           "GRAPH_NODES"]
+           "GRAPH_NODES", "PRESETS", "default_config_dir"]
+
+#: the preset scenarios of the five papers (``config/<name>.yaml``)
+PRESETS = ("hst_roll_step", "hawaiisat_lvlh", "flexible_axis", "cubesat_1u", "pitch_axis")
+
+
+def default_config_dir() -> Path:
+    """The presets: the repository's ``config/`` (or the installed ``share/attitude_sil/config``)."""
+    here = Path(__file__).resolve().parents[2] / "config"
+    if here.is_dir():
+        return here
+    return Path(sys.prefix) / "share" / "attitude_sil" / "config"
+
 
 #: nodes of the graph, in the order the runner starts them
 GRAPH_NODES = ("plant", "wheels", "disturbance", "guidance", "controller")

@@ -18,10 +18,7 @@ from pathlib import Path
 
 from attitude_sil.core.controllers import CONTROLLER_TYPES
 from attitude_sil.core.engine import simulate
-from attitude_sil.core.scenario import ScenarioError, load_scenario
-
-#: the presets whose plants and laws the kernels serve (the tuning and Monte Carlo specs use the same)
-PRESETS = ("hst_roll_step", "cubesat_1u", "flexible_axis", "hawaiisat_lvlh", "pitch_axis")
+from attitude_sil.core.scenario import PRESETS, ScenarioError, default_config_dir, load_scenario
 
 
 def warm(config_dir: str | Path | None = None) -> float:
@@ -30,9 +27,9 @@ def warm(config_dir: str | Path | None = None) -> float:
     Parameters
     ----------
     config_dir : path, optional
-        Where the preset scenarios are (default: the repository's ``config/``).
+        Where the preset scenarios are (default: :func:`~attitude_sil.core.scenario.default_config_dir`).
     """
-    folder = Path(config_dir) if config_dir is not None else Path(__file__).resolve().parents[2] / "config"
+    folder = Path(config_dir) if config_dir is not None else default_config_dir()
     t0 = time.perf_counter()
     for name in PRESETS:
         scn = load_scenario(folder / f"{name}.yaml")

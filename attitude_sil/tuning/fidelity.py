@@ -20,7 +20,6 @@ Rows that share a simulation share it (each group is computed once per
 from __future__ import annotations
 
 import math
-import sys
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -33,7 +32,7 @@ from attitude_sil.core.engine import flexible_states, simulate
 from attitude_sil.core.linearize import PAPER_000_TABLE_1, PAPER_000_TABLE_1_DURATION, rmse_table
 from attitude_sil.core.metrics import flexible_split, scenario_metrics, step_metrics, tracking_metrics
 from attitude_sil.core.plants import FLEXIBLE_CASES
-from attitude_sil.core.scenario import Scenario, load_scenario
+from attitude_sil.core.scenario import PRESETS, Scenario, default_config_dir, load_scenario
 from attitude_sil.errors import AttitudeSilError
 
 from .rootlocus import closed_loop, place_poles, reduced_roll_loop
@@ -76,18 +75,10 @@ PAPER_002_SETTLING = {
 }
 
 
-def default_config_dir() -> Path:
-    """The presets: the repository's ``config/`` (or the installed ``share/attitude_sil/config``)."""
-    here = Path(__file__).resolve().parents[2] / "config"
-    if here.is_dir():
-        return here
-    return Path(sys.prefix) / "share" / "attitude_sil" / "config"
-
-
 class Presets:
     """The preset scenarios of a config folder, with each shared computation done once."""
 
-    NAMES = ("hst_roll_step", "hawaiisat_lvlh", "flexible_axis", "cubesat_1u", "pitch_axis")
+    NAMES = PRESETS
 
     def __init__(self, config_dir: str | Path | None = None) -> None:
         self.dir = Path(config_dir) if config_dir is not None else default_config_dir()
