@@ -26,7 +26,8 @@ from attitude_sil.errors import ScenarioError
 
 from .disturbance import aerodynamic_torque, gravity_gradient_torque, orbit_rate
 from .fuzzy import FUZZY_PID_DEFAULT_RULES, UNIFORM_VERTICES, vertices_from_ratios
-from .kernels import fuzzy_infer, fuzzy_pid_step, ga_flc_step, geometric_step, measure, pid_step
+from .kernels import (apply_offsets, fuzzy_pid_bumpless, fuzzy_pid_step, ga_flc_step, geometric_step, measure,
+                      pid_bumpless, pid_step)
 from .quaternion import cross, error_vector, quat_error, quat_to_dcm
 
 __all__ = [
@@ -86,6 +87,12 @@ class StepInput:
     def reference_rate_B(self) -> np.ndarray:
         """Q^T omega_d: the reference rate in B, (P, 3) rad/s."""
         return np.einsum("pji,pj->pi", self.Q, self.omega_RN_R)
+
+    def arrays(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """(q_BN, omega_BN_B, q_RN, omega_RN_R) as contiguous float arrays, the kernels' argument order."""
+        c = np.ascontiguousarray
+        return (c(self.q_BN, dtype=float), c(self.omega_BN_B, dtype=float), c(self.q_RN, dtype=float),
+                c(self.omega_RN_R, dtype=float))
 
     def error(self, angle_mode: bool) -> np.ndarray:
         """The error the PID family acts on: e, or 2 asin(e) per axis in angle mode."""
@@ -187,16 +194,16 @@ class PID:
                         self.angle_mode)
 
     def bumpless(self, inp: StepInput, u_last: np.ndarray) -> None:
-        """Set the state so the next :meth:`compute` with ``inp`` returns ``u_last`` (needs Ki > 0)."""
+        """Set the state so the next :meth:`compute` with ``inp`` returns ``u_last`` (needs Ki > 0).
+
+        The kernel :func:`attitude_sil.core.kernels.pid_bumpless` (shared with
+        the compiled driver) does the arithmetic per episode.
+        """
         if self.integral is None:
             self.reset(inp.q_BN.shape[0])
-        e = inp.error(self.angle_mode)
-        e_dot = inp.error_rate_of(self.angle_mode)
-        ki = np.broadcast_to(self.ki, e.shape)
-        target = np.clip(u_last, -self.u_max, self.u_max)
-        self.filter_state = e - e_dot / self.n
-        rest = target - self.kp * e - self.kd * e_dot
-        self.integral = np.where(ki > 0.0, rest / np.where(ki > 0.0, ki, 1.0), 0.0)
+        kp, ki, kd, n, _ = self._kernel_gains()
+        pid_bumpless(*inp.arrays(), self.angle_mode, kp, ki, kd, n, self.integral, self.filter_state, self.u_max,
+                     np.ascontiguousarray(u_last, dtype=float))
 
 
 class _Stateless:
@@ -205,11 +212,14 @@ class _Stateless:
     At the switch the offset is ``u_last - u_new``; it decays as
     ``exp(-dt / tau_b)`` per step (``bumpless_time_constant`` tau_b), so the
     first command equals the old controller's last and the new law takes over
-    smoothly. With tau_b = 0 there is no offset and the jump is at most
-    ``|u_last| + u_max``.
+    smoothly. Each episode's offset ends on its own, once all three
+    components are below 1e-15 (so an episode's numbers do not depend on the
+    batch it runs in). With tau_b = 0 there is no offset and the jump is at
+    most ``|u_last| + u_max``.
     """
 
-    offset: np.ndarray | None = None
+    offset: np.ndarray | None = None  # (P, 3)
+    has_offset: np.ndarray | None = None  # (P,) bool: the episodes whose offset still runs
     decay: float = 0.0
 
     def set_transfer(self, tau_b: float, dt: float) -> None:
@@ -218,16 +228,17 @@ class _Stateless:
     def _apply_offset(self, u: np.ndarray) -> np.ndarray:
         if self.offset is None:
             return u
-        out = u + self.offset
-        self.offset = self.offset * self.decay
-        if np.all(np.abs(self.offset) < 1e-15):
-            self.offset = None
+        out = np.array(u, dtype=float)
+        apply_offsets(out, self.offset, self.has_offset, self.decay)
+        if not self.has_offset.any():
+            self.offset = self.has_offset = None
         return out
 
     def bumpless(self, inp: StepInput, u_last: np.ndarray) -> None:
-        self.offset = None
+        self.offset = self.has_offset = None
         if self.decay > 0.0:
-            self.offset = np.asarray(u_last, dtype=float) - self._law(inp)
+            self.offset = np.ascontiguousarray(np.asarray(u_last, dtype=float) - self._law(inp))
+            self.has_offset = np.ones(self.offset.shape[0], dtype=bool)
 
 
 class FuzzyPID(_Stateless):
@@ -272,17 +283,12 @@ class FuzzyPID(_Stateless):
         self.rules = r.reshape((-1, 7, 7)) if r.ndim != 3 else r
         self._cache = None
 
-    def _fuzzy(self, inp: StepInput) -> tuple[np.ndarray, np.ndarray]:
-        n = inp.e.shape[0]
-        e = inp.error(self.pid.angle_mode)
-        de = np.zeros_like(e) if self.e_prev is None else (e - self.e_prev) / self.dt
-        v = np.ascontiguousarray(np.broadcast_to(UNIFORM_VERTICES, (n, 3, 7)))
-        rules = np.ascontiguousarray(np.broadcast_to(self.rules, (n, 7, 7)))
-        x_e = e / self.e_scale
-        x_de = de / self.de_scale
-        u_f = self.u_scale * fuzzy_infer(_pe(x_de, n, 3), _pe(x_e, n, 3), v, v, rules, v)
-        f = np.clip(x_e, -1.0, 1.0) ** 2
-        return u_f, f
+    def _params(self, n: int) -> tuple:
+        """(rules (n, 7, 7), e_scale, de_scale, u_scale (n, 3)) for the kernels, cached per n."""
+        if self._cache is None or self._cache[0].shape[0] != n:
+            self._cache = (np.ascontiguousarray(np.broadcast_to(self.rules, (n, 7, 7))),
+                           _pe(self.e_scale, n, 3), _pe(self.de_scale, n, 3), _pe(self.u_scale, n, 3))
+        return self._cache
 
     @staticmethod
     def mix(u_pid: np.ndarray, u_f: np.ndarray, f: np.ndarray) -> np.ndarray:
@@ -302,10 +308,7 @@ class FuzzyPID(_Stateless):
         has_prev = self.e_prev is not None
         if not has_prev:
             self.e_prev = np.zeros((n, 3))
-        if self._cache is None or self._cache[0].shape[0] != n:
-            self._cache = (np.ascontiguousarray(np.broadcast_to(self.rules, (n, 7, 7))),
-                           _pe(self.e_scale, n, 3), _pe(self.de_scale, n, 3), _pe(self.u_scale, n, 3))
-        rules, e_scale, de_scale, u_scale = self._cache
+        rules, e_scale, de_scale, u_scale = self._params(n)
         mixed = fuzzy_pid_step(np.ascontiguousarray(inp.q_BN, dtype=float),
                                np.ascontiguousarray(inp.q_RN, dtype=float), self.e_prev, has_prev,
                                *pid._kernel_gains(), pid.integral, pid.filter_state, e_scale, de_scale, u_scale,
@@ -315,24 +318,22 @@ class FuzzyPID(_Stateless):
     def reset(self, n_episodes: int) -> None:
         self.pid.reset(n_episodes)
         self.e_prev = None
-        self.offset = None
+        self.offset = self.has_offset = None
 
     def bumpless(self, inp: StepInput, u_last: np.ndarray) -> None:
-        self.offset = None
-        angle = self.pid.angle_mode
-        self.e_prev = inp.error(angle) - inp.error_rate_of(angle) * self.dt  # de starts at the measured rate
-        u_f, f = self._fuzzy(inp)
-        target = np.clip(u_last, -self.u_max, self.u_max)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            p2 = (target - f * u_f) / (1.0 - f)  # case 2: PID faster
-            p1 = (target - (1.0 - f) * u_f) / f  # case 1: fuzzy faster
-        ok2 = np.isfinite(p2) & (np.abs(p2) > np.abs(u_f) + 1e-12)
-        ok1 = np.isfinite(p1) & (np.abs(p1) < np.abs(u_f) - 1e-12)
-        u_pid = np.where(ok2, p2, np.where(ok1, p1, target))
-        self.pid.bumpless(inp, u_pid)
-        rest = target - self.mix(u_pid, u_f, f)
-        if self.decay > 0.0 and np.any(np.abs(rest) > 1e-12):
-            self.offset = rest
+        """Per episode, in :func:`attitude_sil.core.kernels.fuzzy_pid_bumpless` (shared with the compiled driver)."""
+        n = inp.q_BN.shape[0]
+        pid = self.pid
+        if pid.integral is None:
+            pid.reset(n)
+        self.e_prev = np.zeros((n, 3))
+        offset, has = np.zeros((n, 3)), np.zeros(n, dtype=bool)
+        rules, e_scale, de_scale, u_scale = self._params(n)
+        kp, ki, kd, nf, _ = pid._kernel_gains()
+        fuzzy_pid_bumpless(*inp.arrays(), pid.angle_mode, self.e_prev, kp, ki, kd, nf, pid.integral, pid.filter_state,
+                           e_scale, de_scale, u_scale, rules, UNIFORM_VERTICES, self.dt, self.u_max, self.decay,
+                           np.ascontiguousarray(u_last, dtype=float), offset, has)
+        self.offset, self.has_offset = (offset, has) if has.any() else (None, None)
 
 
 class GAFLC(_Stateless):
@@ -368,7 +369,7 @@ class GAFLC(_Stateless):
         self._cache = None
 
     def reset(self, n_episodes: int) -> None:
-        self.offset = None
+        self.offset = self.has_offset = None
 
     def _law(self, inp: StepInput) -> np.ndarray:
         """The compiled law (:func:`attitude_sil.core.kernels.ga_flc_step`), saturated."""
@@ -443,7 +444,7 @@ class Geometric(_Stateless):
         return tau
 
     def reset(self, n_episodes: int) -> None:
-        self.offset = None
+        self.offset = self.has_offset = None
         self.w_d_prev = None
 
     def torque_terms(self, inp: StepInput, tau_env_B: np.ndarray | None = None) -> np.ndarray:

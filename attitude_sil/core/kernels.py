@@ -441,54 +441,223 @@ def geometric_step(q_BN, omega, q_RN, w_d, w_d_prev, has_prev, k, l, inertia, dt
     Shapes: quaternions (P, 4); omega, w_d, w_d_prev, k, l (P, 3); inertia (P, 3, 3);
     cp_offset (3,). ``aero_coeff`` is 0.5 rho C_d A V^2. Returns (P, 3) N m.
     """
-    m = q_BN.shape[0]
-    out = np.empty((m, 3))
-    Q = np.empty((3, 3))
-    for p in range(m):
-        x, y, z, w = _error_quat(q_BN, q_RN, p)  # q_BR: Q = R(q_BR) = R_d^T R
-        Q[0, 0] = 1 - 2 * (y * y + z * z)
-        Q[0, 1] = 2 * (x * y - z * w)
-        Q[0, 2] = 2 * (x * z + y * w)
-        Q[1, 0] = 2 * (x * y + z * w)
-        Q[1, 1] = 1 - 2 * (x * x + z * z)
-        Q[1, 2] = 2 * (y * z - x * w)
-        Q[2, 0] = 2 * (x * z - y * w)
-        Q[2, 1] = 2 * (y * z + x * w)
-        Q[2, 2] = 1 - 2 * (x * x + y * y)
-        J = inertia[p]
-        nu = np.zeros(3)
-        wdd = np.zeros(3)
-        for i in range(3):
-            for j in range(3):
-                nu[i] += Q[j, i] * w_d[p, j]
-                if has_prev:
-                    wdd[i] += Q[j, i] * (w_d[p, j] - w_d_prev[p, j]) / dt
-        jnu = J @ nu
-        jwdd = J @ wdd
-        kk = k[p]
-        s_k = (kk[2] * Q[2, 1] - kk[1] * Q[1, 2], kk[0] * Q[0, 2] - kk[2] * Q[2, 0], kk[1] * Q[1, 0] - kk[0] * Q[0, 1])
-        cx = nu[1] * jnu[2] - nu[2] * jnu[1]
-        cy = nu[2] * jnu[0] - nu[0] * jnu[2]
-        cz = nu[0] * jnu[1] - nu[1] * jnu[0]
-        tau = (-l[p, 0] * (omega[p, 0] - nu[0]) - s_k[0] + jwdd[0] + cx,
-               -l[p, 1] * (omega[p, 1] - nu[1]) - s_k[1] + jwdd[1] + cy,
-               -l[p, 2] * (omega[p, 2] - nu[2]) - s_k[2] + jwdd[2] + cz)
-        env = np.zeros(3)
-        if use_gg:
-            nadir = -Q[2, :]  # -l3 in B: column 3 of R_BL = Q^T
-            jn = J @ nadir
-            c = 3.0 * gg_rate * gg_rate
-            env[0] += c * (nadir[1] * jn[2] - nadir[2] * jn[1])
-            env[1] += c * (nadir[2] * jn[0] - nadir[0] * jn[2])
-            env[2] += c * (nadir[0] * jn[1] - nadir[1] * jn[0])
-        if use_aero:
-            v = Q[0, :]  # l1 in B
-            env[0] += aero_coeff * (v[1] * cp_offset[2] - v[2] * cp_offset[1])
-            env[1] += aero_coeff * (v[2] * cp_offset[0] - v[0] * cp_offset[2])
-            env[2] += aero_coeff * (v[0] * cp_offset[1] - v[1] * cp_offset[0])
-        for i in range(3):
-            out[p, i] = min(max(tau[i] - env[i], -u_max), u_max)
+    out = np.empty((q_BN.shape[0], 3))
+    for p in range(q_BN.shape[0]):
+        geometric_row(q_BN, omega, q_RN, w_d, w_d_prev, has_prev, p, k, l, inertia, dt, u_max, gg_rate,
+                      aero_coeff, cp_offset, use_gg, use_aero, out)
     return out
+
+
+@njit(cache=True, inline="always")
+def _jv(J, p, a, b, c):
+    # J[p] @ (a, b, c) on scalars
+    return (J[p, 0, 0] * a + J[p, 0, 1] * b + J[p, 0, 2] * c,
+            J[p, 1, 0] * a + J[p, 1, 1] * b + J[p, 1, 2] * c,
+            J[p, 2, 0] * a + J[p, 2, 1] * b + J[p, 2, 2] * c)
+
+
+@njit(cache=True, inline="always")
+def geometric_row(q_BN, omega, q_RN, w_d, w_d_prev, has_prev, p, k, l, inertia, dt, u_max,  # noqa: E741
+                  gg_rate, aero_coeff, cp_offset, use_gg, use_aero, out):
+    """:func:`geometric_step` for episode ``p`` alone, on scalars (no temporaries), into ``out[p]``."""
+    x, y, z, w = _error_quat(q_BN, q_RN, p)  # q_BR: Q = R(q_BR) = R_d^T R
+    q00, q01, q02 = 1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)
+    q10, q11, q12 = 2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)
+    q20, q21, q22 = 2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)
+    a0, a1, a2 = w_d[p, 0], w_d[p, 1], w_d[p, 2]
+    nu = (q00 * a0 + q10 * a1 + q20 * a2, q01 * a0 + q11 * a1 + q21 * a2, q02 * a0 + q12 * a1 + q22 * a2)
+    if has_prev:
+        d0, d1, d2 = (a0 - w_d_prev[p, 0]) / dt, (a1 - w_d_prev[p, 1]) / dt, (a2 - w_d_prev[p, 2]) / dt
+        wdd = (q00 * d0 + q10 * d1 + q20 * d2, q01 * d0 + q11 * d1 + q21 * d2, q02 * d0 + q12 * d1 + q22 * d2)
+    else:
+        wdd = (0.0, 0.0, 0.0)
+    jnu = _jv(inertia, p, nu[0], nu[1], nu[2])
+    jwdd = _jv(inertia, p, wdd[0], wdd[1], wdd[2])
+    s_k = (k[p, 2] * q21 - k[p, 1] * q12, k[p, 0] * q02 - k[p, 2] * q20, k[p, 1] * q10 - k[p, 0] * q01)
+    cx = nu[1] * jnu[2] - nu[2] * jnu[1]
+    cy = nu[2] * jnu[0] - nu[0] * jnu[2]
+    cz = nu[0] * jnu[1] - nu[1] * jnu[0]
+    t0 = -l[p, 0] * (omega[p, 0] - nu[0]) - s_k[0] + jwdd[0] + cx
+    t1 = -l[p, 1] * (omega[p, 1] - nu[1]) - s_k[1] + jwdd[1] + cy
+    t2 = -l[p, 2] * (omega[p, 2] - nu[2]) - s_k[2] + jwdd[2] + cz
+    e0, e1, e2 = 0.0, 0.0, 0.0
+    if use_gg:
+        n0, n1, n2 = -q20, -q21, -q22  # -l3 in B: column 3 of R_BL = Q^T
+        jn = _jv(inertia, p, n0, n1, n2)
+        c = 3.0 * gg_rate * gg_rate
+        e0 += c * (n1 * jn[2] - n2 * jn[1])
+        e1 += c * (n2 * jn[0] - n0 * jn[2])
+        e2 += c * (n0 * jn[1] - n1 * jn[0])
+    if use_aero:
+        v0, v1, v2 = q00, q01, q02  # l1 in B
+        e0 += aero_coeff * (v1 * cp_offset[2] - v2 * cp_offset[1])
+        e1 += aero_coeff * (v2 * cp_offset[0] - v0 * cp_offset[2])
+        e2 += aero_coeff * (v0 * cp_offset[1] - v1 * cp_offset[0])
+    out[p, 0] = min(max(t0 - e0, -u_max), u_max)
+    out[p, 1] = min(max(t1 - e1, -u_max), u_max)
+    out[p, 2] = min(max(t2 - e2, -u_max), u_max)
+
+
+# ---------------------------------------------------------------- bumpless transfer
+# What ControllerBank does at a swap, per episode, as kernels: the nodes (P = 1), the stepwise driver and
+# the compiled driver all call these, so a swap gives the same numbers in each.
+
+@njit(cache=True, inline="always")
+def error_and_rate_row(q_BN, omega, q_RN, w_d, p, angle_mode):
+    """The PID family's error of episode ``p`` and its time derivative, two 3-tuples.
+
+    ``e = -vec(q_BR)`` (or ``2 asin(e)`` per axis in angle mode) and, with
+    ``ω_e = ω - Q^T ω_d``, ``de/dt = -½ (w ω_e + v × ω_e)`` for ``q_BR = (v, w)``
+    (the angle's rate is ``2 ė / sqrt(1 - e²)``, floored at 1e-12 under the root).
+    """
+    x, y, z, s = _error_quat(q_BN, q_RN, p)
+    vx, vy, vz = w_d[p, 0], w_d[p, 1], w_d[p, 2]
+    if vx == 0.0 and vy == 0.0 and vz == 0.0:
+        nu = (0.0, 0.0, 0.0)
+    else:  # Q^T w_d, as ga_flc_row computes it
+        rx, ry, rz = -x, -y, -z
+        cx, cy, cz = ry * vz - rz * vy, rz * vx - rx * vz, rx * vy - ry * vx
+        ccx, ccy, ccz = ry * cz - rz * cy, rz * cx - rx * cz, rx * cy - ry * cx
+        nu = (vx + 2.0 * (s * cx + ccx), vy + 2.0 * (s * cy + ccy), vz + 2.0 * (s * cz + ccz))
+    wx, wy, wz = omega[p, 0] - nu[0], omega[p, 1] - nu[1], omega[p, 2] - nu[2]
+    e = (-x, -y, -z)
+    de = (-0.5 * (s * wx + (y * wz - z * wy)), -0.5 * (s * wy + (z * wx - x * wz)),
+          -0.5 * (s * wz + (x * wy - y * wx)))
+    if not angle_mode:
+        return e, de
+    ea, da = np.empty(3), np.empty(3)
+    for i in range(3):
+        c = min(max(e[i], -1.0), 1.0)
+        ea[i] = 2.0 * np.arcsin(c)
+        da[i] = 2.0 * de[i] / np.sqrt(max(1.0 - e[i] * e[i], 1e-12))
+    return (ea[0], ea[1], ea[2]), (da[0], da[1], da[2])
+
+
+@njit(cache=True, inline="always")
+def pid_bumpless_row(e, de, p, kp, ki, kd, n, integral, filt, u_max, u_last):
+    """Set PID state row ``p`` so its next command is ``clip(u_last)`` (a 3-tuple; see ``controllers.PID.bumpless``)."""
+    for i in range(3):
+        target = min(max(u_last[i], -u_max), u_max)
+        filt[p, i] = e[i] - de[i] / n[p, i]
+        rest = target - kp[p, i] * e[i] - kd[p, i] * de[i]
+        integral[p, i] = rest / ki[p, i] if ki[p, i] > 0.0 else 0.0
+
+
+@njit(cache=True, inline="always")
+def _infer_vertices(xr, xc, v, rules, p):
+    # fuzzy_infer's arithmetic for one element with the vertices v (7,) for rows, columns and output
+    if xr <= v[0]:
+        i, ti = 0, 0.0
+    elif xr >= v[6]:
+        i, ti = 5, 1.0
+    else:
+        i = 0
+        for k in range(1, 6):
+            if xr > v[k]:
+                i = k
+        ti = (xr - v[i]) / (v[i + 1] - v[i])
+    if xc <= v[0]:
+        j, tj = 0, 0.0
+    elif xc >= v[6]:
+        j, tj = 5, 1.0
+    else:
+        j = 0
+        for k in range(1, 6):
+            if xc > v[k]:
+                j = k
+        tj = (xc - v[j]) / (v[j + 1] - v[j])
+    r = rules
+    return ((1.0 - ti) * ((1.0 - tj) * v[r[p, i, j] - 1] + tj * v[r[p, i, j + 1] - 1])
+            + ti * ((1.0 - tj) * v[r[p, i + 1, j] - 1] + tj * v[r[p, i + 1, j + 1] - 1]))
+
+
+@njit(cache=True, inline="always")
+def fuzzy_pid_bumpless_row(e, de, p, e_prev, kp, ki, kd, n, integral, filt, e_scale, de_scale, u_scale, rules, v,
+                           dt, u_max, decay, u_last, offset):
+    """Fuzzy PID bumpless entry for row ``p`` (see ``controllers.FuzzyPID.bumpless``).
+
+    Sets ``e_prev`` from the measured error rate and the PID state so the mixed
+    command equals ``clip(u_last[p])`` wherever some PID output achieves it;
+    writes the remainder into ``offset[p]`` and returns True when a decaying
+    offset is needed (``decay`` > 0 and some remainder above 1e-12).
+    """
+    u_pid = np.empty(3)
+    rest = np.empty(3)
+    for i in range(3):
+        e_prev[p, i] = e[i] - de[i] * dt  # de starts at the measured rate
+    for i in range(3):
+        d = (e[i] - e_prev[p, i]) / dt
+        x_e = e[i] / e_scale[p, i]
+        u_f = u_scale[p, i] * _infer_vertices(d / de_scale[p, i], x_e, v, rules, p)
+        en = min(max(x_e, -1.0), 1.0)
+        f = en * en
+        target = min(max(u_last[p, i], -u_max), u_max)
+        p2 = (target - f * u_f) / (1.0 - f) if f != 1.0 else np.inf  # case 2: PID faster
+        p1 = (target - (1.0 - f) * u_f) / f if f != 0.0 else np.inf  # case 1: fuzzy faster
+        if np.isfinite(p2) and abs(p2) > abs(u_f) + 1e-12:
+            up = p2
+        elif np.isfinite(p1) and abs(p1) < abs(u_f) - 1e-12:
+            up = p1
+        else:
+            up = target
+        u_pid[i] = up
+        if abs(u_f) > abs(up) + 1e-12:
+            mixed = f * up + (1.0 - f) * u_f
+        elif abs(up) > abs(u_f) + 1e-12:
+            mixed = (1.0 - f) * up + f * u_f
+        else:
+            mixed = up
+        rest[i] = target - mixed
+    pid_bumpless_row(e, de, p, kp, ki, kd, n, integral, filt, u_max, (u_pid[0], u_pid[1], u_pid[2]))
+    needed = decay > 0.0 and (abs(rest[0]) > 1e-12 or abs(rest[1]) > 1e-12 or abs(rest[2]) > 1e-12)
+    for i in range(3):
+        offset[p, i] = rest[i] if needed else 0.0
+    return needed
+
+
+@njit(cache=True, inline="always")
+def offset_row(u, p, offset, has_offset, decay):
+    """Add row ``p``'s decaying bumpless offset to ``u[p]`` (see ``controllers._Stateless``).
+
+    The offset decays by ``decay`` per step and ends, for this episode alone,
+    once all three components are below 1e-15.
+    """
+    if not has_offset[p]:
+        return
+    small = True
+    for i in range(3):
+        u[p, i] = u[p, i] + offset[p, i]
+        offset[p, i] = offset[p, i] * decay
+        small = small and abs(offset[p, i]) < 1e-15
+    if small:
+        has_offset[p] = False
+        for i in range(3):
+            offset[p, i] = 0.0
+
+
+@njit(cache=True)
+def apply_offsets(u, offset, has_offset, decay):
+    """:func:`offset_row` for every episode, in place on ``u`` (P, 3)."""
+    for p in range(u.shape[0]):
+        offset_row(u, p, offset, has_offset, decay)
+
+
+@njit(cache=True)
+def pid_bumpless(q_BN, omega, q_RN, w_d, angle_mode, kp, ki, kd, n, integral, filt, u_max, u_last):
+    """:func:`pid_bumpless_row` for every episode (P rows of each array)."""
+    for p in range(q_BN.shape[0]):
+        e, de = error_and_rate_row(q_BN, omega, q_RN, w_d, p, angle_mode)
+        pid_bumpless_row(e, de, p, kp, ki, kd, n, integral, filt, u_max, (u_last[p, 0], u_last[p, 1], u_last[p, 2]))
+
+
+@njit(cache=True)
+def fuzzy_pid_bumpless(q_BN, omega, q_RN, w_d, angle_mode, e_prev, kp, ki, kd, n, integral, filt, e_scale,
+                       de_scale, u_scale, rules, v, dt, u_max, decay, u_last, offset, has_offset):
+    """:func:`fuzzy_pid_bumpless_row` for every episode; ``has_offset`` (P,) says where an offset remains."""
+    for p in range(q_BN.shape[0]):
+        e, de = error_and_rate_row(q_BN, omega, q_RN, w_d, p, angle_mode)
+        has_offset[p] = fuzzy_pid_bumpless_row(e, de, p, e_prev, kp, ki, kd, n, integral, filt, e_scale, de_scale,
+                                               u_scale, rules, v, dt, u_max, decay, u_last, offset)
 
 
 # ---------------------------------------------------------------- sensor noise
