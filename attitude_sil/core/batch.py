@@ -29,17 +29,18 @@ import numpy as np
 from numba import njit, prange
 
 from .fuzzy import UNIFORM_VERTICES
-from .kernels import fuzzy_pid_step_into, ga_flc_step_into, measure_row, pid_step_into, rk4_body_into, wheel_row
+from .kernels import (error_and_rate_row, fuzzy_pid_bumpless_row, fuzzy_pid_row, ga_flc_row, geometric_row,
+                      measure_row, offset_row, pid_bumpless_row, pid_row, rk4_body_into, wheel_row)
 from .trajectory import Trajectory
 from .wheels import no_failure
 
 __all__ = ["COMPILED_LAWS", "COMPILED_DISTURBANCES", "SUMMARY_COLUMNS", "TRAJECTORY_FIELDS", "run_compiled"]
 
-#: laws the compiled driver runs (the geometric law and swaps take the stepwise driver)
-COMPILED_LAWS = {"pid": 0, "fuzzy_pid": 1, "ga_flc": 2}
+#: the laws of the compiled driver and their codes (every controller_type, swaps included)
+COMPILED_LAWS = {"pid": 0, "fuzzy_pid": 1, "ga_flc": 2, "geometric": 3}
 
 #: disturbance models the compiled driver evaluates in the loop
-COMPILED_DISTURBANCES = frozenset({"constant", "step"})
+COMPILED_DISTURBANCES = frozenset({"constant", "step", "noise"})
 
 
 #: columns of the running sums the compiled driver keeps per episode (``summary=True``)
@@ -69,23 +70,41 @@ def _crossing(found, level, f, f_prev, ta, ta_prev, first):
     return ta_prev + frac * (ta - ta_prev)
 
 
+@njit(cache=True, inline="always")
+def _reset_row(law, p, integral, filt, has_prev_f, has_prev_g, has_off):
+    # what ControllerBank.request + compute do to the new law's state at a swap (its reset())
+    if law <= 1:  # the PID and the fuzzy PID's PID
+        for i in range(3):
+            integral[p, i] = 0.0
+            filt[p, i] = 0.0
+    has_prev_f[p] = False
+    has_prev_g[p] = False
+    has_off[p] = False
+
+
 @njit(cache=True)
-def _chunk(law, lo, hi, n_steps, stride, dt, dt_ns, substeps, step_time,
-           q0, w0, x0, q_initial, q_final, inertia, inertia_inv,
-           kp, ki, kd, nf, af, u_max, angle_mode,
+def _chunk(lo, hi, n_steps, stride, dt, dt_ns, substeps, step_time,
+           q0, w0, x0, q_initial, q_final, omega_ref, inertia, inertia_inv,
+           law0, sw_k, sw_law, command_torque, decay, u_max, angle_mode,
+           kp, ki, kd, nf, af, fkp, fki, fkd, fnf, faf,
            e_scale, de_scale, u_scale, fz_rules, v_uniform,
            g_rules, g_vertices, g_scales,
-           allocation, axes, phi_T, gamma, j_m, k_b, headroom, speed_max, v_max, torque_mode, k_i, r_a, b_m,
+           gk, gl, gj, g_umax, g_rate, g_coeff, g_cp, g_gg, g_aero,
+           allocation, axes, phi_T, gamma, j_m, k_b, headroom, speed_max, v_max, k_i, r_a, b_m,
            fail_j, fail_k, fail_stuck, e_hold, coast, noisy, s_seeds, s_att, s_rate,
-           tau_constant, tau_step, step_ns,
+           tau_constant, tau_step, step_ns, tau_noise, noise_lo,
            o_q, o_w, o_qr, o_h, o_u, o_tc, o_te, o_ws, o_wa, o_we,
            m_axis, m_y0, m_r, m_band, o_sum):
     """Episodes ``lo..hi-1`` from step 0 to K, the stepwise driver's order of calls, kept every ``stride``.
 
-    An output array with
-    no rows is not kept; ``o_sum`` (P, len(SUMMARY_COLUMNS)) gets the running
-    sums when it has rows (``m_*``: the metrics axis, per-episode start and
-    final values, the settling band as a fraction of the step).
+    Each episode runs its own law (``law0``, codes of :data:`COMPILED_LAWS`)
+    and takes the swaps ``sw_law[s]`` before the command of step ``sw_k[s]``
+    (sorted), with ControllerBank's bumpless transfer, per episode. An output
+    array with no rows is not kept; ``o_sum`` (P, len(SUMMARY_COLUMNS)) gets
+    the running sums when it has rows (``m_*``: the metrics axis, per-episode
+    start and final values, the settling band as a fraction of the step).
+    ``tau_noise`` (rows from episode ``noise_lo``, K + 1, 3) is the
+    disturbance noise torque, or has no rows.
     """
     q = q0[lo:hi].copy()
     w = w0[lo:hi].copy()
@@ -93,23 +112,35 @@ def _chunk(law, lo, hi, n_steps, stride, dt, dt_ns, substeps, step_time,
     m = hi - lo
     qi = q_initial[lo:hi].copy()
     qf = q_final[lo:hi].copy()
+    omega_r = omega_ref[lo:hi].copy()
     ii = inertia[lo:hi].copy()
     iv = inertia_inv[lo:hi].copy()
+    law = law0[lo:hi].copy()
     kp_, ki_, kd_, n_, a_ = kp[lo:hi].copy(), ki[lo:hi].copy(), kd[lo:hi].copy(), nf[lo:hi].copy(), af[lo:hi].copy()
+    fkp_, fki_, fkd_ = fkp[lo:hi].copy(), fki[lo:hi].copy(), fkd[lo:hi].copy()
+    fn_, fa_ = fnf[lo:hi].copy(), faf[lo:hi].copy()
     integral = np.zeros((m, 3))
     filt = np.zeros((m, 3))
     e_prev = np.zeros((m, 3))
+    has_prev_f = np.zeros(m, dtype=np.bool_)
+    w_prev = np.zeros((m, 3))
+    has_prev_g = np.zeros(m, dtype=np.bool_)
+    offset = np.zeros((m, 3))
+    has_off = np.zeros(m, dtype=np.bool_)
+    u_last = np.zeros((m, 3))
     es, ds, us, fr = e_scale[lo:hi].copy(), de_scale[lo:hi].copy(), u_scale[lo:hi].copy(), fz_rules[lo:hi].copy()
     gr, gv, gs = g_rules[lo:hi].copy(), g_vertices[lo:hi].copy(), g_scales[lo:hi].copy()
+    gk_, gl_, gj_ = gk[lo:hi].copy(), gl[lo:hi].copy(), gj[lo:hi].copy()
     # private copies of the shared read-only arrays: threads sharing one array would fight over its reference count
     allocation, axes, phi_T, gamma = allocation.copy(), axes.copy(), phi_T.copy(), gamma.copy()
     k_b, headroom, k_i, r_a, coast = k_b.copy(), headroom.copy(), k_i.copy(), r_a.copy(), coast.copy()
     fail_j, fail_k, fail_stuck = fail_j.copy(), fail_k.copy(), fail_stuck.copy()
     s_seeds, s_att, s_rate = s_seeds.copy(), s_att.copy(), s_rate.copy()
+    sw_k, sw_law, g_cp = sw_k.copy(), sw_law.copy(), g_cp.copy()
     qm = np.empty((m, 4))
     wm = np.empty((m, 3))
     tau_constant, tau_step, v_uniform = tau_constant.copy(), tau_step.copy(), v_uniform.copy()
-    omega_r = np.zeros((m, 3))
+    with_noise = tau_noise.shape[0] > 0
     tau_e = np.zeros((m, 3))
     u = np.empty((m, 3))
     tau_c = np.empty((m, 3))
@@ -129,31 +160,80 @@ def _chunk(law, lo, hi, n_steps, stride, dt, dt_ns, substeps, step_time,
     last_out = np.full(m, -1)
     prev = np.zeros((m, 3))  # fraction of the step, time after it, error
     n_after = 0
+    s_next = 0
     for k in range(n_steps + 1):
         t_ns = k * dt_ns
         q_r = qf if t_ns * 1e-9 >= step_time - 1e-12 else qi
+        swap = -1
+        while s_next < sw_k.shape[0] and sw_k[s_next] <= k:
+            if sw_k[s_next] == k:
+                swap = sw_law[s_next]
+            s_next += 1
         for p in range(m):
             for i in range(3):
                 tau_e[p, i] = 0.0 + tau_constant[i]
                 if t_ns >= step_ns:
                     tau_e[p, i] += tau_step[i]
+                if with_noise:
+                    tau_e[p, i] += tau_noise[lo + p - noise_lo, k, i]
         if noisy:  # the law sees the measurements (controllers.ControllerBank.measure)
             for p in range(m):
                 measure_row(q, w, p, lo + p, k, s_seeds, s_att, s_rate, qm, wm)
         qs, ws = (qm, wm) if noisy else (q, w)
-        if law == 0:
-            pid_step_into(qs, q_r, kp_, ki_, kd_, n_, a_, integral, filt, dt, u_max, angle_mode, u)
-        elif law == 1:
-            fuzzy_pid_step_into(qs, q_r, e_prev, k > 0, kp_, ki_, kd_, n_, a_, integral, filt, es, ds, us, fr,
-                                v_uniform, dt, u_max, angle_mode, u)
-            for p in range(m):
-                for i in range(3):
-                    u[p, i] = min(max(u[p, i], -u_max), u_max)
-        else:
-            ga_flc_step_into(qs, ws, q_r, omega_r, gr, gv, gs, u_max, u)
         for p in range(m):
+            if swap >= 0 and law[p] != swap:  # ControllerBank.compute with a swap pending
+                same_kind = (law[p] == 3) == (swap == 3) or command_torque
+                law[p] = swap
+                _reset_row(swap, p, integral, filt, has_prev_f, has_prev_g, has_off)
+                if k > 0 and same_kind:
+                    if swap <= 1:
+                        e, de = error_and_rate_row(qs, ws, q_r, omega_r, p, angle_mode)
+                        if swap == 0:
+                            pid_bumpless_row(e, de, p, kp_, ki_, kd_, n_, integral, filt, u_max,
+                                             (u_last[p, 0], u_last[p, 1], u_last[p, 2]))
+                        else:
+                            has_off[p] = fuzzy_pid_bumpless_row(e, de, p, e_prev, fkp_, fki_, fkd_, fn_, integral,
+                                                                filt, es, ds, us, fr, v_uniform, dt, u_max, decay,
+                                                                u_last, offset)
+                            has_prev_f[p] = True
+                    elif decay > 0.0:  # a stateless law: a decaying offset from the old law's last command
+                        if swap == 2:
+                            ga_flc_row(qs, ws, q_r, omega_r, p, gr, gv, gs, u_max, u)
+                        else:
+                            geometric_row(qs, ws, q_r, omega_r, w_prev, False, p, gk_, gl_, gj_, dt, g_umax, g_rate,
+                                          g_coeff, g_cp, g_gg, g_aero, u)
+                        for i in range(3):
+                            offset[p, i] = u_last[p, i] - u[p, i]
+                        has_off[p] = True
+            lp = law[p]
+            if lp == 0:
+                pid_row(qs, q_r, p, kp_, ki_, kd_, n_, a_, integral, filt, dt, u_max, angle_mode, u)
+            elif lp == 1:
+                fuzzy_pid_row(qs, q_r, p, e_prev, has_prev_f[p], fkp_, fki_, fkd_, fn_, fa_, integral, filt, es, ds,
+                              us, fr, v_uniform, dt, u_max, angle_mode, u)
+                has_prev_f[p] = True
+            elif lp == 2:
+                ga_flc_row(qs, ws, q_r, omega_r, p, gr, gv, gs, u_max, u)
+            else:
+                geometric_row(qs, ws, q_r, omega_r, w_prev, has_prev_g[p], p, gk_, gl_, gj_, dt, g_umax, g_rate,
+                              g_coeff, g_cp, g_gg, g_aero, u)
+                for i in range(3):
+                    w_prev[p, i] = omega_r[p, i]
+                has_prev_g[p] = True
+            if lp >= 1:  # the stateless part of the transfer: the offset, then the law's saturation
+                limit = g_umax if lp == 3 else u_max
+                if has_off[p]:
+                    offset_row(u, p, offset, has_off, decay)
+                    for i in range(3):
+                        u[p, i] = min(max(u[p, i], -limit), limit)
+                elif lp == 1:
+                    for i in range(3):
+                        u[p, i] = min(max(u[p, i], -limit), limit)
+            for i in range(3):
+                u_last[p, i] = u[p, i]
             wheel_row(x, u, p, lo + p, k, allocation, axes, phi_T, gamma, j_m, k_b, headroom, speed_max, v_max, dt,
-                      torque_mode, k_i, r_a, b_m, fail_j, fail_k, fail_stuck, e_hold, coast, x_next, tau_c, h0)
+                      command_torque or lp == 3, k_i, r_a, b_m, fail_j, fail_k, fail_stuck, e_hold, coast, x_next,
+                      tau_c, h0)
         if k % stride == 0:
             r = k // stride
             for p in range(m):
@@ -248,27 +328,10 @@ def _accumulate_row(acc, last_out, prev, p, e, k, n_steps, t, dt, after, n_after
 
 
 @njit(cache=True, parallel=True)
-def _chunks(bounds, law, n_steps, stride, dt, dt_ns, substeps, step_time,
-            q0, w0, x0, q_initial, q_final, inertia, inertia_inv,
-            kp, ki, kd, nf, af, u_max, angle_mode,
-            e_scale, de_scale, u_scale, fz_rules, v_uniform,
-            g_rules, g_vertices, g_scales,
-            allocation, axes, phi_T, gamma, j_m, k_b, headroom, speed_max, v_max, torque_mode, k_i, r_a, b_m,
-            fail_j, fail_k, fail_stuck, e_hold, coast, noisy, s_seeds, s_att, s_rate,
-            tau_constant, tau_step, step_ns,
-            o_q, o_w, o_qr, o_h, o_u, o_tc, o_te, o_ws, o_wa, o_we,
-            m_axis, m_y0, m_r, m_band, o_sum):
+def _chunks(bounds, args):
+    # the chunks of bounds on every thread; args are _chunk's arguments after (lo, hi)
     for c in prange(bounds.shape[0] - 1):
-        _chunk(law, bounds[c], bounds[c + 1], n_steps, stride, dt, dt_ns, substeps, step_time,
-               q0, w0, x0, q_initial, q_final, inertia, inertia_inv,
-               kp, ki, kd, nf, af, u_max, angle_mode,
-               e_scale, de_scale, u_scale, fz_rules, v_uniform,
-               g_rules, g_vertices, g_scales,
-               allocation, axes, phi_T, gamma, j_m, k_b, headroom, speed_max, v_max, torque_mode, k_i, r_a, b_m,
-               fail_j, fail_k, fail_stuck, e_hold, coast, noisy, s_seeds, s_att, s_rate,
-               tau_constant, tau_step, step_ns,
-               o_q, o_w, o_qr, o_h, o_u, o_tc, o_te, o_ws, o_wa, o_we,
-               m_axis, m_y0, m_r, m_band, o_sum)
+        _chunk(bounds[c], bounds[c + 1], *args)
 
 
 def _c(a, shape=None) -> np.ndarray:
@@ -281,9 +344,24 @@ TRAJECTORY_FIELDS = ("q_BN", "omega_BN_B", "q_RN", "h_wheels_B", "u_cmd", "tau_c
                      "wheel_angle", "wheel_effort")
 
 
+def _kinds(ctrl, laws: np.ndarray, swaps: dict, kept_steps: np.ndarray) -> list[str]:
+    """The command kind (``voltage``/``torque``) at each kept step; every episode's is the same."""
+    kind = ctrl.kind_of(str(laws[0]))
+    changes = {k: ctrl.kind_of(law) for k, law in sorted(swaps.items())}
+    out, at = [], kind
+    timeline = sorted(changes)
+    i = 0
+    for k in kept_steps.tolist():
+        while i < len(timeline) and timeline[i] <= k:
+            at = changes[timeline[i]]
+            i += 1
+        out.append(at)
+    return out
+
+
 def run_compiled(plant, wheels, dist, guide, ctrl, n_steps: int, dt: float, stride: int = 1, threads: int | None = None,
-                 chunk: int = 64, keep=TRAJECTORY_FIELDS, sums: tuple | None = None
-                 ) -> tuple[Trajectory | None, np.ndarray | None]:
+                 chunk: int = 64, keep=TRAJECTORY_FIELDS, sums: tuple | None = None, swaps: dict | None = None,
+                 laws=None) -> tuple[Trajectory | None, np.ndarray | None]:
     """Run built models (fresh, as the stepwise driver gets them) in the compiled loop.
 
     Parameters
@@ -304,12 +382,18 @@ def run_compiled(plant, wheels, dist, guide, ctrl, n_steps: int, dt: float, stri
     chunk : int
         Episodes per chunk.
     keep : collection of str
-        The :data:`TRAJECTORY_FIELDS` (and ``omega_RN_R``, zero for step
-        guidance) to keep; the others are None. Empty keeps no trajectory.
+        The :data:`TRAJECTORY_FIELDS` (and ``omega_RN_R``) to keep; the others
+        are None. Empty keeps no trajectory.
     sums : tuple, optional
         ``(axis, y0 (P,), r (P,), band)``: keep the running sums of
         :data:`SUMMARY_COLUMNS` for a step on that Euler axis from ``y0`` to
         ``r`` (rad) with a settling band of ``band`` times the step.
+    swaps : dict, optional
+        ``{step k: controller_type}``: swaps before the command of step k,
+        with the bank's bumpless transfer.
+    laws : sequence of str, optional
+        Each episode's ``controller_type`` (default ``ctrl.active`` for all);
+        all must command the same kind (volts or N m).
 
     Returns
     -------
@@ -321,15 +405,21 @@ def run_compiled(plant, wheels, dist, guide, ctrl, n_steps: int, dt: float, stri
     if unknown:
         raise ValueError(f"keep: unknown trajectory fields {sorted(unknown)}")
     P = plant.n_episodes
-    law = COMPILED_LAWS[ctrl.active]
+    swaps = dict(swaps or {})
+    laws = np.asarray([ctrl.active] * P if laws is None else laws, dtype=object)
+    law0 = np.array([COMPILED_LAWS[str(law)] for law in laws], dtype=np.int64)
+    sw = sorted(swaps.items())
+    sw_k = np.array([k for k, _ in sw], dtype=np.int64)
+    sw_law = np.array([COMPILED_LAWS[law] for _, law in sw], dtype=np.int64)
     kept = n_steps // stride + 1
     nw = wheels.assembly.n_wheels
     shape3 = (P, 3)
-    pid = ctrl.controllers["fuzzy_pid"].pid if law == 1 else ctrl.controllers["pid"]
-    pid.reset(P)
-    kp, ki, kd, nf, af = pid._kernel_gains()
+    pid = ctrl.controllers["pid"]
     fz = ctrl.controllers["fuzzy_pid"]
     ga = ctrl.controllers["ga_flc"]
+    geo = ctrl.controllers["geometric"]
+    pid.reset(P)
+    fz.pid.reset(P)
     asm = wheels.assembly
     mot = asm.motor
     v = dist.v
@@ -352,32 +442,48 @@ def run_compiled(plant, wheels, dist, guide, ctrl, n_steps: int, dt: float, stri
     size = max(1, min(int(chunk), -(-P // n_threads)))  # every thread gets work, chunks stay cache-sized
     bounds = np.unique(np.append(np.arange(0, P, size), P)).astype(np.int64)
     dt_ns = int(round(dt * 1e9))
+    g_k, g_l, g_j, g_rate, g_coeff, g_cp, g_gg, g_aero = geo.kernel_params(P)
+    head = (int(n_steps), int(stride), float(dt), dt_ns, int(plant.substeps), float(guide.step_time),
+            _c(plant.q0), _c(plant.omega0), np.ascontiguousarray(wheels.x), _c(guide.q_initial),
+            _c(guide.q_final), _c(guide.omega, shape3), _c(plant.inertia), _c(plant.inertia_inv),
+            law0, sw_k, sw_law, ctrl.command == "torque", float(fz.decay), float(pid.u_max), bool(pid.angle_mode),
+            *pid._kernel_gains(), *fz.pid._kernel_gains(),
+            _c(fz.e_scale, shape3), _c(fz.de_scale, shape3), _c(fz.u_scale, shape3),
+            np.ascontiguousarray(np.broadcast_to(fz.rules, (P, 7, 7))), UNIFORM_VERTICES,
+            np.ascontiguousarray(np.broadcast_to(ga.rules, (P, 7, 7))),
+            _c(ga.vertices, (P, 3, 7)), _c(ga.scales, shape3),
+            g_k, g_l, g_j, float(geo.u_max), g_rate, g_coeff, _c(g_cp), bool(g_gg), bool(g_aero),
+            asm.allocation, asm.axes_B, asm.phi_e, asm.gamma_e, mot.rotor_inertia, asm.k_b_e,
+            asm.headroom_e, mot.speed_max, mot.v_max, asm.k_i_e, asm.r_a_e,
+            mot.viscous_friction, *failure, asm.coast, ctrl.noisy, ctrl.sensor_seeds, ctrl.sensor_att_std,
+            ctrl.sensor_rate_std, tau_constant, tau_step, step_ns)
+    tail = (*out.values(), m_axis, m_y0, m_r, m_band, o_sum)
+    # disturbance noise is drawn in numpy (the stepwise driver's streams) for a group of episodes at a time,
+    # so its memory is that of the group, not of the run
+    groups = [(0, P)]
+    if "noise" in models:
+        group = max(size * n_threads, 256)
+        groups = [(g, min(g + group, P)) for g in range(0, P, group)]
     if threads is not None:
         numba.set_num_threads(n_threads)
     try:
-        rest = (int(n_steps), int(stride), float(dt), dt_ns, int(plant.substeps), float(guide.step_time),
-                _c(plant.q0), _c(plant.omega0), np.ascontiguousarray(wheels.x), _c(guide.q_initial),
-                _c(guide.q_final), _c(plant.inertia), _c(plant.inertia_inv),
-                kp, ki, kd, nf, af, float(ga.u_max if law == 2 else pid.u_max), bool(pid.angle_mode),
-                _c(fz.e_scale, shape3), _c(fz.de_scale, shape3), _c(fz.u_scale, shape3),
-                np.ascontiguousarray(np.broadcast_to(fz.rules, (P, 7, 7))), UNIFORM_VERTICES,
-                np.ascontiguousarray(np.broadcast_to(ga.rules, (P, 7, 7))),
-                _c(ga.vertices, (P, 3, 7)), _c(ga.scales, shape3),
-                asm.allocation, asm.axes_B, asm.phi_e, asm.gamma_e, mot.rotor_inertia, asm.k_b_e,
-                asm.headroom_e, mot.speed_max, mot.v_max, ctrl.kind == "torque", asm.k_i_e, asm.r_a_e,
-                mot.viscous_friction, *failure, asm.coast, ctrl.noisy, ctrl.sensor_seeds, ctrl.sensor_att_std,
-                ctrl.sensor_rate_std, tau_constant, tau_step, step_ns, *out.values(),
-                m_axis, m_y0, m_r, m_band, o_sum)
-        if n_threads > 1 and bounds.shape[0] > 2:
-            _chunks(bounds, law, *rest)
-        else:  # one thread: the chunks one after another, no thread launch
-            for lo, hi in zip(bounds[:-1].tolist(), bounds[1:].tolist(), strict=True):
-                _chunk(law, lo, hi, *rest)
+        for g_lo, g_hi in groups:
+            noise = (dist.noise_torque(g_lo, g_hi, n_steps) if "noise" in models else np.zeros((0, 0, 3)))
+            args = (*head, noise, g_lo, *tail)
+            b = bounds[(bounds >= g_lo) & (bounds <= g_hi)]
+            b = np.unique(np.concatenate(([g_lo], b, [g_hi]))).astype(np.int64)
+            if n_threads > 1 and b.shape[0] > 2:
+                _chunks(b, args)
+            else:  # one thread: the chunks one after another, no thread launch
+                for lo, hi in zip(b[:-1].tolist(), b[1:].tolist(), strict=True):
+                    _chunk(lo, hi, *args)
     finally:
         numba.set_num_threads(previous)
     trajectory = None
     if keep:
         got = {f: (a if f in keep else None) for f, a in out.items()}
-        trajectory = Trajectory(t=np.arange(0, n_steps + 1, stride) * dt, kind=[ctrl.kind] * kept,
-                                omega_RN_R=np.zeros((P, kept, 3)) if "omega_RN_R" in keep else None, **got)
+        steps = np.arange(0, n_steps + 1, stride)
+        omega_rn = np.ascontiguousarray(np.broadcast_to(_c(guide.omega, shape3)[:, None, :], (P, kept, 3)))
+        trajectory = Trajectory(t=steps * dt, kind=_kinds(ctrl, laws, swaps, steps),
+                                omega_RN_R=omega_rn if "omega_RN_R" in keep else None, **got)
     return trajectory, (None if sums is None else o_sum)

@@ -464,10 +464,9 @@ class Geometric(_Stateless):
             tau = tau - tau_env_B
         return tau
 
-    def _law(self, inp: StepInput) -> np.ndarray:
-        """The compiled law (:func:`attitude_sil.core.kernels.geometric_step`), saturated;
-        :meth:`torque_terms` + :meth:`environment_torque` is its numpy reference."""
-        n = inp.q_BN.shape[0]
+    def kernel_params(self, n: int) -> tuple:
+        """The kernel's arguments after ``dt``, for n episodes: (k, l (n, 3), inertia (n, 3, 3), orbit rate,
+        0.5 rho C_d A V^2, cp_offset (3,), use gravity gradient, use aerodynamic); cached per n."""
         if self._cache is None or self._cache[0].shape[0] != n:
             env = self.environment or {"models": [], "rate": 0.0, "speed": 0.0, "aero.density": 0.0,
                                        "aero.drag_coefficient": 0.0, "aero.area": 0.0,
@@ -477,7 +476,13 @@ class Geometric(_Stateless):
                            np.ascontiguousarray(np.broadcast_to(self.inertia, (n, 3, 3))), float(env["rate"]),
                            float(coeff), np.asarray(env["aero.cp_offset"], dtype=float),
                            "gravity_gradient" in env["models"], "aerodynamic" in env["models"])
-        k, l, J, rate, coeff, cp, use_gg, use_aero = self._cache  # noqa: E741
+        return self._cache
+
+    def _law(self, inp: StepInput) -> np.ndarray:
+        """The compiled law (:func:`attitude_sil.core.kernels.geometric_step`), saturated;
+        :meth:`torque_terms` + :meth:`environment_torque` is its numpy reference."""
+        n = inp.q_BN.shape[0]
+        k, l, J, rate, coeff, cp, use_gg, use_aero = self.kernel_params(n)  # noqa: E741
         c = np.ascontiguousarray
         has_prev = self.w_d_prev is not None
         prev = self.w_d_prev if has_prev else np.zeros((n, 3))

@@ -144,6 +144,19 @@ class DisturbanceModel:
         self._at += n
         return out
 
+    def noise_torque(self, lo: int, hi: int, n_steps: int) -> np.ndarray:
+        """The ``noise`` model's torque of steps 0..K for episodes ``lo..hi-1``, (hi - lo, K + 1, 3) N m.
+
+        Drawn from fresh streams of the episodes' seeds: the numbers
+        :meth:`torque` adds step by step after a :meth:`reset` (the compiled
+        driver adds them in the same place of the sum).
+        """
+        n = self.samples_per_step
+        std = np.broadcast_to(self.noise_std, (self.n_episodes, 3))[lo:hi, None, :]
+        draws = np.stack([np.random.Generator(np.random.PCG64(s)).standard_normal(((n_steps + 1) * n, 3))
+                          for s in self.seeds[lo:hi]])
+        return np.add.reduce(draws.reshape(hi - lo, n_steps + 1, n, 3), axis=2) / n * std
+
     def _lvlh_to_body(self, q_BN: np.ndarray, t_ns: int) -> np.ndarray:
         q_LN = lvlh_attitude(t_ns * 1e-9, self.q_LN0, self.rate)
         q_BL = quat_multiply(quat_conjugate(np.broadcast_to(q_LN, q_BN.shape)), q_BN)

@@ -21,8 +21,8 @@ import numpy as np
 from attitude_sil.errors import ScenarioError
 
 from .actuators import SpeedLoopWheels, TorqueActuator
-from .batch import COMPILED_DISTURBANCES, COMPILED_LAWS, TRAJECTORY_FIELDS, run_compiled
-from .controllers import OUTPUT_KIND, ControllerBank
+from .batch import COMPILED_DISTURBANCES, TRAJECTORY_FIELDS, run_compiled
+from .controllers import CONTROLLER_TYPES, OUTPUT_KIND, ControllerBank
 from .disturbance import DisturbanceModel, lvlh_attitude, orbit_rate
 from .linear import LinearizedPlant
 from .metrics import step_summary, summarize
@@ -408,10 +408,6 @@ def compiled_plan(plant, wheels, dist: DisturbanceModel, guide: Guidance, ctrl: 
     extra = sorted(set(dist.models) - COMPILED_DISTURBANCES)
     if extra:
         return f"disturbance {', '.join(extra)}"
-    if swaps:
-        return "scheduled swaps"
-    if ctrl.active not in COMPILED_LAWS:
-        return f"controller {ctrl.active}"
     return ""
 
 
@@ -454,8 +450,10 @@ def simulate(
         Per-episode inertia, (P, 3) principal values or (P, 3, 3).
     seeds : sequence of int, optional
         Per-episode noise seeds.
-    controller : str, optional
-        ``controller_type`` to start with (default: the scenario's).
+    controller : str or sequence of P str, optional
+        ``controller_type`` to start with (default: the scenario's), or one
+        per episode (one command kind; the compiled driver runs them, and
+        episode p gives what a batch of its type alone gives).
     schedule : list of (step, controller_type), optional
         Swaps applied before the command of that step (default: the
         scenario's ``schedule.*``).
@@ -538,7 +536,7 @@ def simulate_summary(
         y0 = np.broadcast_to(y0, (n_episodes,))
         end, _ = guide.setpoint(run.K * int(round(run.dt * 1e9)) * 1e-9)
         r = np.broadcast_to(euler_from_quat(end)[..., axis], (n_episodes,))
-        _, sums = run_compiled(*run.models, run.K, run.dt, threads=threads, keep=(),
+        _, sums = run_compiled(*run.models, run.K, run.dt, threads=threads, keep=(), swaps=run.swaps, laws=run.laws,
                                sums=(axis, y0, r, values["metrics.settling_band"]))
         return step_summary(sums, values, r - y0)
     return summarize(run.trajectory(threads), values, step_time=scn.param("guidance", "step_time"))
@@ -566,6 +564,21 @@ def split_episode_values(episode_values: dict | None) -> dict[str, dict]:
     return out
 
 
+def _episode_laws(controller, n_episodes: int, ctrl: ControllerBank) -> list[str]:
+    """Validate a controller_type per episode: P known names of one command kind."""
+    laws = [str(c) for c in controller]
+    if len(laws) != n_episodes:
+        raise ScenarioError(f"controller: {len(laws)} controller types for {n_episodes} episodes")
+    unknown = sorted(set(laws) - set(CONTROLLER_TYPES))
+    if unknown:
+        raise ScenarioError(f"controller: unknown controller_type {unknown[0]!r} (known: {', '.join(CONTROLLER_TYPES)})")
+    kinds = {ctrl.kind_of(law) for law in laws}
+    if len(kinds) > 1:
+        raise ScenarioError(f"controller: the episodes' controller types command both volts and torque "
+                            f"({', '.join(sorted(set(laws)))}); one batch takes one command kind")
+    return laws
+
+
 class _Run:
     """The models of one :func:`simulate` call and the driver that will run them."""
 
@@ -586,6 +599,12 @@ class _Run:
                                  noise_power=dv.get("noise.power"))
         guide = build_guidance(scn, P, gv.get("setpoint_rpy_deg", setpoints_rpy_deg))
         ctrl = build_controller(scn, P, params={**(controller_params or {}), **ev["controller"]} or None)
+        self.laws = None  # per-episode controller types (compiled driver), or None: ctrl.active for all
+        if controller is not None and not isinstance(controller, str):
+            self.laws = _episode_laws(controller, P, ctrl)
+            controller = self.laws[0]
+            if len(set(self.laws)) == 1:
+                self.laws = None
         if controller is not None:
             ctrl.active = controller
         self.models = (plant, wheels, dist, guide, ctrl)
@@ -596,11 +615,16 @@ class _Run:
             if driver == "compiled" and why:
                 raise ScenarioError(f"the compiled driver does not run this scenario ({why}); use driver='auto'")
             self.compiled = not why
+        if self.laws is not None and not self.compiled:
+            why = "driver='stepwise'" if driver == "stepwise" else why
+            raise ScenarioError(f"a controller_type per episode runs in the compiled driver only, and this run "
+                                f"does not fit it ({why})")
 
     def trajectory(self, threads: int | None, stride: int = 1, keep=KEEPABLE) -> Trajectory:
         """Run the models in the chosen driver; the arrays not in ``keep`` are None."""
         if self.compiled:
-            tr, _ = run_compiled(*self.models, self.K, self.dt, stride=stride, threads=threads, keep=keep)
+            tr, _ = run_compiled(*self.models, self.K, self.dt, stride=stride, threads=threads, keep=keep,
+                                 swaps=self.swaps, laws=self.laws)
             return tr
         tr = _simulate_stepwise(*self.models, self.swaps, self.K, self.dt)
         tr = tr if stride == 1 else tr.every(stride)
