@@ -45,7 +45,7 @@ def _per_episode():
                 [rng.uniform(40, 70, P), rng.uniform(30, 60, P), rng.uniform(1.5, 2.5, P)])}
 
 
-@pytest.mark.parametrize("law", ["pid", "fuzzy_pid", "ga_flc"])
+@pytest.mark.parametrize("law", ["pid", "fuzzy_pid", "ga_flc", "geometric"])
 def test_compiled_equals_stepwise_for_each_law(hst, law):
     params = {k: v for k, v in _per_episode().items() if k.startswith(law.split("_")[0])}
     inertia = np.array([[31.046, 77.217, 78.754]]) * np.linspace(0.9, 1.1, P)[:, None]
@@ -79,12 +79,78 @@ def test_runs_outside_the_compiled_set_fall_back_or_are_refused_by_name(hst):
     _assert_same(simulate(flexible, 1, duration=1.0), simulate(flexible, 1, duration=1.0, driver="stepwise"))
     with pytest.raises(ScenarioError, match="FlexibleAxisPlant"):
         simulate(flexible, 1, duration=1.0, driver="compiled")
-    with pytest.raises(ScenarioError, match="controller geometric"):
-        simulate(hst, 1, duration=1.0, controller="geometric", driver="compiled")
-    with pytest.raises(ScenarioError, match="scheduled swaps"):
-        simulate(hst, 1, duration=1.0, schedule=[(10, "fuzzy_pid")], driver="compiled")
+    hawaiisat = load_scenario(CONFIG / "hawaiisat_lvlh.yaml")
+    with pytest.raises(ScenarioError, match="TorqueActuator"):
+        simulate(hawaiisat, 1, duration=1.0, driver="compiled")
+    # a controller_type per episode: compiled only, P names of one command kind
+    with pytest.raises(ScenarioError, match="compiled driver only.*stepwise"):
+        simulate(hst, 2, duration=1.0, controller=["pid", "ga_flc"], driver="stepwise")
+    with pytest.raises(ScenarioError, match="compiled driver only.*FlexibleAxisPlant"):
+        simulate(flexible, 2, duration=1.0, controller=["pid", "fuzzy_pid"])
+    with pytest.raises(ScenarioError, match="both volts and torque"):
+        simulate(hst, 2, duration=1.0, controller=["pid", "geometric"])
+    with pytest.raises(ScenarioError, match="3 controller types for 2 episodes"):
+        simulate(hst, 2, duration=1.0, controller=["pid"] * 3)
+    with pytest.raises(ScenarioError, match="unknown controller_type 'lqr'"):
+        simulate(hst, 2, duration=1.0, controller=["pid", "lqr"])
     with pytest.raises(ScenarioError, match="driver must be one of"):
         simulate(hst, 1, driver="fast")
+
+
+LAWS = ("pid", "fuzzy_pid", "ga_flc", "geometric")
+
+
+@pytest.fixture(scope="module")
+def measured(hst):
+    # the laws see noisy measurements, so the transfer's error rate comes from noisy rates too
+    return hst.with_values("controller", **{"sensor_noise.attitude_std_deg": 0.002,
+                                            "sensor_noise.rate_std_deg_s": 0.001})
+
+
+@pytest.mark.parametrize("old", LAWS)
+@pytest.mark.parametrize("new", LAWS)
+def test_swaps_with_bumpless_transfer_are_the_stepwise_drivers_bit_for_bit(measured, old, new):
+    # a swap mid-transient and the swap back: the bank's reset and bumpless transfer per episode (the PID
+    # family's state, the fuzzy PID's remainder, the stateless laws' decaying offsets) in compiled code
+    kw = dict(duration=3.0, controller=old, schedule=[(80, new), (200, old)],
+              controller_params={k: v[:3] for k, v in _per_episode().items()})
+    compiled = simulate(measured, 3, driver="compiled", **kw)
+    _assert_same(simulate(measured, 3, driver="stepwise", **kw), compiled)
+    if old != new:  # the swap took effect: without it the commands after it differ
+        alone = simulate(measured, 3, duration=3.0, controller=old,
+                         controller_params=kw["controller_params"], schedule=[])
+        assert np.max(np.abs(compiled.u_cmd[:, 81:200] - alone.u_cmd[:, 81:200])) > 1e-6
+        assert compiled.kind[80] == ("torque" if new == "geometric" else "voltage")
+
+
+def test_a_controller_type_per_episode_gives_each_episode_its_own_laws_run(measured):
+    # episode p of a mixed batch is, bit for bit, episode p of a batch that runs its type for everyone
+    # (and such a batch equals the stepwise driver: the tests above); through a swap too
+    laws = ["pid", "ga_flc", "fuzzy_pid", "ga_flc", "pid"]
+    kw = dict(duration=2.0, schedule=[(120, "fuzzy_pid")], threads=2)
+    mixed = simulate(measured, 5, controller=laws, driver="compiled", **kw)
+    for law in set(laws):
+        alone = simulate(measured, 5, controller=law, **kw)
+        rows = [p for p, name in enumerate(laws) if name == law]
+        for f in FIELDS:
+            assert np.array_equal(getattr(mixed, f)[rows], getattr(alone, f)[rows]), (law, f)
+    assert np.ptp(mixed.u_cmd[:, 60, 0]) > 0
+    summary = simulate_summary(measured, 5, controller=laws, **kw)
+    for law in set(laws):
+        rows = [p for p, name in enumerate(laws) if name == law]
+        alone = simulate_summary(measured, 5, controller=law, **kw)
+        assert np.array_equal(summary.metrics["iae"][rows], alone.metrics["iae"][rows])
+
+
+def test_disturbance_noise_is_the_stepwise_streams_in_any_grouping(hst):
+    # noise is drawn per group of episodes (256 and more); 300 episodes span two groups, on two threads
+    scn = hst.with_values("disturbance", models=["constant", "step", "noise"])
+    kw = dict(duration=0.3, seeds=np.arange(300) * 7 + 1)
+    compiled = simulate(scn, 300, driver="compiled", threads=2, **kw)
+    _assert_same(simulate(scn, 300, driver="stepwise", **kw), compiled)
+    _assert_same(simulate(scn, 300, driver="compiled", threads=1, **kw), compiled)
+    quiet = simulate(hst, 300, driver="compiled", duration=0.3)
+    assert np.min(np.abs(compiled.tau_ext_B[:, 1:, 0] - quiet.tau_ext_B[:, 1:, 0])) > 0  # the noise is there
 
 
 def _assert_same_summary(a, b, rtol=1e-12):

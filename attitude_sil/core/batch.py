@@ -7,26 +7,32 @@ once per step from Python. This module is the third caller: one compiled loop
 over every step of a chunk of episodes, calling the *same* kernels with the
 *same* arrays, so its numbers are the stepwise driver's to the last bit (and
 the graph's, which the graph == batch tests check at 1e-9). Chunks of episodes
-run on every core (``numba.prange``); an episode's arithmetic does not depend
-on which chunk or thread ran it, so the result is identical for any number of
-threads.
+run on every core (a thread each: the compiled loop runs without the GIL); an
+episode's arithmetic does not depend on which chunk or thread ran it, so the
+result is identical for any number of threads.
 
 What the compiled driver covers (the tuning and Monte Carlo workhorse: the HST
 and CubeSat presets and their kind): the ``rigid_body`` plant, the
-``reaction_wheels`` actuator, ``step`` guidance, the ``constant`` and ``step``
-disturbance models (or none), and the ``pid``, ``fuzzy_pid`` and ``ga_flc``
-laws without a swap, with per-episode motor constants, wheel failures and
-sensor noise (the Monte Carlo's dispersions; the same kernels as the nodes').
-:func:`attitude_sil.core.engine.compiled_plan` says
-whether a run fits and, if not, why; everything else runs in the stepwise
-driver, which handles every model.
+``reaction_wheels`` actuator, ``step`` guidance, the ``constant``, ``step``
+and ``noise`` disturbance models (or none), and every law (``pid``,
+``fuzzy_pid``, ``ga_flc``, ``geometric``): one per episode if asked, with
+scheduled swaps and the controller bank's bumpless transfer, per-episode gains,
+motor constants, wheel failures and sensor noise (the Monte Carlo's
+dispersions; the same kernels as the nodes'). Noise torques are drawn in numpy
+from the stepwise driver's streams, a group of episodes at a time.
+:func:`attitude_sil.core.engine.compiled_plan` says whether a run fits and, if
+not, why; everything else (the flexible and pitch plants, the torque actuator,
+LVLH guidance, the orbit disturbances) runs in the stepwise driver, which
+handles every model.
 """
 
 from __future__ import annotations
 
+from concurrent.futures import ThreadPoolExecutor
+
 import numba
 import numpy as np
-from numba import njit, prange
+from numba import njit
 
 from .fuzzy import UNIFORM_VERTICES
 from .kernels import (error_and_rate_row, fuzzy_pid_bumpless_row, fuzzy_pid_row, ga_flc_row, geometric_row,
@@ -82,7 +88,7 @@ def _reset_row(law, p, integral, filt, has_prev_f, has_prev_g, has_off):
     has_off[p] = False
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _chunk(lo, hi, n_steps, stride, dt, dt_ns, substeps, step_time,
            q0, w0, x0, q_initial, q_final, omega_ref, inertia, inertia_inv,
            law0, sw_k, sw_law, command_torque, decay, u_max, angle_mode,
@@ -327,16 +333,29 @@ def _accumulate_row(acc, last_out, prev, p, e, k, n_steps, t, dt, after, n_after
     prev[p, 0], prev[p, 1], prev[p, 2] = f, ta, err
 
 
-@njit(cache=True, parallel=True)
-def _chunks(bounds, args):
-    # the chunks of bounds on every thread; args are _chunk's arguments after (lo, hi)
-    for c in prange(bounds.shape[0] - 1):
-        _chunk(bounds[c], bounds[c + 1], *args)
+#: threads of the compiled driver: one per core (numba's count, which NUMBA_NUM_THREADS sets)
+_POOL_SIZE = max(1, int(numba.config.NUMBA_NUM_THREADS))
+_POOL: ThreadPoolExecutor | None = None
+
+
+def _pool() -> ThreadPoolExecutor:
+    global _POOL
+    if _POOL is None:
+        _POOL = ThreadPoolExecutor(_POOL_SIZE, thread_name_prefix="attitude_sil-batch")
+    return _POOL
 
 
 def _c(a, shape=None) -> np.ndarray:
     a = np.asarray(a, dtype=float)
     return np.ascontiguousarray(a if shape is None else np.broadcast_to(a, shape))
+
+
+def _writable(a):
+    # one numba signature per argument: a read-only or strided array (a broadcast view) would compile the
+    # whole loop again for its type, so such arrays go in as contiguous writable copies
+    if isinstance(a, np.ndarray) and not (a.flags.writeable and a.flags.c_contiguous):
+        return np.array(a, order="C")
+    return a
 
 
 #: the Trajectory arrays the compiled driver can keep (``keep``), in its output order
@@ -437,8 +456,7 @@ def run_compiled(plant, wheels, dist, guide, ctrl, n_steps: int, dt: float, stri
         m_axis, m_y0, m_r, m_band = int(sums[0]), _c(sums[1], (P,)), _c(sums[2], (P,)), float(sums[3])
         o_sum = np.empty((P, len(SUMMARY_COLUMNS)))
     failure = wheels.failure_arrays() if wheels.failure is not None else no_failure()
-    previous = numba.get_num_threads()
-    n_threads = previous if threads is None else max(1, min(int(threads), numba.config.NUMBA_NUM_THREADS))
+    n_threads = _POOL_SIZE if threads is None else max(1, min(int(threads), _POOL_SIZE))
     size = max(1, min(int(chunk), -(-P // n_threads)))  # every thread gets work, chunks stay cache-sized
     bounds = np.unique(np.append(np.arange(0, P, size), P)).astype(np.int64)
     dt_ns = int(round(dt * 1e9))
@@ -457,6 +475,7 @@ def run_compiled(plant, wheels, dist, guide, ctrl, n_steps: int, dt: float, stri
             asm.headroom_e, mot.speed_max, mot.v_max, asm.k_i_e, asm.r_a_e,
             mot.viscous_friction, *failure, asm.coast, ctrl.noisy, ctrl.sensor_seeds, ctrl.sensor_att_std,
             ctrl.sensor_rate_std, tau_constant, tau_step, step_ns)
+    head = tuple(_writable(a) for a in head)
     tail = (*out.values(), m_axis, m_y0, m_r, m_band, o_sum)
     # disturbance noise is drawn in numpy (the stepwise driver's streams) for a group of episodes at a time,
     # so its memory is that of the group, not of the run
@@ -464,21 +483,17 @@ def run_compiled(plant, wheels, dist, guide, ctrl, n_steps: int, dt: float, stri
     if "noise" in models:
         group = max(size * n_threads, 256)
         groups = [(g, min(g + group, P)) for g in range(0, P, group)]
-    if threads is not None:
-        numba.set_num_threads(n_threads)
-    try:
-        for g_lo, g_hi in groups:
-            noise = (dist.noise_torque(g_lo, g_hi, n_steps) if "noise" in models else np.zeros((0, 0, 3)))
-            args = (*head, noise, g_lo, *tail)
-            b = bounds[(bounds >= g_lo) & (bounds <= g_hi)]
-            b = np.unique(np.concatenate(([g_lo], b, [g_hi]))).astype(np.int64)
-            if n_threads > 1 and b.shape[0] > 2:
-                _chunks(b, args)
-            else:  # one thread: the chunks one after another, no thread launch
-                for lo, hi in zip(b[:-1].tolist(), b[1:].tolist(), strict=True):
-                    _chunk(lo, hi, *args)
-    finally:
-        numba.set_num_threads(previous)
+    for g_lo, g_hi in groups:
+        noise = (dist.noise_torque(g_lo, g_hi, n_steps) if "noise" in models else np.zeros((0, 0, 3)))
+        args = (*head, noise, g_lo, *tail)
+        b = bounds[(bounds >= g_lo) & (bounds <= g_hi)]
+        b = np.unique(np.concatenate(([g_lo], b, [g_hi]))).astype(np.int64).tolist()
+        spans = list(zip(b[:-1], b[1:], strict=True))
+        if n_threads > 1 and len(spans) > 1:  # the chunks on threads: _chunk runs without the GIL
+            list(_pool().map(lambda span: _chunk(span[0], span[1], *args), spans))
+        else:  # one thread: the chunks one after another, no thread hand-off
+            for lo, hi in spans:
+                _chunk(lo, hi, *args)
     trajectory = None
     if keep:
         got = {f: (a if f in keep else None) for f, a in out.items()}
