@@ -52,6 +52,7 @@ def main() -> None:
             print(f"{label:<32} real-time factor {m['real_time_factor']:7.1f}x  (wall {m['wall_time_s']:.2f} s, "
                   f"recording on)")
     ceiling(scn)
+    newly_compiled(scn)
     costs = {p: controller_cost(scn, p) for p in (1, 50)}
     print("controller cost, us per step per episode (ratio to pid at the same P):")
     for kind in CONTROLLER_TYPES:
@@ -70,6 +71,27 @@ def _best(fn, reps: int) -> float:
 
 #: what the fused loop keeps per step: the engine is asked for the same arrays for the equal-work column
 FUSED_KEEPS = ("q_BN", "omega_BN_B", "u_cmd", "tau_c_B")
+
+
+def newly_compiled(scn, n_episodes: int = 50) -> None:
+    """Runs that took the stepwise driver until the compiled loop ran them: both drivers, same run."""
+    noisy = scn.with_values("disturbance", models=["noise"])
+    cases = (("geometric law", scn, dict(controller="geometric")),
+             ("swaps pid -> ga_flc -> fuzzy_pid", scn, dict(schedule=[(500, "ga_flc"), (1000, "fuzzy_pid")])),
+             ("a law per episode", scn, dict(controller=["pid", "fuzzy_pid", "ga_flc"] * (n_episodes // 3) + ["pid"]
+                                             * (n_episodes % 3))),
+             ("disturbance noise", noisy, dict()))
+    print(f"runs the compiled loop took over (P = {n_episodes}, both cores), simulated s per wall s:")
+    for label, s, kw in cases:
+        compiled = _best(lambda s=s, kw=kw: simulate(s, n_episodes, **kw), 3)
+        if isinstance(kw.get("controller"), list):  # the stepwise driver runs one law per batch: one per type
+            stepwise = sum(_best(lambda s=s, law=law: simulate(s, n_episodes, controller=law, driver="stepwise"), 1)
+                           for law in set(kw["controller"]))
+        else:
+            stepwise = _best(lambda s=s, kw=kw: simulate(s, n_episodes, driver="stepwise", **kw), 1)
+        work = n_episodes * scn.duration
+        print(f"  {label:<34} compiled {work / compiled:9,.0f}   stepwise {work / stepwise:7,.0f}   "
+              f"({stepwise / compiled:5.1f}x)")
 
 
 def ceiling(scn) -> None:

@@ -365,17 +365,12 @@ TRAJECTORY_FIELDS = ("q_BN", "omega_BN_B", "q_RN", "h_wheels_B", "u_cmd", "tau_c
 
 def _kinds(ctrl, laws: np.ndarray, swaps: dict, kept_steps: np.ndarray) -> list[str]:
     """The command kind (``voltage``/``torque``) at each kept step; every episode's is the same."""
-    kind = ctrl.kind_of(str(laws[0]))
-    changes = {k: ctrl.kind_of(law) for k, law in sorted(swaps.items())}
-    out, at = [], kind
-    timeline = sorted(changes)
-    i = 0
-    for k in kept_steps.tolist():
-        while i < len(timeline) and timeline[i] <= k:
-            at = changes[timeline[i]]
-            i += 1
-        out.append(at)
-    return out
+    first = ctrl.kind_of(str(laws[0]))
+    if not swaps:
+        return [first] * len(kept_steps)
+    at = sorted(swaps)
+    kinds = np.array([first] + [ctrl.kind_of(swaps[k]) for k in at], dtype=object)
+    return kinds[np.searchsorted(np.array(at), kept_steps, side="right")].tolist()
 
 
 def run_compiled(plant, wheels, dist, guide, ctrl, n_steps: int, dt: float, stride: int = 1, threads: int | None = None,
