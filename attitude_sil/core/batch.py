@@ -35,8 +35,19 @@ import numpy as np
 from numba import njit
 
 from .fuzzy import UNIFORM_VERTICES
-from .kernels import (error_and_rate_row, fuzzy_pid_bumpless_row, fuzzy_pid_row, ga_flc_row, geometric_row,
-                      measure_row, offset_row, pid_bumpless_row, pid_row, rk4_body_into, wheel_row)
+from .kernels import (
+    error_and_rate_row,
+    fuzzy_pid_bumpless_row,
+    fuzzy_pid_row,
+    ga_flc_row,
+    geometric_row,
+    measure_row,
+    offset_row,
+    pid_bumpless_row,
+    pid_row,
+    rk4_body_into,
+    wheel_row,
+)
 from .trajectory import Trajectory
 from .wheels import no_failure
 
@@ -485,7 +496,7 @@ def run_compiled(plant, wheels, dist, guide, ctrl, n_steps: int, dt: float, stri
         b = np.unique(np.concatenate(([g_lo], b, [g_hi]))).astype(np.int64).tolist()
         spans = list(zip(b[:-1], b[1:], strict=True))
         if n_threads > 1 and len(spans) > 1:  # the chunks on threads: _chunk runs without the GIL
-            list(_pool().map(lambda span: _chunk(span[0], span[1], *args), spans))
+            list(_pool().map(lambda span, a=args: _chunk(span[0], span[1], *a), spans))
         else:  # one thread: the chunks one after another, no thread hand-off
             for lo, hi in spans:
                 _chunk(lo, hi, *args)

@@ -26,8 +26,16 @@ from attitude_sil.errors import ScenarioError
 
 from .disturbance import aerodynamic_torque, gravity_gradient_torque, orbit_rate
 from .fuzzy import FUZZY_PID_DEFAULT_RULES, UNIFORM_VERTICES, vertices_from_ratios
-from .kernels import (apply_offsets, fuzzy_pid_bumpless, fuzzy_pid_step, ga_flc_step, geometric_step, measure,
-                      pid_bumpless, pid_step)
+from .kernels import (
+    apply_offsets,
+    fuzzy_pid_bumpless,
+    fuzzy_pid_step,
+    ga_flc_step,
+    geometric_step,
+    measure,
+    pid_bumpless,
+    pid_step,
+)
 from .quaternion import cross, error_vector, quat_error, quat_to_dcm
 
 __all__ = [

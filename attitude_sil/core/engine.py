@@ -571,7 +571,8 @@ def _episode_laws(controller, n_episodes: int, ctrl: ControllerBank) -> list[str
         raise ScenarioError(f"controller: {len(laws)} controller types for {n_episodes} episodes")
     unknown = sorted(set(laws) - set(CONTROLLER_TYPES))
     if unknown:
-        raise ScenarioError(f"controller: unknown controller_type {unknown[0]!r} (known: {', '.join(CONTROLLER_TYPES)})")
+        known = ", ".join(CONTROLLER_TYPES)
+        raise ScenarioError(f"controller: unknown controller_type {unknown[0]!r} (known: {known})")
     kinds = {ctrl.kind_of(law) for law in laws}
     if len(kinds) > 1:
         raise ScenarioError(f"controller: the episodes' controller types command both volts and torque "
