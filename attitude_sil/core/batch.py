@@ -467,13 +467,14 @@ def run_compiled(plant, wheels, dist, guide, ctrl, n_steps: int, dt: float, stri
     bounds = np.unique(np.append(np.arange(0, P, size), P)).astype(np.int64)
     dt_ns = int(round(dt * 1e9))
     g_k, g_l, g_j, g_rate, g_coeff, g_cp, g_gg, g_aero = geo.kernel_params(P)
+    omega_ref = _c(guide.omega, shape3)
     head = (int(n_steps), int(stride), float(dt), dt_ns, int(plant.substeps), float(guide.step_time),
             _c(plant.q0), _c(plant.omega0), np.ascontiguousarray(wheels.x), _c(guide.q_initial),
-            _c(guide.q_final), _c(guide.omega, shape3), _c(plant.inertia), _c(plant.inertia_inv),
+            _c(guide.q_final), omega_ref, _c(plant.inertia), _c(plant.inertia_inv),
             law0, sw_k, sw_law, ctrl.command == "torque", float(fz.decay), float(pid.u_max), bool(pid.angle_mode),
             *pid._kernel_gains(), *fz.pid._kernel_gains(),
             _c(fz.e_scale, shape3), _c(fz.de_scale, shape3), _c(fz.u_scale, shape3),
-            np.ascontiguousarray(np.broadcast_to(fz.rules, (P, 7, 7))), UNIFORM_VERTICES,
+            np.ascontiguousarray(np.broadcast_to(fz.rules, (P, 7, 7))), UNIFORM_VERTICES.reshape(1, 1, 7),
             np.ascontiguousarray(np.broadcast_to(ga.rules, (P, 7, 7))),
             _c(ga.vertices, (P, 3, 7)), _c(ga.scales, shape3),
             g_k, g_l, g_j, float(geo.u_max), g_rate, g_coeff, _c(g_cp), bool(g_gg), bool(g_aero),
@@ -504,7 +505,7 @@ def run_compiled(plant, wheels, dist, guide, ctrl, n_steps: int, dt: float, stri
     if keep:
         got = {f: (a if f in keep else None) for f, a in out.items()}
         steps = np.arange(0, n_steps + 1, stride)
-        omega_rn = np.ascontiguousarray(np.broadcast_to(_c(guide.omega, shape3)[:, None, :], (P, kept, 3)))
+        omega_rn = np.ascontiguousarray(np.broadcast_to(omega_ref[:, None, :], (P, kept, 3)))
         trajectory = Trajectory(t=steps * dt, kind=_kinds(ctrl, laws, swaps, steps),
                                 omega_RN_R=omega_rn if "omega_RN_R" in keep else None, **got)
     return trajectory, (None if sums is None else o_sum)

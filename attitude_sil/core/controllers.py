@@ -36,7 +36,7 @@ from .kernels import (
     pid_bumpless,
     pid_step,
 )
-from .quaternion import cross, error_vector, quat_error, quat_to_dcm
+from .quaternion import cross, error_vector, quat_to_dcm
 
 __all__ = [
     "CONTROLLER_TYPES",
@@ -102,25 +102,6 @@ class StepInput:
         return (c(self.q_BN, dtype=float), c(self.omega_BN_B, dtype=float), c(self.q_RN, dtype=float),
                 c(self.omega_RN_R, dtype=float))
 
-    def error(self, angle_mode: bool) -> np.ndarray:
-        """The error the PID family acts on: e, or 2 asin(e) per axis in angle mode."""
-        return 2.0 * np.arcsin(np.clip(self.e, -1.0, 1.0)) if angle_mode else self.e
-
-    def error_rate_of(self, angle_mode: bool) -> np.ndarray:
-        """Time derivative of :meth:`error`, (P, 3)."""
-        rate = self.error_rate()
-        return 2.0 * rate / np.sqrt(np.maximum(1.0 - self.e**2, 1e-12)) if angle_mode else rate
-
-    def error_rate(self) -> np.ndarray:
-        """de/dt of the error vector, (P, 3) 1/s.
-
-        With ``q_BR`` the error quaternion and ``ω_e = ω - Q^T ω_d``,
-        ``d q_BR/dt = ½ q_BR ⊗ (ω_e, 0)``, so ``de/dt = -½ (w ω_e + v × ω_e)``.
-        """
-        q = quat_error(self.q_BN, self.q_RN)
-        w_e = self.omega_BN_B - self.reference_rate_B()
-        return -0.5 * (q[:, 3:4] * w_e + cross(q[:, :3], w_e))
-
 
 def _pe(value, n: int, width: int) -> np.ndarray:
     """Broadcast to a contiguous (P, width) array."""
@@ -151,7 +132,7 @@ class PID:
 
     Bumpless entry (:meth:`bumpless`): the filter state is set so the
     derivative term starts at the measured error rate (``x_f = e - ė / N``,
-    ``ė`` from :meth:`StepInput.error_rate`), and the integrator takes the rest,
+    ``ė`` from :func:`~attitude_sil.core.kernels.error_and_rate_row`), and the integrator takes the rest,
     ``I = (u_last - Kp e - Kd ė) / Ki``; the first command then equals
     ``u_last`` exactly when ``Ki > 0``, and the integrator holds only the real
     difference between the two laws (not the derivative action, which with a
@@ -339,7 +320,8 @@ class FuzzyPID(_Stateless):
         rules, e_scale, de_scale, u_scale = self._params(n)
         kp, ki, kd, nf, _ = pid._kernel_gains()
         fuzzy_pid_bumpless(*inp.arrays(), pid.angle_mode, self.e_prev, kp, ki, kd, nf, pid.integral, pid.filter_state,
-                           e_scale, de_scale, u_scale, rules, UNIFORM_VERTICES, self.dt, self.u_max, self.decay,
+                           e_scale, de_scale, u_scale, rules, UNIFORM_VERTICES.reshape(1, 1, 7), self.dt, self.u_max,
+                           self.decay,
                            np.ascontiguousarray(u_last, dtype=float), offset, has)
         self.offset, self.has_offset = (offset, has) if has.any() else (None, None)
 

@@ -396,8 +396,7 @@ def schedule_from_scenario(scn: Scenario) -> list[tuple[int, str]]:
                   for t, kind in zip(s["schedule.times"], s["schedule.controller_types"], strict=True))
 
 
-def compiled_plan(plant, wheels, dist: DisturbanceModel, guide: Guidance, ctrl: ControllerBank,
-                  swaps: dict) -> str:
+def compiled_plan(plant, wheels, dist: DisturbanceModel, guide: Guidance, ctrl: ControllerBank) -> str:
     """'' if built models fit the compiled driver (:mod:`attitude_sil.core.batch`), else why not."""
     if type(plant) is not Plant:
         return f"plant model {type(plant).__name__}"
@@ -612,7 +611,7 @@ class _Run:
         self.swaps = dict(schedule_from_scenario(scn) if schedule is None else schedule)
         self.compiled = False
         if driver != "stepwise":
-            why = compiled_plan(*self.models, self.swaps)
+            why = compiled_plan(*self.models)
             if driver == "compiled" and why:
                 raise ScenarioError(f"the compiled driver does not run this scenario ({why}); use driver='auto'")
             self.compiled = not why

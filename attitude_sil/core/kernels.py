@@ -364,6 +364,16 @@ def fuzzy_pid_step_into(q_BN, q_RN, e_prev, has_prev, kp, ki, kd, n, a, integral
 
 
 @njit(cache=True, inline="always")
+def _mix(u_p, u_f, f):
+    # paper 003's mixing block with the magnitude rule (controllers.FuzzyPID.mix), one element
+    if abs(u_f) > abs(u_p) + 1e-12:
+        return f * u_p + (1.0 - f) * u_f
+    if abs(u_p) > abs(u_f) + 1e-12:
+        return (1.0 - f) * u_p + f * u_f
+    return u_p
+
+
+@njit(cache=True, inline="always")
 def fuzzy_pid_row(q_BN, q_RN, p, e_prev, has_prev, kp, ki, kd, n, a, integral, filt, e_scale, de_scale,
                   u_scale, rules, v, dt, u_max, angle_mode, out):
     """:func:`fuzzy_pid_step_into` for episode ``p`` alone (row ``p`` of every array)."""
@@ -382,13 +392,7 @@ def fuzzy_pid_row(q_BN, q_RN, p, e_prev, has_prev, kp, ki, kd, n, a, integral, f
         filt[p, i] = a[p, i] * filt[p, i] + (1.0 - a[p, i]) * e
         # mixing block, f(e) = e_n^2
         en = min(max(xe, -1.0), 1.0)
-        f = en * en
-        if abs(u_f) > abs(u_p) + 1e-12:
-            out[p, i] = f * u_p + (1.0 - f) * u_f
-        elif abs(u_p) > abs(u_f) + 1e-12:
-            out[p, i] = (1.0 - f) * u_p + f * u_f
-        else:
-            out[p, i] = u_p
+        out[p, i] = _mix(u_p, u_f, en * en)
         e_prev[p, i] = e
 
 
@@ -412,18 +416,22 @@ def ga_flc_step_into(q_BN, omega, q_RN, omega_RN_R, rules, vertices, scales, u_m
 
 
 @njit(cache=True, inline="always")
+def _reference_rate_row(x, y, z, w, w_d, p):
+    # Q^T w_d = R(conj(q_BR)) w_d for q_BR = (x, y, z, w): v + 2 w (r x v) + 2 r x (r x v) with r = -vec(q_BR)
+    vx, vy, vz = w_d[p, 0], w_d[p, 1], w_d[p, 2]
+    if vx == 0.0 and vy == 0.0 and vz == 0.0:
+        return 0.0, 0.0, 0.0
+    rx, ry, rz = -x, -y, -z
+    cx, cy, cz = ry * vz - rz * vy, rz * vx - rx * vz, rx * vy - ry * vx
+    ccx, ccy, ccz = ry * cz - rz * cy, rz * cx - rx * cz, rx * cy - ry * cx
+    return vx + 2.0 * (w * cx + ccx), vy + 2.0 * (w * cy + ccy), vz + 2.0 * (w * cz + ccz)
+
+
+@njit(cache=True, inline="always")
 def ga_flc_row(q_BN, omega, q_RN, omega_RN_R, p, rules, vertices, scales, u_max, out):
     """:func:`ga_flc_step_into` for episode ``p`` alone (row ``p`` of every array)."""
     x, y, z, w = _error_quat(q_BN, q_RN, p)
-    vx, vy, vz = omega_RN_R[p, 0], omega_RN_R[p, 1], omega_RN_R[p, 2]
-    if vx == 0.0 and vy == 0.0 and vz == 0.0:
-        nu = (0.0, 0.0, 0.0)
-    else:
-        # Q^T w_d = R(conj(q_BR)) w_d: v + 2 w (r x v) + 2 r x (r x v) with r = -vec(q_BR)
-        rx, ry, rz = -x, -y, -z
-        cx, cy, cz = ry * vz - rz * vy, rz * vx - rx * vz, rx * vy - ry * vx
-        ccx, ccy, ccz = ry * cz - rz * cy, rz * cx - rx * cz, rx * cy - ry * cx
-        nu = (vx + 2.0 * (w * cx + ccx), vy + 2.0 * (w * cy + ccy), vz + 2.0 * (w * cz + ccz))
+    nu = _reference_rate_row(x, y, z, w, omega_RN_R, p)
     vec = (x, y, z)
     for i in range(3):
         # errors, reference minus measurement (paper 004 Fig. 2 feeds the FLC the error)
@@ -511,14 +519,7 @@ def error_and_rate_row(q_BN, omega, q_RN, w_d, p, angle_mode):
     (the angle's rate is ``2 ė / sqrt(1 - e²)``, floored at 1e-12 under the root).
     """
     x, y, z, s = _error_quat(q_BN, q_RN, p)
-    vx, vy, vz = w_d[p, 0], w_d[p, 1], w_d[p, 2]
-    if vx == 0.0 and vy == 0.0 and vz == 0.0:
-        nu = (0.0, 0.0, 0.0)
-    else:  # Q^T w_d, as ga_flc_row computes it
-        rx, ry, rz = -x, -y, -z
-        cx, cy, cz = ry * vz - rz * vy, rz * vx - rx * vz, rx * vy - ry * vx
-        ccx, ccy, ccz = ry * cz - rz * cy, rz * cx - rx * cz, rx * cy - ry * cx
-        nu = (vx + 2.0 * (s * cx + ccx), vy + 2.0 * (s * cy + ccy), vz + 2.0 * (s * cz + ccz))
+    nu = _reference_rate_row(x, y, z, s, w_d, p)
     wx, wy, wz = omega[p, 0] - nu[0], omega[p, 1] - nu[1], omega[p, 2] - nu[2]
     e = (-x, -y, -z)
     de = (-0.5 * (s * wx + (y * wz - z * wy)), -0.5 * (s * wy + (z * wx - x * wz)),
@@ -545,30 +546,13 @@ def pid_bumpless_row(e, de, p, kp, ki, kd, n, integral, filt, u_max, u_last):
 
 @njit(cache=True, inline="always")
 def _infer_vertices(xr, xc, v, rules, p):
-    # fuzzy_infer's arithmetic for one element with the vertices v (7,) for rows, columns and output
-    if xr <= v[0]:
-        i, ti = 0, 0.0
-    elif xr >= v[6]:
-        i, ti = 5, 1.0
-    else:
-        i = 0
-        for k in range(1, 6):
-            if xr > v[k]:
-                i = k
-        ti = (xr - v[i]) / (v[i + 1] - v[i])
-    if xc <= v[0]:
-        j, tj = 0, 0.0
-    elif xc >= v[6]:
-        j, tj = 5, 1.0
-    else:
-        j = 0
-        for k in range(1, 6):
-            if xc > v[k]:
-                j = k
-        tj = (xc - v[j]) / (v[j + 1] - v[j])
-    r = rules
-    return ((1.0 - ti) * ((1.0 - tj) * v[r[p, i, j] - 1] + tj * v[r[p, i, j + 1] - 1])
-            + ti * ((1.0 - tj) * v[r[p, i + 1, j] - 1] + tj * v[r[p, i + 1, j + 1] - 1]))
+    # fuzzy_infer's arithmetic for one element, with the vertices v[0, 0] (v (1, 1, 7)) for rows, columns and
+    # output, and the rules of episode p
+    i, ti = _segment(xr, v, 0, 0)
+    j, tj = _segment(xc, v, 0, 0)
+    c, r = v[0, 0], rules
+    return ((1.0 - ti) * ((1.0 - tj) * c[r[p, i, j] - 1] + tj * c[r[p, i, j + 1] - 1])
+            + ti * ((1.0 - tj) * c[r[p, i + 1, j] - 1] + tj * c[r[p, i + 1, j + 1] - 1]))
 
 
 @njit(cache=True, inline="always")
@@ -579,7 +563,8 @@ def fuzzy_pid_bumpless_row(e, de, p, e_prev, kp, ki, kd, n, integral, filt, e_sc
     Sets ``e_prev`` from the measured error rate and the PID state so the mixed
     command equals ``clip(u_last[p])`` wherever some PID output achieves it;
     writes the remainder into ``offset[p]`` and returns True when a decaying
-    offset is needed (``decay`` > 0 and some remainder above 1e-12).
+    offset is needed (``decay`` > 0 and some remainder above 1e-12). ``v``
+    (1, 1, 7): the evenly spaced vertices (``fuzzy.UNIFORM_VERTICES``).
     """
     u_pid = np.empty(3)
     rest = np.empty(3)
@@ -601,13 +586,7 @@ def fuzzy_pid_bumpless_row(e, de, p, e_prev, kp, ki, kd, n, integral, filt, e_sc
         else:
             up = target
         u_pid[i] = up
-        if abs(u_f) > abs(up) + 1e-12:
-            mixed = f * up + (1.0 - f) * u_f
-        elif abs(up) > abs(u_f) + 1e-12:
-            mixed = (1.0 - f) * up + f * u_f
-        else:
-            mixed = up
-        rest[i] = target - mixed
+        rest[i] = target - _mix(up, u_f, f)
     pid_bumpless_row(e, de, p, kp, ki, kd, n, integral, filt, u_max, (u_pid[0], u_pid[1], u_pid[2]))
     needed = decay > 0.0 and (abs(rest[0]) > 1e-12 or abs(rest[1]) > 1e-12 or abs(rest[2]) > 1e-12)
     for i in range(3):

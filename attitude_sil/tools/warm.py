@@ -39,8 +39,6 @@ def warm(config_dir: str | Path | None = None) -> float:
                     simulate(scn, 1, duration=2 * scn.dt, controller=controller, driver=driver)
                 except ScenarioError:  # a law the preset's plant cannot take: nothing to compile for it
                     break
-        if name == PRESETS[0]:  # the multi-threaded compiled driver (chunks on threads) is one more compilation
-            simulate(scn, 2, duration=2 * scn.dt, threads=2)
     return time.perf_counter() - t0
 
 
