@@ -32,7 +32,7 @@ os.environ.setdefault("ROS_DOMAIN_ID", str(150 + os.getpid() % 50))
 
 from fused_reference import fused_parallel, fused_serial, fused_setup  # noqa: E402
 
-from attitude_sil.core.controllers import CONTROLLER_TYPES  # noqa: E402
+from attitude_sil.core.control.registry import names as law_names  # noqa: E402
 from attitude_sil.core.engine import build_controller, simulate, simulate_summary  # noqa: E402
 from attitude_sil.core.quaternion import quat_from_euler  # noqa: E402
 from attitude_sil.core.scenario import load_scenario  # noqa: E402
@@ -55,7 +55,7 @@ def main() -> None:
     newly_compiled(scn)
     costs = {p: controller_cost(scn, p) for p in (1, 50)}
     print("controller cost, us per step per episode (ratio to pid at the same P):")
-    for kind in CONTROLLER_TYPES:
+    for kind in law_names():
         cells = "   ".join(f"P={p:<3} {costs[p][kind]:7.2f} ({costs[p][kind] / costs[p]['pid']:4.1f}x)" for p in costs)
         print(f"  {kind:<10} {cells}")
 
@@ -143,7 +143,7 @@ def controller_cost(scn, n_episodes: int, steps: int = 2000) -> dict[str, float]
     q_RN = np.tile([0.0, 0.0, 0.0, 1.0], (n_episodes, 1))
     w_d = np.zeros((n_episodes, 3))
     out = {}
-    for kind in CONTROLLER_TYPES:
+    for kind in law_names():
         bank = build_controller(scn, n_episodes)
         bank.active = kind
         bank.compute(q_BN, w, q_RN, w_d)  # compile / warm

@@ -14,8 +14,8 @@ from __future__ import annotations
 import numpy as np
 from numba import njit, prange
 
+from attitude_sil.core.control.kernels import error3_row
 from attitude_sil.core.engine import build_controller, build_guidance, build_plant, build_wheels
-from attitude_sil.core.kernels import _error3
 
 
 @njit(cache=True, inline="always")
@@ -75,7 +75,7 @@ def _episode(p, n_steps, dt, q0, q_r, inertia, inertia_inv, kp, ki, kd, nf, af, 
     for k in range(n_steps + 1):
         # PID on the quaternion error vector
         qq[0, :] = q
-        e = _error3(qq, qr, 0, False)
+        e = error3_row(qq, qr, 0, False)
         for i in range(3):
             deriv = nf[p, i] * (e[i] - filt[i])
             raw = kp[p, i] * e[i] + ki[p, i] * integral[i] + kd[p, i] * deriv
@@ -152,9 +152,8 @@ def fused_setup(scn, n_episodes: int, kp=None, stride: int = 1):
     wheels = build_wheels(scn, P)
     guide = build_guidance(scn, P)
     ctrl = build_controller(scn, P, params=None if kp is None else {"pid.kp": kp})
-    pid = ctrl.controllers["pid"]
-    pid.reset(P)
-    gains = pid._kernel_gains()
+    pid = ctrl.records[ctrl.codes["pid"]]
+    gains = (pid.kp, pid.ki, pid.kd, pid.n, pid.a)
     asm, mot = wheels.assembly, wheels.assembly.motor
     K = scn.steps()
     kept = K // stride + 1

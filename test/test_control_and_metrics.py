@@ -3,12 +3,18 @@
 import numpy as np
 import pytest
 
-from attitude_sil.core.controllers import PID, StepInput
+from attitude_sil.core.control.bank import ControllerBank
 from attitude_sil.core.engine import simulate
 from attitude_sil.core.metrics import metrics_from_trajectory, step_metrics
 from attitude_sil.core.quaternion import quat_from_euler
 from attitude_sil.core.scenario import load_scenario
 from conftest import CONFIG
+
+
+def _pid(kp, ki, kd, n, dt, u_max):
+    """The pid law alone, through the bank the nodes use."""
+    return ControllerBank.for_law("pid", 1, dt, {"kp": [kp] * 3, "ki": [ki] * 3, "kd": [kd] * 3, "n": [n] * 3,
+                                                 "output_limit": u_max})
 
 
 def _pid_on_error(pid, errors):
@@ -17,14 +23,14 @@ def _pid_on_error(pid, errors):
     q_RN = np.array([[0.0, 0.0, 0.0, 1.0]])
     for e in errors:
         q_BN = np.array([[-e, 0.0, 0.0, np.sqrt(1 - e * e)]])  # error vector = +e on roll
-        out.append(pid.compute(StepInput(q_BN, np.zeros((1, 3)), q_RN, np.zeros((1, 3))))[0, 0])
+        out.append(pid.compute(q_BN, np.zeros((1, 3)), q_RN, np.zeros((1, 3)))[0, 0])
     return np.array(out)
 
 
 def test_pid_derivative_filter_matches_continuous_ramp():
     # e(t) = r t: continuous Kd N s/(s+N) gives Kd r (1 - exp(-N t))
     dt, n, r = 0.01, 5.0, 0.01
-    pid = PID(0.0, 0.0, 2.0, n, dt, 1e9)
+    pid = _pid(0.0, 0.0, 2.0, n, dt, 1e9)
     t = np.arange(1000) * dt  # 10 s: the transient exp(-N t) has died out to 2e-22
     u = _pid_on_error(pid, r * t)
     exact = 2.0 * r * (1 - np.exp(-n * t))
@@ -35,13 +41,13 @@ def test_pid_derivative_filter_matches_continuous_ramp():
 
 
 def test_pid_integrator_and_anti_windup():
-    pid = PID(0.0, 1.0, 0.0, 1.0, 0.1, 1e9)
+    pid = _pid(0.0, 1.0, 0.0, 1.0, 0.1, 1e9)
     u = _pid_on_error(pid, np.full(11, 0.01))
     assert u[-1] == pytest.approx(0.01 * 1.0, rel=1e-12)  # 10 steps of 0.1 s
-    sat = PID(100.0, 1.0, 0.0, 1.0, 0.1, 0.5)
+    sat = _pid(100.0, 1.0, 0.0, 1.0, 0.1, 0.5)
     u = _pid_on_error(sat, np.full(50, 0.01))  # saturated throughout: kp e = 1 > 0.5
     assert np.all(u == 0.5)
-    assert sat.integral[0, 0] == 0.0  # held while saturated
+    assert sat.states[sat.codes["pid"]].integral[0, 0] == 0.0  # held while saturated
 
 
 def test_step_metrics_first_order_closed_form():

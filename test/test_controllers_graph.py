@@ -11,7 +11,7 @@ import yaml
 from mcap.reader import make_reader
 from mcap_ros2.decoder import DecoderFactory
 
-from attitude_sil.core.controllers import CONTROLLER_TYPES, OUTPUT_KIND
+from attitude_sil.core.control import registry
 from attitude_sil.core.engine import simulate
 from attitude_sil.core.scenario import load_scenario
 from attitude_sil.graph.session import run_graph
@@ -20,7 +20,7 @@ from conftest import CONFIG, ROOT
 ONE_DEG = np.radians(1.0)
 
 
-@pytest.mark.parametrize("controller", CONTROLLER_TYPES)
+@pytest.mark.parametrize("controller", registry.names())
 def test_each_controller_settles_the_hst_step_in_graph_and_batch(controller):
     scn = load_scenario(CONFIG / "hst_roll_step.yaml")
     result = run_graph(scn, controller=controller, progress=False, keep_trajectory=True)
@@ -44,7 +44,7 @@ def _jump(tr, k):
                                      ("ga_flc", "fuzzy_pid"), ("ga_flc", "pid")])
 def test_swap_mid_transient_is_bumpless_within_a_command_kind(old, new):
     scn = load_scenario(CONFIG / "hst_roll_step.yaml")
-    assert OUTPUT_KIND[old] == OUTPUT_KIND[new] == "voltage"
+    assert registry.output_of(old) == registry.output_of(new) == "command"
     tr = simulate(scn, 1, duration=4.0, controller=old, schedule=[(150, new)])
     assert max(_jump(tr, k) for k in range(140, 150)) > 1e-4  # mid-transient: the command is moving
     assert _jump(tr, 150) <= 1e-9  # the new law's first command is the old law's last

@@ -5,7 +5,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from attitude_sil.core.controllers import FuzzyPID
+from attitude_sil.core.control.bank import ControllerBank
+from attitude_sil.core.control.kernels import fuzzy_infer
+from attitude_sil.core.control.laws.fuzzy_pid import mix
 from attitude_sil.core.fuzzy import (
     FUZZY_PID_DEFAULT_RULES,
     PAPER_003_TABLE_3,
@@ -15,7 +17,6 @@ from attitude_sil.core.fuzzy import (
     memberships,
     vertices_from_ratios,
 )
-from attitude_sil.core.kernels import fuzzy_infer
 
 DATA = Path(__file__).parent / "data"
 CODES = {"NL": 1, "NB": 1, "NM": 2, "NS": 3, "ZR": 4, "ZO": 4, "PS": 5, "PM": 6, "PL": 7, "PB": 7}
@@ -90,12 +91,12 @@ def test_mixing_cases_of_paper_003():
     f = np.array([0.25, 0.25, 0.25])
     u_pid = np.array([1.0, 3.0, 2.0])
     u_f = np.array([3.0, 1.0, 2.0])  # axis 0: fuzzy faster; axis 1: PID faster; axis 2: equal
-    u = FuzzyPID.mix(u_pid, u_f, f)
+    u = [mix(a, b, c) for a, b, c in zip(u_pid, u_f, f, strict=True)]  # the compiled block, one axis each
     assert u[0] == pytest.approx(0.25 * 1.0 + 0.75 * 3.0)  # case 1: f u_pid + (1 - f) u_fuzzy
     assert u[1] == pytest.approx(0.75 * 3.0 + 0.25 * 1.0)  # case 2: (1 - f) u_pid + f u_fuzzy
     assert u[2] == 2.0  # case 3: the PID's command
     # "faster" is magnitude, not sign
-    assert FuzzyPID.mix(np.array([1.0]), np.array([-3.0]), np.array([0.5]))[0] == pytest.approx(0.5 - 1.5)
+    assert mix(1.0, -3.0, 0.5) == pytest.approx(0.5 - 1.5)
 
 
 def _random_states(rng, n):
@@ -106,43 +107,53 @@ def _random_states(rng, n):
     return q_BN, rng.normal(0, 0.02, (n, 3)), q_RN, rng.normal(0, 0.002, (n, 3))
 
 
+def _mix_reference(u_pid, u_f, f):
+    """Paper 003's mixing block with the magnitude rule, in numpy (laws/fuzzy_pid.py module docstring)."""
+    a_p, a_f = np.abs(u_pid), np.abs(u_f)
+    return np.where(a_f > a_p + 1e-12, f * u_pid + (1.0 - f) * u_f,
+                    np.where(a_p > a_f + 1e-12, (1.0 - f) * u_pid + f * u_f, u_pid))
+
+
 def test_compiled_fuzzy_pid_equals_its_documented_steps():
-    from attitude_sil.core.controllers import PID, StepInput
+    from attitude_sil.core.quaternion import error_vector
 
     rng = np.random.default_rng(3)
     args = dict(e_scale=[0.02, 0.03, 0.01], de_scale=[0.01, 0.02, 0.01], u_scale=[2.0, 1.0, 3.0],
-                rules=FUZZY_PID_DEFAULT_RULES)
-    fast = FuzzyPID(PID(40.0, 0.5, 90.0, 2.0, 0.01, 5.0), dt=0.01, u_max=5.0, **args)
-    ref_pid = PID(40.0, 0.5, 90.0, 2.0, 0.01, 5.0)
-    ref_pid.reset(6)
+                rules=FUZZY_PID_DEFAULT_RULES.ravel().tolist())
+    gains = dict(kp=[40.0] * 3, ki=[0.5] * 3, kd=[90.0] * 3, n=[2.0] * 3)
+    fast = ControllerBank.for_law("fuzzy_pid", 6, 0.01, {**gains, **args, "output_limit": 5.0})
+    ref_pid = ControllerBank.for_law("pid", 6, 0.01, {**gains, "output_limit": 5.0})
     e_prev = None
     for _ in range(30):
-        inp = StepInput(*_random_states(rng, 6))
-        e = inp.e
+        states = _random_states(rng, 6)
+        e = error_vector(states[0], states[2])
         de = np.zeros_like(e) if e_prev is None else (e - e_prev) / 0.01
         x_e, x_de = e / np.array(args["e_scale"]), de / np.array(args["de_scale"])
         u_f = np.array(args["u_scale"]) * infer(memberships(x_de, UNIFORM_VERTICES), memberships(x_e, UNIFORM_VERTICES),
                                                  FUZZY_PID_DEFAULT_RULES, UNIFORM_VERTICES)
-        u_p = ref_pid.compute(inp)
-        expected = np.clip(FuzzyPID.mix(u_p, u_f, np.clip(x_e, -1, 1) ** 2), -5.0, 5.0)
-        assert np.allclose(fast.compute(inp), expected, atol=1e-12)
+        u_p = ref_pid.compute(*states)
+        expected = np.clip(_mix_reference(u_p, u_f, np.clip(x_e, -1, 1) ** 2), -5.0, 5.0)
+        assert np.allclose(fast.compute(*states), expected, atol=1e-12)
         e_prev = e
 
 
 def test_compiled_ga_flc_equals_its_documented_steps():
-    from attitude_sil.core.controllers import GAFLC, StepInput
-    from attitude_sil.core.quaternion import quat_error
+    from attitude_sil.core.quaternion import quat_error, quat_to_dcm
 
     rng = np.random.default_rng(4)
     ratios = rng.uniform(0.2, 2.0, 18)
     scales = [20.0, 30.0, 1.5]
-    flc = GAFLC(PAPER_004_TABLE_2.ravel(), ratios, scales, u_max=1.2)
+    flc = ControllerBank.for_law("ga_flc", 5, 0.01, {"rules": PAPER_004_TABLE_2.ravel().tolist(),
+                                                      "mf_ratios": ratios.tolist(), "scales": scales,
+                                                      "output_limit": 1.2})
     v = vertices_from_ratios(ratios.reshape(3, 6))
     for _ in range(10):
-        inp = StepInput(*_random_states(rng, 5))
-        q_BR = quat_error(inp.q_BN, inp.q_RN)
+        states = _random_states(rng, 5)
+        q_BR = quat_error(states[0], states[2])
         theta = -2 * np.arcsin(q_BR[:, :3])  # error: reference minus attitude
-        rate = inp.reference_rate_B() - inp.omega_BN_B
+        Q = np.swapaxes(quat_to_dcm(states[2]), -1, -2) @ quat_to_dcm(states[0])  # R_d^T R
+        nu = np.einsum("pji,pj->pi", Q, states[3])  # Q^T w_d
+        rate = nu - states[1]
         expected = np.clip(scales[2] * infer(memberships(scales[0] * theta, v[0]), memberships(scales[1] * rate, v[1]),
                                              PAPER_004_TABLE_2, v[2]), -1.2, 1.2)
-        assert np.allclose(flc.compute(inp), expected, atol=1e-12)
+        assert np.allclose(flc.compute(*states), expected, atol=1e-12)

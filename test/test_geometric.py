@@ -3,7 +3,8 @@
 import numpy as np
 import pytest
 
-from attitude_sil.core.controllers import Geometric, StepInput, skew_vee
+from attitude_sil.core.control.bank import ControllerBank
+from attitude_sil.core.control.laws.geometric import skew_vee, torque_reference
 from attitude_sil.core.params import spec_for
 from attitude_sil.core.quaternion import quat_derivative, quat_from_euler, quat_multiply, quat_to_dcm
 
@@ -22,17 +23,25 @@ def test_attitude_term_matches_papers_sum():
     assert np.allclose(s_k, -paper)  # eq. 7 adds +sum k_i e_i x Q^T e_i, i.e. -S_K
 
 
-def _lyapunov(law, q_BN, w, q_RN, w_d):
-    inp = StepInput(q_BN, w, q_RN, w_d)
-    w_e = w - inp.reference_rate_B()
-    return 0.5 * np.einsum("pi,ij,pj->p", w_e, J, w_e) + np.sum(K * (1.0 - np.diagonal(inp.Q, axis1=1, axis2=2)),
+def _values(k=K, l=L, inertia=J, **extra):  # noqa: E741 - the paper's L
+    return {"k": np.asarray(k).tolist() if np.ndim(k) == 1 else k, "l": np.asarray(l).tolist() if np.ndim(l) == 1 else l,
+            "inertia": np.asarray(inertia).ravel().tolist(), **extra}
+
+
+def _law(dt, torque_limit, n=1, **values):
+    return ControllerBank.for_law("geometric", n, dt, {**_values(**values), "torque_limit": torque_limit})
+
+
+def _lyapunov(q_BN, w, q_RN, w_d):
+    Q = np.swapaxes(quat_to_dcm(q_RN), -1, -2) @ quat_to_dcm(q_BN)  # R_d^T R (eq. 5)
+    w_e = w - np.einsum("pji,pj->pi", Q, w_d)
+    return 0.5 * np.einsum("pi,ij,pj->p", w_e, J, w_e) + np.sum(K * (1.0 - np.diagonal(Q, axis1=1, axis2=2)),
                                                                   axis=1), w_e
 
 
 def test_lyapunov_function_decreases_at_rate_minus_we_L_we():
     """Torque-driven rigid body under the unsaturated law, tracking a rotating reference."""
     dt = 0.01
-    law = Geometric(K, L, J, dt, torque_limit=1e9)
     w_d = np.array([[0.0, 0.0011, 0.0]])  # LVLH-like constant rate about y, in R
     q_RN = np.array([[0.0, 0.0, 0.0, 1.0]])
     q_BN = quat_from_euler(np.radians([[60.0, -40.0, 120.0]]))  # far from the reference
@@ -44,8 +53,8 @@ def test_lyapunov_function_decreases_at_rate_minus_we_L_we():
 
     vs, rates = [], []
     for _ in range(6000):  # 60 s: the slowest mode, sqrt(k/J) ~ 0.1 rad/s, has several time constants
-        tau = law.torque_terms(StepInput(q_BN, w, q_RN, w_d))
-        v, w_e = _lyapunov(law, q_BN, w, q_RN, w_d)
+        tau = torque_reference(_values(), q_BN, w, q_RN, w_d)
+        v, w_e = _lyapunov(q_BN, w, q_RN, w_d)
         vs.append(v[0])
         rates.append(-(w_e @ np.diag(L) @ w_e.T)[0, 0])
         # RK4 with the torque held (ZOH); the law is re-evaluated every 10 ms
@@ -69,14 +78,14 @@ def test_lyapunov_function_decreases_at_rate_minus_we_L_we():
 
 
 def test_torque_saturates_and_reference_rate_is_fed_forward():
-    law = Geometric(K, L, J, 0.01, torque_limit=1.2e-3)
+    law = _law(0.01, torque_limit=1.2e-3)
     q = quat_multiply(np.array([[0, 0, 0, 1.0]]), quat_from_euler(np.radians([[30.0, 0, 0]])))
-    u = law.compute(StepInput(q, np.zeros((1, 3)), np.array([[0, 0, 0, 1.0]]), np.zeros((1, 3))))
+    u = law.compute(q, np.zeros((1, 3)), np.array([[0, 0, 0, 1.0]]), np.zeros((1, 3)))
     assert np.max(np.abs(u)) == pytest.approx(1.2e-3)
     # aligned and rotating with the reference: nothing to correct, only nu x J nu
     w_d = np.array([[0.0, 0.0011, 0.0]])
-    law2 = Geometric(K, L, J, 0.01, torque_limit=1.0)
-    u2 = law2.compute(StepInput(np.array([[0, 0, 0, 1.0]]), w_d, np.array([[0, 0, 0, 1.0]]), w_d))
+    law2 = _law(0.01, torque_limit=1.0)
+    u2 = law2.compute(np.array([[0, 0, 0, 1.0]]), w_d, np.array([[0, 0, 0, 1.0]]), w_d)
     assert np.allclose(u2, np.cross(w_d, w_d @ J.T))
 
 
@@ -88,23 +97,28 @@ def test_equal_k_entries_are_refused():
 
 
 def test_compiled_law_equals_the_numpy_reference():
-    """geometric_step == torque_terms - environment, saturated, over random states and a rotating reference."""
-    from attitude_sil.core.controllers import _environment
+    """The compiled step == the numpy reference (feed-forward on), saturated, over random states and a rotating
+    reference, with per-episode gains and a per-episode inertia."""
     from attitude_sil.core.scenario import load_scenario
     from conftest import CONFIG
 
-    values = load_scenario(CONFIG / "hawaiisat_lvlh.yaml").values["controller"]
-    env = _environment(values)
+    values = dict(load_scenario(CONFIG / "hawaiisat_lvlh.yaml").values["controller"])
+    assert values["geometric.feedforward"]  # the preset feeds the environment forward: the test covers it
     rng = np.random.default_rng(9)
-    law = Geometric(rng.uniform(0.01, 0.1, (6, 3)), rng.uniform(0.01, 0.1, (6, 3)), J, 0.05, 1e-3, env)
-    ref = Geometric(law.k, law.l, J, 0.05, 1e-3, env)
+    inertia = np.array([np.diag(J * s) for s in rng.uniform(0.8, 1.2, 6)]).reshape(6, 9)
+    gains = {"k": rng.uniform(0.01, 0.1, (6, 3)), "l": rng.uniform(0.01, 0.1, (6, 3)), "inertia": inertia}
+    values.update({f"geometric.{n}": v for n, v in gains.items()})
+    values.update({"geometric.torque_limit": 1e-3, "controller_type": "geometric"})
+    law = ControllerBank(values, 0.05, 6)
+    ref = {**values, **gains, "feedforward": values["geometric.feedforward"]}
     w_d = np.tile([0.0, 0.0011, 0.0], (6, 1))
+    w_prev = None
     for step in range(5):
         q_b = rng.standard_normal((6, 4))
         q_b /= np.linalg.norm(q_b, axis=1, keepdims=True)
         q_r = rng.standard_normal((6, 4))
         q_r /= np.linalg.norm(q_r, axis=1, keepdims=True)
-        inp = StepInput(q_b, rng.normal(0, 0.01, (6, 3)), q_r, w_d * (1 + 0.1 * step))
-        expected = np.clip(ref.torque_terms(inp, ref.environment_torque(inp)), -1e-3, 1e-3)
-        ref.w_d_prev = inp.omega_RN_R.copy()
-        assert np.allclose(law.compute(inp), expected, rtol=1e-9, atol=1e-15)
+        args = (q_b, rng.normal(0, 0.01, (6, 3)), q_r, w_d * (1 + 0.1 * step))
+        expected = np.clip(torque_reference(ref, *args, w_d_prev=w_prev, dt=0.05), -1e-3, 1e-3)
+        w_prev = args[3]
+        assert np.allclose(law.compute(*args), expected, rtol=1e-9, atol=1e-15)

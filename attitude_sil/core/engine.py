@@ -22,7 +22,8 @@ from attitude_sil.errors import ScenarioError
 
 from .actuators import SpeedLoopWheels, TorqueActuator
 from .batch import COMPILED_DISTURBANCES, TRAJECTORY_FIELDS, run_compiled
-from .controllers import CONTROLLER_TYPES, OUTPUT_KIND, ControllerBank
+from .control import registry
+from .control.bank import ControllerBank
 from .disturbance import DisturbanceModel, lvlh_attitude, orbit_rate
 from .linear import LinearizedPlant
 from .metrics import step_summary, summarize
@@ -378,7 +379,7 @@ def check_episode(scn: Scenario, controller: str | None = None) -> None:
         raise ScenarioError(f"{scn.source}: {exc}") from None
     c = scn.values["controller"]
     for _, law in [(0, controller or c["controller_type"]), *schedule_from_scenario(scn)]:
-        torque = OUTPUT_KIND[law] == "torque" or c["command"] == "torque"
+        torque = registry.output_of(law) == "torque" or c["command"] == "torque"
         topic = "torque_cmd" if torque else "voltage_cmd"
         if isinstance(actuator, TorqueActuator) and not torque:
             raise ScenarioError(f"{scn.source}: wheels.actuator torque takes torque_cmd, but {law} (controller.command "
@@ -568,9 +569,9 @@ def _episode_laws(controller, n_episodes: int, ctrl: ControllerBank) -> list[str
     laws = [str(c) for c in controller]
     if len(laws) != n_episodes:
         raise ScenarioError(f"controller: {len(laws)} controller types for {n_episodes} episodes")
-    unknown = sorted(set(laws) - set(CONTROLLER_TYPES))
+    unknown = sorted(set(laws) - set(registry.names()))
     if unknown:
-        known = ", ".join(CONTROLLER_TYPES)
+        known = ", ".join(registry.names())
         raise ScenarioError(f"controller: unknown controller_type {unknown[0]!r} (known: {known})")
     kinds = {ctrl.kind_of(law) for law in laws}
     if len(kinds) > 1:

@@ -12,135 +12,19 @@ description, with the reason.
 from __future__ import annotations
 
 import math
-import re
-from collections.abc import Callable
-from dataclasses import dataclass, field
 from typing import Any
 
-from attitude_sil.errors import ScenarioError
-
-from .fuzzy import FUZZY_PID_DEFAULT_RULES, PAPER_004_TABLE_2
+from .control import registry
+from .paramspec import ParamSpec
+from .paramspec import double as _d
+from .paramspec import double_array as _da
+from .paramspec import inertia_rule as _inertia_rule
+from .paramspec import nonzero as _nonzero
 
 __all__ = ["ParamSpec", "NODE_PARAMS", "GLOBAL_NODE", "SCENARIO_NODE", "spec_for", "HST_MOTOR", "parameters_markdown"]
 
 GLOBAL_NODE = "/**"
 SCENARIO_NODE = "scenario"
-
-_YAML12_FLOAT = re.compile(r"[-+]?(\.[0-9]+|[0-9]+(\.[0-9]*)?)([eE][-+]?[0-9]+)?")
-
-_KINDS = ("double", "integer", "bool", "string", "double_array", "integer_array", "string_array")
-
-
-@dataclass(frozen=True)
-class ParamSpec:
-    """One parameter: its type, default and the rule a value must satisfy.
-
-    Attributes
-    ----------
-    name : str
-        Parameter name, dotted for groups (``pid.kp``).
-    kind : str
-        One of ``double``, ``integer``, ``bool``, ``string`` and their
-        ``*_array`` forms.
-    default : Any
-    description : str
-        One line, with the unit.
-    min, max : float, optional
-        Inclusive bounds for numbers and for every array element.
-    min_exclusive : bool
-        ``min`` itself is not allowed (strictly positive quantities).
-    lengths : tuple of int, optional
-        Allowed array lengths.
-    choices : tuple of str, optional
-        Allowed values for strings (and string-array elements).
-    """
-
-    name: str
-    kind: str
-    default: Any
-    description: str
-    min: float | None = None
-    max: float | None = None
-    min_exclusive: bool = False
-    lengths: tuple[int, ...] | None = None
-    choices: tuple[str, ...] | None = None
-    runtime: bool = field(default=False)
-    rule: Callable[[Any], str] | None = field(default=None, compare=False)
-
-    def __post_init__(self) -> None:
-        assert self.kind in _KINDS, self.kind
-
-    # -- validation ------------------------------------------------------------
-    def _check_number(self, value: Any, where: str) -> float | int:
-        if isinstance(value, str) and _YAML12_FLOAT.fullmatch(value.strip()):
-            value = float(value)  # PyYAML (YAML 1.1) reads 1e-3 as a string; YAML 1.2 and ROS read a number
-        if isinstance(value, bool) or not isinstance(value, (int, float)):
-            raise ScenarioError(f"{where} must be a number, got {type(value).__name__} {value!r}")
-        if self.kind.startswith("integer"):
-            if isinstance(value, float):
-                if not value.is_integer():
-                    raise ScenarioError(f"{where} must be an integer, got {value!r}")
-                value = int(value)
-            if not -(2**63) <= value < 2**63:
-                raise ScenarioError(f"{where} must fit a 64-bit integer (a ROS integer), got {value!r}")
-        else:
-            value = float(value)
-            if not math.isfinite(value):
-                raise ScenarioError(f"{where} must be finite, got {value!r}")
-        if self.min is not None:
-            if value < self.min or (self.min_exclusive and value == self.min):
-                rel = ">" if self.min_exclusive else ">="
-                raise ScenarioError(f"{where} must be {rel} {self.min}, got {value!r}")
-        if self.max is not None and value > self.max:
-            raise ScenarioError(f"{where} must be <= {self.max}, got {value!r}")
-        return value
-
-    def _check_string(self, value: Any, where: str) -> str:
-        if not isinstance(value, str):
-            raise ScenarioError(f"{where} must be a string, got {type(value).__name__} {value!r}")
-        if self.choices is not None and value not in self.choices:
-            raise ScenarioError(f"{where} must be one of {', '.join(self.choices)}; got {value!r}")
-        return value
-
-    def validate(self, value: Any, node: str = "") -> Any:
-        """Return the value converted to this parameter's type or raise ``ValueError``.
-
-        The message names the parameter and the rule it broke, on one line.
-        """
-        where = f"{node}.{self.name}" if node else self.name
-        if self.kind == "bool":
-            if not isinstance(value, bool):
-                raise ScenarioError(f"{where} must be true or false, got {value!r}")
-            return value
-        if self.kind == "string":
-            return self._check_string(value, where)
-        if self.kind in ("double", "integer"):
-            return self._check_number(value, where)
-        # arrays
-        if isinstance(value, (str, bytes)) or not hasattr(value, "__iter__"):
-            raise ScenarioError(f"{where} must be a list, got {type(value).__name__} {value!r}")
-        items = list(value)
-        if self.lengths is not None and len(items) not in self.lengths:
-            allowed = " or ".join(str(n) for n in self.lengths)
-            raise ScenarioError(f"{where} must have {allowed} elements, got {len(items)}")
-        if self.kind == "string_array":
-            out = [self._check_string(v, f"{where}[{i}]") for i, v in enumerate(items)]
-        else:
-            out = [self._check_number(v, f"{where}[{i}]") for i, v in enumerate(items)]
-        if self.rule is not None:
-            broken = self.rule(out)
-            if broken:
-                raise ScenarioError(f"{where} {broken}")
-        return out
-
-
-def _d(name, default, description, **kw) -> ParamSpec:
-    return ParamSpec(name, "double", float(default), description, **kw)
-
-
-def _da(name, default, description, **kw) -> ParamSpec:
-    return ParamSpec(name, "double_array", [float(v) for v in default], description, **kw)
-
 
 # HST wheel motor. Paper 000 gives J_m = 0.84 kg m^2, 0.8 N m and 3000 rpm and
 # names a commercial PMDC motor without its constants; the rest is assumed.
@@ -170,29 +54,6 @@ HST_MOTOR = {
 
 _HST_INERTIA = [31.046, 77.217, 78.754]
 
-
-def _inertia_rule(values: list) -> str:
-    """An inertia must be symmetric and positive definite (3 principal values: each > 0)."""
-    if len(values) == 3:
-        return "" if all(v > 0.0 for v in values) else "principal moments must be > 0"
-    m = [values[0:3], values[3:6], values[6:9]]
-    scale = max(abs(v) for v in values) or 1.0
-    if any(abs(m[i][j] - m[j][i]) > 1e-9 * scale for i in range(3) for j in range(i)):
-        return "must be symmetric (9 row-major entries)"
-    minor2 = m[0][0] * m[1][1] - m[0][1] * m[1][0]
-    det = (m[0][0] * (m[1][1] * m[2][2] - m[1][2] * m[2][1]) - m[0][1] * (m[1][0] * m[2][2] - m[1][2] * m[2][0])
-           + m[0][2] * (m[1][0] * m[2][1] - m[1][1] * m[2][0]))
-    return "" if m[0][0] > 0.0 and minor2 > 0.0 and det > 0.0 else "must be positive definite"
-
-
-def _nonzero(values: list) -> str:
-    """A direction: not the zero vector."""
-    return "" if any(v != 0.0 for v in values) else "must not be the zero vector"
-
-
-def _distinct(values: list) -> str:
-    """Rule of paper 001: the entries of K must differ."""
-    return "entries must be distinct (paper 001: k1 != k2 != k3)" if len(set(values)) < len(values) else ""
 
 _ORBIT = [
     _d("orbit.mu", 3.986004418e14, "Earth gravitational parameter, m^3/s^2", min=0.0, min_exclusive=True),
@@ -338,7 +199,7 @@ NODE_PARAMS: dict[str, list[ParamSpec]] = {
     "controller": [
         _d("control_period", 0.01, "control step dt, s (shared by every node)", min=0.0, min_exclusive=True, max=1.0),
         ParamSpec("controller_type", "string", "pid", "active control law (switches at the next step, bumpless)",
-                  choices=("pid", "fuzzy_pid", "ga_flc", "geometric"), runtime=True),
+                  choices=registry.names(), runtime=True),
         ParamSpec("error_mode", "string", "quaternion",
                   "what the PID-family laws act on: quaternion (vector part, paper 000) or angle (2 asin of it, "
                   "the rotation angle per axis, for single-axis papers 002 and 004)", choices=("quaternion", "angle")),
@@ -346,16 +207,8 @@ NODE_PARAMS: dict[str, list[ParamSpec]] = {
                   "topic of the PID-family laws: voltage (voltage_cmd, wheel presets) or torque (torque_cmd, "
                   "torque presets); geometric always commands torque", choices=("voltage", "torque")),
         _d("bumpless_time_constant", 1.0,
-           "decay time of the transfer offset when switching to a stateless law (ga_flc, geometric), s",
+           "decay time of the transfer offset when switching to a law without a bumpless entry (ga_flc, geometric), s",
            min=0.0, runtime=True),
-        _da("pid.kp", [48.894] * 3, "proportional gain per body axis, V per unit quaternion error",
-            lengths=(3,), min=0.0, runtime=True),
-        _da("pid.ki", [0.071] * 3, "integral gain per body axis, V/s per unit error", lengths=(3,), min=0.0,
-            runtime=True),
-        _da("pid.kd", [106.046] * 3, "derivative gain per body axis, V s per unit error", lengths=(3,), min=0.0,
-            runtime=True),
-        _da("pid.n", [1.427] * 3, "derivative filter coefficient N per body axis, rad/s", lengths=(3,),
-            min=0.0, min_exclusive=True, runtime=True),
         _d("output_limit", HST_MOTOR["motor.v_max"], "command saturation of the voltage laws, V",
            min=0.0, min_exclusive=True, runtime=True),
         _d("sensor_noise.attitude_std_deg", 0.0, "attitude sensor noise: standard deviation of a small "
@@ -364,47 +217,8 @@ NODE_PARAMS: dict[str, list[ParamSpec]] = {
            "body rate the law sees, deg/s (0: none)", min=0.0),
         ParamSpec("sensor_noise.seed", "integer", 0, "sensor noise seed (a draw depends only on the seed, the "
                   "step and the channel)", min=0),
-        # hybrid fuzzy PID, paper 003
-        _da("fuzzy_pid.kp", [48.894] * 3, "PID part: proportional gain per axis, V per unit error",
-            lengths=(3,), min=0.0, runtime=True),
-        _da("fuzzy_pid.ki", [0.071] * 3, "PID part: integral gain per axis", lengths=(3,), min=0.0, runtime=True),
-        _da("fuzzy_pid.kd", [106.046] * 3, "PID part: derivative gain per axis", lengths=(3,), min=0.0,
-            runtime=True),
-        _da("fuzzy_pid.n", [1.427] * 3, "PID part: derivative filter N per axis, rad/s", lengths=(3,),
-            min=0.0, min_exclusive=True, runtime=True),
-        _da("fuzzy_pid.e_scale", [0.0175] * 3, "error universe: |e| at which e is 'large', unit quaternion error",
-            lengths=(3,), min=0.0, min_exclusive=True, runtime=True),
-        _da("fuzzy_pid.de_scale", [0.01] * 3, "change-of-error universe, 1/s", lengths=(3,), min=0.0,
-            min_exclusive=True, runtime=True),
-        _da("fuzzy_pid.u_scale", [2.0] * 3, "fuzzy output universe, V", lengths=(3,), min=0.0, runtime=True),
-        ParamSpec("fuzzy_pid.rules", "integer_array", FUZZY_PID_DEFAULT_RULES.ravel().tolist(),
-                  "49 rule outputs 1..7 (NL..PL), row-major: rows change of error NL..PL, columns error NL..PL "
-                  "(assumed: paper 003 Table 3 with its misprinted row restored, README)",
-                  lengths=(49,), min=1, max=7, runtime=True),
-        # GA-designed FLC, paper 004
-        ParamSpec("ga_flc.rules", "integer_array", PAPER_004_TABLE_2.ravel().tolist(),
-                  "49 rule outputs 1..7 (NB..PB), row-major: rows angle NB..PB, columns rate NB..PB "
-                  "(paper 004 Table 2)", lengths=(49,), min=1, max=7, runtime=True),
-        _da("ga_flc.mf_ratios", [1.0] * 18,
-            "MF vertex ratios a1..a6 (eq. 5) for angle, then rate, then output; all > 0 "
-            "(assumed: evenly spaced, the paper prints only a figure)",
-            lengths=(18,), min=0.0, min_exclusive=True, runtime=True),
-        _da("ga_flc.scales", [1.0 / math.radians(30.0), 1.0, 1.3],
-            "scaling factors K_theta 1/rad, K_q s/rad, K_e V (eq. 6; paper: 30 deg, 1.0, 1.3)",
-            lengths=(3,), min=0.0, min_exclusive=True, runtime=True),
-        # geometric tracking law, paper 001
-        _da("geometric.k", [62.5, 16.5, 14.5], "diagonal of K, N m (distinct, > 0)", lengths=(3,), min=0.0,
-            min_exclusive=True, runtime=True, rule=_distinct),
-        _da("geometric.l", [56.0, 139.0, 142.0], "diagonal of L, N m s", lengths=(3,), min=0.0,
-            min_exclusive=True, runtime=True),
-        _da("geometric.inertia", _HST_INERTIA, "the law's model of the inertia J, kg m^2 (3 or 9 values)",
-            lengths=(3, 9), runtime=True, rule=_inertia_rule),
-        _d("geometric.torque_limit", 0.7, "torque saturation per body axis, N m", min=0.0, min_exclusive=True,
-           runtime=True),
-        ParamSpec("geometric.feedforward", "string_array", [],
-                  "modelled environmental moments fed forward (paper 001 eq. 7): gravity_gradient, aerodynamic; "
-                  "computed from Q, so the reference must be LVLH", choices=("gravity_gradient", "aerodynamic"),
-                  runtime=True),
+        # each registered law's own table, as <law>.<name> (attitude_sil.core.control.laws, plugins)
+        *registry.parameter_table(),
         *_ORBIT,
         *_AERO,
     ],
@@ -428,7 +242,7 @@ NODE_PARAMS: dict[str, list[ParamSpec]] = {
         _da("schedule.times", [], "sim times of scheduled controller swaps, s (runner applies them as "
             "parameter sets)", min=0.0),
         ParamSpec("schedule.controller_types", "string_array", [], "controller_type to swap to at each time",
-                  choices=("pid", "fuzzy_pid", "ga_flc", "geometric")),
+                  choices=registry.names()),
     ],
 }
 

@@ -28,7 +28,7 @@ import rclpy
 from rclpy.experimental import EventsExecutor
 from rclpy.signals import SignalHandlerOptions
 
-from attitude_sil.core.controllers import OUTPUT_KIND
+from attitude_sil.core.control import registry
 from attitude_sil.core.engine import check_episode, schedule_from_scenario, simulate
 from attitude_sil.core.metrics import episode_report
 from attitude_sil.core.params import spec_for
@@ -169,9 +169,9 @@ class GraphSession:
         localhost_environment()
         # compile (or load from numba's cache) every law's kernels before the clock
         # starts, so no node compiles mid-episode and node processes find the cache
-        for kind in OUTPUT_KIND:
+        for law in registry.names():
             try:
-                simulate(self.scn, 1, duration=self.scn.dt, controller=kind, schedule=[])
+                simulate(self.scn, 1, duration=self.scn.dt, controller=law, schedule=[])
             except (AttitudeSilError, ValueError):
                 pass  # a law this preset's actuator cannot take (e.g. torque into speed-loop wheels)
         self.context = rclpy.Context()

@@ -2,7 +2,7 @@
 
 Once it holds ``attitude``, ``body_rate``, ``attitude_setpoint`` and
 ``rate_setpoint`` all stamped t_k, it computes the command of the active law
-(:class:`attitude_sil.core.controllers.ControllerBank`) and publishes, stamped
+(:class:`attitude_sil.core.control.bank.ControllerBank`) and publishes, stamped
 t_k, ``voltage_cmd`` (V, body axes: ``pid``, ``fuzzy_pid``, ``ga_flc``) or
 ``torque_cmd`` (N m: ``geometric``), and ``attitude_error`` (roll, pitch, yaw of
 the rotation still to go, setpoint minus attitude, rad).

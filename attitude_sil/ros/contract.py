@@ -91,7 +91,7 @@ STEP_TOPICS: dict[str, str] = {
 #: the controller publishes one of these per step, depending on its law
 COMMAND_TOPICS = (VOLTAGE_CMD, TORQUE_CMD)
 
-#: the command topic of each kind of law (:data:`attitude_sil.core.controllers.OUTPUT_KIND`)
+#: the command topic of each kind of law (:meth:`attitude_sil.core.control.bank.ControllerBank.kind_of`)
 COMMAND_TOPIC = {"voltage": VOLTAGE_CMD, "torque": TORQUE_CMD}
 
 #: what the plant needs, all stamped t_k, before it integrates to t_k+1

@@ -1,6 +1,7 @@
 """Compile the step kernels once, into numba's on-disk cache, before anything else needs them.
 
-The kernels (:mod:`attitude_sil.core.kernels`, :mod:`attitude_sil.core.batch`)
+The kernels (:mod:`attitude_sil.core.kernels`, the laws' steps and the batch loop
+generated for the registered laws, :mod:`attitude_sil.core.control.compiled`)
 are compiled on first use and cached next to their modules (``cache=True``). On
 a fresh install that first use is typically a graph run: five node processes
 and the runner, started together on a machine with fewer cores, each
@@ -16,7 +17,7 @@ import sys
 import time
 from pathlib import Path
 
-from attitude_sil.core.controllers import CONTROLLER_TYPES
+from attitude_sil.core.control import registry
 from attitude_sil.core.engine import simulate
 from attitude_sil.core.scenario import PRESETS, ScenarioError, default_config_dir, load_scenario
 
@@ -33,7 +34,7 @@ def warm(config_dir: str | Path | None = None) -> float:
     t0 = time.perf_counter()
     for name in PRESETS:
         scn = load_scenario(folder / f"{name}.yaml")
-        for controller in CONTROLLER_TYPES:
+        for controller in registry.names():
             for driver in ("auto", "stepwise"):
                 try:
                     simulate(scn, 1, duration=2 * scn.dt, controller=controller, driver=driver)

@@ -43,6 +43,7 @@ from typing import Any
 import numpy as np
 
 from attitude_sil.core import yaml12
+from attitude_sil.core.control import registry
 from attitude_sil.core.engine import check_episode, simulate_summary
 from attitude_sil.core.params import NODE_PARAMS
 from attitude_sil.core.scenario import Scenario, load_scenario, with_parameter_file
@@ -144,8 +145,8 @@ def load_mc_spec(path: str | Path, runs: int | None = None) -> MonteCarloSpec:
         except ScenarioError as exc:
             raise _fail(p, f"set {key}: {exc}") from None
     controller = data.get("controller")
-    if controller is not None and controller not in ("pid", "fuzzy_pid", "ga_flc", "geometric"):
-        raise _fail(p, f"controller must be pid, fuzzy_pid, ga_flc or geometric, got {controller!r}")
+    if controller is not None and controller not in registry.names():
+        raise _fail(p, f"controller must be one of {', '.join(registry.names())}, got {controller!r}")
     try:
         check_episode(scn, controller)
     except ScenarioError as exc:

@@ -34,6 +34,7 @@ from typing import Any
 import numpy as np
 
 from attitude_sil.core import yaml12
+from attitude_sil.core.control import registry
 from attitude_sil.core.params import NODE_PARAMS
 from attitude_sil.core.scenario import Scenario, load_scenario
 from attitude_sil.errors import ScenarioError, SpecError
@@ -287,8 +288,8 @@ def load_spec(path: str | Path) -> TuningSpec:
         except ScenarioError as exc:
             raise _fail(p, f"scenarios: {exc}") from None
     controller = data["controller"]
-    if controller not in ("pid", "fuzzy_pid", "ga_flc", "geometric"):
-        raise _fail(p, f"controller must be pid, fuzzy_pid, ga_flc or geometric, got {controller!r}")
+    if controller not in registry.names():
+        raise _fail(p, f"controller must be one of {', '.join(registry.names())}, got {controller!r}")
     if not isinstance(data["genome"], list) or not data["genome"]:
         raise _fail(p, "genome must be a non-empty list")
     genome = [_gene(p, i, g, controller) for i, g in enumerate(data["genome"])]

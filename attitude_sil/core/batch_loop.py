@@ -1,0 +1,261 @@
+"""The batch engine's compiled loop, as a template over the set of laws.
+
+:func:`attitude_sil.core.control.compiled.from_template` copies this source
+into a generated module with the law dispatch of the registered laws in
+place of the stubs below (numba cannot call a run-time choice of function
+otherwise), and :mod:`attitude_sil.core.batch` runs that module's
+:func:`chunk`. Read it as ordinary code: ``law_step`` & co. are the laws'
+compiled steps selected by each episode's law code (:mod:`attitude_sil.core.control.law`).
+Its imports are absolute because the copy lives outside the package.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+from attitude_sil.core.kernels import measure_row, rk4_body_into, wheel_row
+
+# >>> law dispatch stubs (replaced by the generated dispatch; see the module docstring)
+
+
+def law_step(code, q, w, q_r, w_r, p, pars, sts, dt, u):  # pragma: no cover - a stand-in
+    raise NotImplementedError
+
+
+def law_reset(code, p, sts):  # pragma: no cover - a stand-in
+    raise NotImplementedError
+
+
+def law_enter(code, q, w, q_r, w_r, p, pars, sts, dt, decay, u_last, offset, scratch):  # pragma: no cover
+    raise NotImplementedError
+
+
+def law_finish(code, p, pars, u, offset, has_off, decay):  # pragma: no cover - a stand-in
+    raise NotImplementedError
+
+
+def law_is_torque(code):  # pragma: no cover - a stand-in
+    raise NotImplementedError
+# <<< law dispatch stubs
+
+#: number of running-sum columns (batch.SUMMARY_COLUMNS)
+N_SUMS = 13
+
+
+@njit(cache=True, inline="always")
+def _euler_axis(q, p, axis):
+    # roll, pitch or yaw (ZYX, paper 000 eq. 9) of row p, as quaternion.euler_from_quat computes it
+    x, y, z, w = q[p, 0], q[p, 1], q[p, 2], q[p, 3]
+    if axis == 0:
+        return np.arctan2(2.0 * (w * x + y * z), 1.0 - 2.0 * (x * x + y * y))
+    if axis == 1:
+        return np.arcsin(min(max(2.0 * (w * y - z * x), -1.0), 1.0))
+    return np.arctan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
+
+
+@njit(cache=True, inline="always")
+def _crossing(found, level, f, f_prev, ta, ta_prev, first):
+    # metrics._first_crossing, one sample at a time: the interpolated time frac reaches level, or found
+    if not np.isnan(found) or not f >= level:
+        return found
+    if first:
+        return ta
+    frac = (level - f_prev) / (f - f_prev) if f != f_prev else 0.0
+    return ta_prev + frac * (ta - ta_prev)
+
+
+@njit(cache=True, inline="always")
+def _swap_row(k, p, swap, law, qs, ws, q_r, omega_r, pars, sts, dt, sim, u_last, offset, has_off, u):
+    # ControllerBank.compute with a swap pending, for row p: reset, then the bumpless entry
+    same_kind = law_is_torque(law[p]) == law_is_torque(swap) or sim.command_torque
+    law[p] = swap
+    law_reset(swap, p, sts)
+    has_off[p] = False
+    if k > 0 and same_kind:
+        has_off[p] = law_enter(swap, qs, ws, q_r, omega_r, p, pars, sts, dt, sim.decay, u_last, offset, u)
+
+
+@njit(cache=True, inline="always")
+def _ext_torque(tau_e, m, k, lo, sim, noise, noise_lo):
+    # the disturbance torque of step k: constant, step and the noise drawn for this group of episodes
+    t_ns = k * sim.dt_ns
+    with_noise = noise.shape[0] > 0
+    for p in range(m):
+        for i in range(3):
+            tau_e[p, i] = 0.0 + sim.tau_constant[i]
+            if t_ns >= sim.step_ns:
+                tau_e[p, i] += sim.tau_step[i]
+            if with_noise:
+                tau_e[p, i] += noise[lo + p - noise_lo, k, i]
+
+
+@njit(cache=True, inline="always")
+def _keep(out, r, lo, m, q, w, q_r, h0, u, tau_c, tau_e, x, k_i):
+    # write the kept step r of every row into the outputs that have rows
+    for p in range(m):
+        e = lo + p
+        for i in range(4):
+            if out.q.shape[0] > 0:
+                out.q[e, r, i] = q[p, i]
+            if out.qr.shape[0] > 0:
+                out.qr[e, r, i] = q_r[p, i]
+        for i in range(3):
+            if out.w.shape[0] > 0:
+                out.w[e, r, i] = w[p, i]
+            if out.h.shape[0] > 0:
+                out.h[e, r, i] = h0[p, i]
+            if out.u.shape[0] > 0:
+                out.u[e, r, i] = u[p, i]
+            if out.tc.shape[0] > 0:
+                out.tc[e, r, i] = tau_c[p, i]
+            if out.te.shape[0] > 0:
+                out.te[e, r, i] = tau_e[p, i]
+        for j in range(x.shape[1]):
+            if out.wa.shape[0] > 0:
+                out.wa[e, r, j] = x[p, j, 0]
+            if out.ws.shape[0] > 0:
+                out.ws[e, r, j] = x[p, j, 2]
+            if out.we.shape[0] > 0:
+                out.we[e, r, j] = k_i[e if k_i.shape[0] > 1 else 0] * x[p, j, 1]
+
+
+@njit(cache=True, nogil=True)
+def chunk(lo, hi, sim, pars, sts, noise, noise_lo, out, sums):
+    """Episodes ``lo..hi-1`` from step 0 to K, the stepwise driver's order of calls, kept every ``stride``.
+
+    ``sim`` (batch.SimArrays) holds the models' arrays; ``pars`` and ``sts``
+    each law's parameter and state records for these episodes (rows 0..hi-lo-1);
+    ``noise`` (rows from episode ``noise_lo``, K + 1, 3) the disturbance noise
+    torque, or no rows; ``out`` (batch.Outputs) the kept trajectory arrays
+    (one with no rows is not kept) and ``sums`` (batch.SumsSpec) the running
+    sums' axis, start and final values, band and output (no rows: none).
+    Each episode runs its own law (``sim.law0``) and takes the swaps
+    ``sim.sw_law[s]`` before the command of step ``sim.sw_k[s]`` (sorted),
+    with the controller bank's bumpless transfer.
+    """
+    m = hi - lo
+    dt = sim.dt
+    q = sim.q0[lo:hi].copy()
+    w = sim.w0[lo:hi].copy()
+    x = sim.x0[lo:hi].copy()
+    qi = sim.q_initial[lo:hi].copy()
+    qf = sim.q_final[lo:hi].copy()
+    omega_r = sim.omega_ref[lo:hi].copy()
+    ii = sim.inertia[lo:hi].copy()
+    iv = sim.inertia_inv[lo:hi].copy()
+    law = sim.law0[lo:hi].copy()
+    offset = np.zeros((m, 3))
+    has_off = np.zeros(m, dtype=np.bool_)
+    u_last = np.zeros((m, 3))
+    # private copies of the shared read-only arrays: threads sharing one array would fight over its reference count
+    allocation, axes, phi_T, gamma = sim.allocation.copy(), sim.axes.copy(), sim.phi_T.copy(), sim.gamma.copy()
+    k_b, headroom, k_i, r_a = sim.k_b.copy(), sim.headroom.copy(), sim.k_i.copy(), sim.r_a.copy()
+    coast = sim.coast.copy()
+    fail_j, fail_k, fail_stuck = sim.fail_j.copy(), sim.fail_k.copy(), sim.fail_stuck.copy()
+    s_seeds, s_att, s_rate = sim.s_seeds.copy(), sim.s_att.copy(), sim.s_rate.copy()
+    sw_k, sw_law = sim.sw_k.copy(), sim.sw_law.copy()
+    qm = np.empty((m, 4))
+    wm = np.empty((m, 3))
+    tau_e = np.zeros((m, 3))
+    u = np.empty((m, 3))
+    tau_c = np.empty((m, 3))
+    h0 = np.empty((m, 3))
+    x_next = np.empty_like(x)
+    h_out = np.empty((m, 3))
+    keep = out.q.shape[0] > 0 or out.qr.shape[0] > 0 or out.w.shape[0] > 0 or out.h.shape[0] > 0
+    keep = keep or out.u.shape[0] > 0 or out.tc.shape[0] > 0 or out.te.shape[0] > 0 or out.wa.shape[0] > 0
+    keep = keep or out.ws.shape[0] > 0 or out.we.shape[0] > 0
+    with_sums = sums.out.shape[0] > 0
+    # running sums (see SUMMARY_COLUMNS) and what each needs of the previous sample
+    acc = np.zeros((m, N_SUMS))
+    acc[:, 0:3] = np.nan
+    acc[:, 3] = -np.inf
+    acc[:, 10] = 1.0
+    last_out = np.full(m, -1)
+    prev = np.zeros((m, 3))  # fraction of the step, time after it, error
+    n_after = 0
+    s_next = 0
+    for k in range(sim.n_steps + 1):
+        t_ns = k * sim.dt_ns
+        q_r = qf if t_ns * 1e-9 >= sim.step_time - 1e-12 else qi
+        swap = -1
+        while s_next < sw_k.shape[0] and sw_k[s_next] <= k:
+            if sw_k[s_next] == k:
+                swap = sw_law[s_next]
+            s_next += 1
+        _ext_torque(tau_e, m, k, lo, sim, noise, noise_lo)
+        if sim.noisy:  # the law sees the measurements (ControllerBank.measure)
+            for p in range(m):
+                measure_row(q, w, p, lo + p, k, s_seeds, s_att, s_rate, qm, wm)
+        qs, ws = (qm, wm) if sim.noisy else (q, w)
+        for p in range(m):
+            if swap >= 0 and law[p] != swap:
+                _swap_row(k, p, swap, law, qs, ws, q_r, omega_r, pars, sts, dt, sim, u_last, offset, has_off, u)
+            lp = law[p]
+            law_step(lp, qs, ws, q_r, omega_r, p, pars, sts, dt, u)
+            law_finish(lp, p, pars, u, offset, has_off, sim.decay)
+            for i in range(3):
+                u_last[p, i] = u[p, i]
+            wheel_row(x, u, p, lo + p, k, allocation, axes, phi_T, gamma, sim.j_m, k_b, headroom, sim.speed_max,
+                      sim.v_max, dt, sim.command_torque or law_is_torque(lp), k_i, r_a, sim.b_m, fail_j, fail_k,
+                      fail_stuck, sim.e_hold, coast, x_next, tau_c, h0)
+        if keep and k % sim.stride == 0:
+            _keep(out, k // sim.stride, lo, m, q, w, q_r, h0, u, tau_c, tau_e, x, k_i)
+        if with_sums:
+            t = k * dt
+            after = t >= sim.step_time - 1e-12
+            for p in range(m):
+                _accumulate_row(acc, last_out, prev, p, lo + p, k, sim.n_steps, t, dt, after, n_after,
+                                sim.step_time, q, w, u, tau_c, x, sums)
+            n_after += after
+        if k < sim.n_steps:
+            rk4_body_into(q, w, h0, ii, iv, tau_c, tau_e, dt, sim.substeps, q, w, h_out)
+        x, x_next = x_next, x
+    if with_sums:
+        for p in range(m):
+            if last_out[p] < 0:
+                acc[p, 4] = 0.0
+            elif last_out[p] == n_after - 1:
+                acc[p, 4] = np.nan
+            acc[p, 5] = abs(prev[p, 2])
+            for c in range(N_SUMS):
+                sums.out[lo + p, c] = acc[p, c]
+
+
+@njit(cache=True, inline="always")
+def _accumulate_row(acc, last_out, prev, p, e, k, n_steps, t, dt, after, n_after, step_time,
+                    q, w, u, tau_c, x, sums):
+    # one step of row p's running sums (SUMMARY_COLUMNS), as metrics.summarize computes them
+    for i in range(3):
+        if not (np.isfinite(w[p, i]) and np.isfinite(u[p, i])):
+            acc[p, 10] = 0.0
+        acc[p, 11] = max(acc[p, 11], abs(u[p, i])) if not np.isnan(u[p, i]) else np.inf
+    for j in range(x.shape[1]):
+        acc[p, 12] = max(acc[p, 12], abs(x[p, j, 2])) if not np.isnan(x[p, j, 2]) else np.inf
+    if k < n_steps:
+        acc[p, 9] += np.sqrt(tau_c[p, 0] ** 2 + tau_c[p, 1] ** 2 + tau_c[p, 2] ** 2) * ((k + 1) * dt - t)
+    if not after:
+        return
+    y0, r_fin = sums.y0[e], sums.r[e]
+    span = r_fin - y0
+    ta = t - step_time
+    y = _euler_axis(q, p, sums.axis)
+    f = (y - y0) / (1.0 if span == 0.0 else span)
+    first = n_after == 0
+    f_prev, ta_prev, err_prev = prev[p, 0], prev[p, 1], prev[p, 2]
+    acc[p, 0] = _crossing(acc[p, 0], 0.632, f, f_prev, ta, ta_prev, first)
+    acc[p, 1] = _crossing(acc[p, 1], 0.1, f, f_prev, ta, ta_prev, first)
+    acc[p, 2] = _crossing(acc[p, 2], 0.9, f, f_prev, ta, ta_prev, first)
+    acc[p, 3] = max(acc[p, 3], f)
+    if abs(y - r_fin) > sums.band * abs(span):
+        last_out[p] = n_after
+    elif last_out[p] == n_after - 1 and last_out[p] >= 0:
+        acc[p, 4] = ta  # settled: the first sample after the last one outside the band, unless it leaves again
+    err = r_fin - y
+    if not first:
+        d = ta - ta_prev
+        acc[p, 6] += 0.5 * (abs(err) + abs(err_prev)) * d
+        acc[p, 7] += 0.5 * (err ** 2 + err_prev ** 2) * d
+        acc[p, 8] += 0.5 * (ta * abs(err) + ta_prev * abs(err_prev)) * d
+    prev[p, 0], prev[p, 1], prev[p, 2] = f, ta, err

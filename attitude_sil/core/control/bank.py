@@ -1,0 +1,194 @@
+"""The controller bank: every registered law for P episodes, one active, swapped bumplessly.
+
+The bank is what the controller node (P = 1) and the stepwise batch driver
+call each control step; the compiled driver (:mod:`attitude_sil.core.batch`)
+takes its records and runs the same law steps in its own loop. Each law's
+parameters come from the controller's values (``pid.kp``, ...) through the
+law's ``record``; its state is the law's declared layout
+(:mod:`attitude_sil.core.control.law`).
+
+:meth:`ControllerBank.request` schedules a swap that takes effect at the next
+:meth:`ControllerBank.compute` (a step boundary). Bumpless transfer:
+
+* the new law's state is zeroed; then, if the old law commanded the same
+  kind (volts or N m), the law's ``enter`` sets its state so the first
+  command equals the old law's last (the ``pid`` and ``fuzzy_pid`` laws),
+  or, for a law without ``enter``, a decaying offset
+  (``bumpless_time_constant``) makes the first command equal the last;
+* between command kinds there is nothing to match: the new law starts from
+  its own command; the jump is bounded by ``|u_last| + u_max`` of the new law.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from typing import Any
+
+import numpy as np
+
+from attitude_sil.errors import ScenarioError
+
+from ..kernels import measure
+from . import registry
+from .compiled import dispatch_module
+from .law import Law
+
+__all__ = ["ControllerBank", "law_values"]
+
+
+def law_values(law: Law, values: Mapping[str, Any]) -> dict[str, Any]:
+    """The controller's values as ``law.record`` reads them: the shared names and the law's short ones."""
+    view = dict(values)
+    prefix = law.name + "."
+    view.update({k[len(prefix):]: v for k, v in values.items() if k.startswith(prefix)})
+    return view
+
+
+class ControllerBank:
+    """One record and state of each registered law for P episodes; the active law computes.
+
+    Parameters
+    ----------
+    values : dict
+        The controller node's parameters (``controller_type``, ``pid.kp``, ...).
+    dt : float
+        Control period, s.
+    n_episodes : int
+    per_episode : dict, optional
+        Per-episode overrides ``{"pid.kp": (P, 3), ...}``.
+    """
+
+    def __init__(self, values: dict, dt: float, n_episodes: int, per_episode: dict | None = None) -> None:
+        self.dt = float(dt)
+        self.n = int(n_episodes)
+        self.dispatch = dispatch_module()
+        self.names: tuple[str, ...] = self.dispatch.LAWS
+        self.codes = {name: i for i, name in enumerate(self.names)}
+        self.states = tuple(getattr(self.dispatch, f"State_{i}")(*self._zeros(registry.get(name)))
+                            for i, name in enumerate(self.names))
+        self.per_episode = dict(per_episode or {})
+        self.configure(values)
+        self.active = values["controller_type"]
+        if self.active not in self.codes:
+            registry.get(self.active)  # the error names the known laws
+        self.pending: str | None = None
+        self.u_last: np.ndarray | None = None
+        self.offset = np.zeros((self.n, 3))
+        self.has_offset = np.zeros(self.n, dtype=np.bool_)
+        self.reset()
+
+    @classmethod
+    def for_law(cls, name: str, n_episodes: int = 1, dt: float = 0.01, values: dict | None = None) -> ControllerBank:
+        """A bank running law ``name`` with the controller's defaults and ``values`` on top.
+
+        ``values`` keys are the law's short parameter names (``kp``) or any
+        controller parameter (``output_limit``, ``orbit.mu``, ``pid.kp``); for
+        a law in isolation (tests, notebooks) without a scenario.
+        """
+        from ..params import NODE_PARAMS
+
+        law = registry.get(name)
+        v = {s.name: s.default for s in NODE_PARAMS["controller"]}
+        short = {s.name for s in law.params}
+        v.update({(f"{name}.{k}" if k in short else k): val for k, val in (values or {}).items()})
+        v["controller_type"] = name
+        return cls(v, dt, n_episodes)
+
+    def _zeros(self, law: Law) -> list[np.ndarray]:
+        from .law import state_layout
+
+        return [np.zeros((self.n, int(w)), dtype=d) for w, d in state_layout(law).values()]
+
+    def configure(self, values: dict) -> None:
+        """Apply (possibly changed) parameters to every law; states are kept."""
+        v = dict(values)
+        v.update(self.per_episode)
+        self.values = v
+        self.command = v["command"]
+        tau_b = float(v["bumpless_time_constant"])
+        self.decay = float(np.exp(-self.dt / tau_b)) if tau_b > 0.0 else 0.0
+        self.records = tuple(registry.get(name).record(law_values(registry.get(name), v), self.n, self.dt)
+                             for name in self.names)
+        self._set_sensor(v)
+
+    def _set_sensor(self, v: dict) -> None:
+        """Sensor noise on the law's inputs (``sensor_noise.*``, scalars or per-episode (P,) arrays)."""
+        seeds = np.atleast_1d(np.asarray(v["sensor_noise.seed"])).astype(np.int64)
+        att = np.radians(np.atleast_1d(np.asarray(v["sensor_noise.attitude_std_deg"], dtype=float)))
+        rate = np.radians(np.atleast_1d(np.asarray(v["sensor_noise.rate_std_deg_s"], dtype=float)))
+        m = max(seeds.size, att.size, rate.size)
+        self.sensor_seeds, self.sensor_att_std, self.sensor_rate_std = (
+            np.ascontiguousarray(np.broadcast_to(a, (m,))) for a in (seeds, att, rate))
+        #: the law sees measurements with noise (else the true state, bit for bit)
+        self.noisy = bool(np.any(self.sensor_att_std > 0.0) or np.any(self.sensor_rate_std > 0.0))
+
+    def measure(self, q_BN: np.ndarray, omega_BN_B: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray]:
+        """What the law sees at step ``k``: the state with this step's sensor noise (or the state itself).
+
+        Each draw is a pure function of (``sensor_noise.seed``, k, channel)
+        (:func:`attitude_sil.core.kernels.measure`), so a node that knows its
+        step draws what the batch engine drew for that episode.
+        """
+        if not self.noisy:
+            return q_BN, omega_BN_B
+        return measure(np.ascontiguousarray(q_BN, dtype=float), np.ascontiguousarray(omega_BN_B, dtype=float),
+                       int(k), self.sensor_seeds, self.sensor_att_std, self.sensor_rate_std)
+
+    def _zero_state(self, name: str) -> None:
+        for a in self.states[self.codes[name]]:
+            a[...] = 0
+
+    def reset(self) -> None:
+        """New episode: every law's state cleared, no swap pending."""
+        for name in self.names:
+            self._zero_state(name)
+        self.offset[...] = 0.0
+        self.has_offset[...] = False
+        self.pending = None
+        self.u_last = None
+
+    def request(self, controller_type: str) -> None:
+        """Swap to ``controller_type`` at the next step."""
+        if controller_type not in self.codes:
+            registry.get(controller_type)  # raises, naming the known laws
+            raise ScenarioError(f"controller_type {controller_type!r} was registered after this bank was built")
+        self.pending = None if controller_type == self.active else controller_type
+
+    @property
+    def kind(self) -> str:
+        """``voltage`` or ``torque``: what the active law commands."""
+        return self.kind_of(self.active)
+
+    def kind_of(self, controller_type: str) -> str:
+        """``torque`` for a torque law, else what ``command`` says (volts for wheel presets)."""
+        return "torque" if registry.output_of(controller_type) == "torque" else self.command
+
+    def compute(self, q_BN: np.ndarray, omega_BN_B: np.ndarray, q_RN: np.ndarray,
+                omega_RN_R: np.ndarray, k: int | None = None) -> np.ndarray:
+        """Command (P, 3) of the active law for step ``k`` (V or N m, see :attr:`kind`).
+
+        With sensor noise on (:attr:`noisy`) the law sees :meth:`measure` of
+        the state, which needs the step ``k``.
+        """
+        if self.noisy:
+            if k is None:
+                raise ScenarioError("sensor noise needs the step index k")
+            q_BN, omega_BN_B = self.measure(q_BN, omega_BN_B, k)
+        c = np.ascontiguousarray
+        q, w, q_r, w_r = (c(a, dtype=float) for a in (q_BN, omega_BN_B, q_RN, omega_RN_R))
+        d = self.dispatch
+        if self.pending is not None:
+            old_kind = self.kind
+            self.active, self.pending = self.pending, None
+            self._zero_state(self.active)
+            self.offset[...] = 0.0
+            self.has_offset[...] = False
+            if self.u_last is not None and self.kind == old_kind:
+                d.lanes_enter(self.codes[self.active], q, w, q_r, w_r, self.records, self.states, self.dt,
+                              self.decay, c(self.u_last, dtype=float), self.offset, self.has_offset)
+        code = self.codes[self.active]
+        u = np.empty((q.shape[0], 3))
+        d.lanes_step(code, q, w, q_r, w_r, self.records, self.states, self.dt, u)
+        d.lanes_finish(code, self.records, u, self.offset, self.has_offset, self.decay)
+        self.u_last = u
+        return u

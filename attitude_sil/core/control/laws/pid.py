@@ -1,0 +1,122 @@
+"""``pid``: per-axis PID on the quaternion error vector (paper 000 eq. 19, second line).
+
+``u = Kp e + Ki ∫e dt + Kd N s / (s + N) e`` per body axis, volts (or N m on a
+torque preset).
+
+Discretisation at the control period ``dt`` (state held between steps):
+
+* the error vector is ``e = -vec(q_RN* ⊗ q_BN)`` with the scalar part made
+  non-negative (:func:`attitude_sil.core.kernels.error3_row`); in the angle
+  mode (``error_mode: angle``) each component becomes ``2 asin(e_i)``;
+* derivative filter: low-pass state ``x_f`` of ``N / (s + N)`` discretised
+  exactly for a held error, ``x_f[k+1] = a x_f[k] + (1 - a) e[k]`` with
+  ``a = exp(-N dt)``; derivative term ``N (e[k] - x_f[k])``. ``x_f`` starts
+  at 0, so a step at t = 0 gives the derivative kick a continuous PID has;
+* integrator: forward Euler, ``I[k+1] = I[k] + e[k] dt``;
+* output saturation at ``±output_limit`` with anti-windup by conditional
+  integration: the integrator holds while the output is saturated and the
+  error pushes further into the limit.
+
+Bumpless entry (:func:`enter`): the filter state is set so the derivative
+term starts at the measured error rate (``x_f = e - ė / N``, ``ė`` from
+:func:`attitude_sil.core.kernels.error_and_rate_row`), and the integrator
+takes the rest, ``I = (u_last - Kp e - Kd ė) / Ki``; the first command then
+equals ``u_last`` exactly when ``Ki > 0``, and the integrator holds only the
+real difference between the two laws.
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import numpy as np
+from numba import njit
+
+from ...paramspec import double_array
+from ..kernels import error3_row, error_and_rate_row
+from ..law import Law, lanes
+
+__all__ = ["LAW", "Params", "pid_row", "pid_bumpless_row", "pid_record"]
+
+
+class Params(NamedTuple):
+    """The PID's record: gains per episode and axis, (n, 3) each, and the shared settings."""
+
+    kp: np.ndarray
+    ki: np.ndarray
+    kd: np.ndarray
+    n: np.ndarray
+    a: np.ndarray  # exp(-N dt): the filter's discrete pole
+    u_max: float  # output limit, V (or N m)
+    angle_mode: bool
+
+
+@njit(cache=True, inline="always")
+def pid_row(q_BN, q_RN, p, kp, ki, kd, n, a, integral, filt, dt, u_max, angle_mode, u):
+    """One PID step for episode ``p`` (row ``p`` of every array); updates ``integral`` and ``filt``."""
+    e = error3_row(q_BN, q_RN, p, angle_mode)
+    for i in range(3):
+        deriv = n[p, i] * (e[i] - filt[p, i])
+        raw = kp[p, i] * e[i] + ki[p, i] * integral[p, i] + kd[p, i] * deriv
+        out = min(max(raw, -u_max), u_max)
+        if not (out != raw and e[i] * raw > 0.0):
+            integral[p, i] += e[i] * dt
+        filt[p, i] = a[p, i] * filt[p, i] + (1.0 - a[p, i]) * e[i]
+        u[p, i] = out
+
+
+@njit(cache=True, inline="always")
+def pid_bumpless_row(e, de, p, kp, ki, kd, n, integral, filt, u_max, u_last):
+    """Set PID state row ``p`` so its next command is ``clip(u_last)`` (a 3-tuple; module docstring)."""
+    for i in range(3):
+        target = min(max(u_last[i], -u_max), u_max)
+        filt[p, i] = e[i] - de[i] / n[p, i]
+        rest = target - kp[p, i] * e[i] - kd[p, i] * de[i]
+        integral[p, i] = rest / ki[p, i] if ki[p, i] > 0.0 else 0.0
+
+
+@njit(cache=True, inline="always")
+def step(q_BN, omega_BN_B, q_RN, omega_RN_R, p, par, st, dt, u):
+    """The law's step (:mod:`attitude_sil.core.control.law`)."""
+    pid_row(q_BN, q_RN, p, par.kp, par.ki, par.kd, par.n, par.a, st.integral, st.filt, dt, par.u_max,
+            par.angle_mode, u)
+
+
+@njit(cache=True, inline="always")
+def enter(q_BN, omega_BN_B, q_RN, omega_RN_R, p, par, st, dt, decay, u_last, offset):
+    """Bumpless entry: the state that makes the first command ``u_last[p]`` (no offset left)."""
+    e, de = error_and_rate_row(q_BN, omega_BN_B, q_RN, omega_RN_R, p, par.angle_mode)
+    pid_bumpless_row(e, de, p, par.kp, par.ki, par.kd, par.n, st.integral, st.filt, par.u_max,
+                     (u_last[p, 0], u_last[p, 1], u_last[p, 2]))
+    return False
+
+
+def pid_record(values, n: int, dt: float, prefix: str = "") -> Params:
+    """The record of the PID gains ``{prefix}kp`` ... ``{prefix}n`` of ``values`` for n episodes."""
+    kp, ki, kd, nf = (lanes(values[prefix + g], n) for g in ("kp", "ki", "kd", "n"))
+    return Params(kp, ki, kd, nf, np.exp(-nf * dt), float(values["output_limit"]), values["error_mode"] == "angle")
+
+
+def _linear(values) -> tuple:
+    return tuple(np.asarray(values[g], dtype=float) for g in ("kp", "ki", "kd", "n"))
+
+
+LAW = Law(
+    name="pid",
+    summary="per-axis PID on the quaternion error with a filtered derivative (paper 000 eq. 19)",
+    params=(
+        double_array("kp", [48.894] * 3, "proportional gain per body axis, V per unit quaternion error",
+                     lengths=(3,), min=0.0, runtime=True),
+        double_array("ki", [0.071] * 3, "integral gain per body axis, V/s per unit error", lengths=(3,), min=0.0,
+                     runtime=True),
+        double_array("kd", [106.046] * 3, "derivative gain per body axis, V s per unit error", lengths=(3,),
+                     min=0.0, runtime=True),
+        double_array("n", [1.427] * 3, "derivative filter coefficient N per body axis, rad/s", lengths=(3,),
+                     min=0.0, min_exclusive=True, runtime=True),
+    ),
+    state={"integral": (3, np.float64), "filt": (3, np.float64)},
+    record=pid_record,
+    step=step,
+    enter=enter,
+    linear=_linear,
+)

@@ -1,0 +1,104 @@
+"""The one list of control laws: the built-ins and those other packages register.
+
+Every part of the package that needs to know which laws exist asks here: the
+controller node and its parameter table, the CLI's ``--controller`` /
+``--swap`` / ``--help``, the batch engine, the tuner, Monte Carlo, replay
+verification and ``docs/parameters.md``.
+
+* Built-in laws: every module of :mod:`attitude_sil.core.control.laws` that
+  defines ``LAW``, found by itself (adding one is adding a file).
+* Plugins: entry points of the group ``attitude_sil.laws`` (a contract, see
+  docs/writing-a-law.md); each names a :class:`~attitude_sil.core.control.law.Law`
+  or a module defining ``LAW``. A plugin that fails to load, breaks the
+  contract or reuses a taken name is skipped with one line on stderr naming
+  the entry point and the reason; the rest of the package works on.
+"""
+
+from __future__ import annotations
+
+import importlib
+import pkgutil
+import sys
+from functools import lru_cache
+from importlib.metadata import entry_points
+from types import ModuleType
+
+from attitude_sil.errors import ScenarioError
+
+from ..paramspec import ParamSpec
+from . import laws as _builtin
+from .law import Law
+
+__all__ = ["ENTRY_POINT_GROUP", "laws", "get", "names", "output_of", "parameter_table", "plugin_problems"]
+
+#: the entry-point group through which other packages add laws (a contract)
+ENTRY_POINT_GROUP = "attitude_sil.laws"
+
+_PROBLEMS: list[str] = []
+
+
+def _law_of(obj, where: str) -> Law:
+    law = getattr(obj, "LAW", obj) if isinstance(obj, ModuleType) else obj
+    if not isinstance(law, Law):
+        raise TypeError(f"{where} is not a Law (nor a module defining LAW)")
+    return law
+
+
+@lru_cache(maxsize=1)
+def laws() -> dict[str, Law]:
+    """Every law by name: the built-ins (by module name), then the plugins (by entry-point name)."""
+    found: dict[str, Law] = {}
+    for info in sorted(pkgutil.iter_modules(_builtin.__path__), key=lambda m: m.name):
+        module = importlib.import_module(f"{_builtin.__name__}.{info.name}")
+        if hasattr(module, "LAW"):
+            law = _law_of(module, module.__name__)
+            found[law.name] = law
+    for ep in sorted(entry_points(group=ENTRY_POINT_GROUP), key=lambda e: e.name):
+        where = f"law plugin {ep.name!r} ({ep.value})"
+        try:
+            law = _law_of(ep.load(), where)
+        except Exception as exc:  # a broken plugin must not take the simulator down with it
+            _skip(f"{where} could not be loaded: {type(exc).__name__}: {exc}")
+            continue
+        if law.name in found:
+            _skip(f"{where} is named {law.name!r}, which another law already has")
+            continue
+        if law.name != ep.name:
+            _skip(f"{where} defines the law {law.name!r}; the entry point must carry the law's name")
+            continue
+        found[law.name] = law
+    return found
+
+
+def _skip(line: str) -> None:
+    _PROBLEMS.append(line)
+    print(f"attitude-sil: {line}; skipped", file=sys.stderr)
+
+
+def plugin_problems() -> list[str]:
+    """What was wrong with each plugin that was skipped (after :func:`laws`)."""
+    laws()
+    return list(_PROBLEMS)
+
+
+def names() -> tuple[str, ...]:
+    """The ``controller_type`` values, built-ins first."""
+    return tuple(laws())
+
+
+def get(name: str) -> Law:
+    """The law called ``name``; a ScenarioError naming the known laws if there is none."""
+    try:
+        return laws()[name]
+    except KeyError:
+        raise ScenarioError(f"unknown controller_type {name!r}; known: {', '.join(names())}") from None
+
+
+def output_of(name: str) -> str:
+    """``command`` or ``torque``: what the law commands (:data:`attitude_sil.core.control.law.OUTPUTS`)."""
+    return get(name).output
+
+
+def parameter_table() -> list[ParamSpec]:
+    """Every law's parameters with full names (``pid.kp``, ...), in registry order."""
+    return [spec for law in laws().values() for spec in law.table()]
