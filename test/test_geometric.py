@@ -23,13 +23,12 @@ def test_attitude_term_matches_papers_sum():
     assert np.allclose(s_k, -paper)  # eq. 7 adds +sum k_i e_i x Q^T e_i, i.e. -S_K
 
 
-def _values(k=K, l=L, inertia=J, **extra):  # noqa: E741 - the paper's L
-    return {"k": np.asarray(k).tolist() if np.ndim(k) == 1 else k, "l": np.asarray(l).tolist() if np.ndim(l) == 1 else l,
-            "inertia": np.asarray(inertia).ravel().tolist(), **extra}
+def _values(**extra):
+    return {"k": K.tolist(), "l": L.tolist(), "inertia": J.ravel().tolist(), **extra}
 
 
-def _law(dt, torque_limit, n=1, **values):
-    return ControllerBank.for_law("geometric", n, dt, {**_values(**values), "torque_limit": torque_limit})
+def _law(dt, torque_limit):
+    return ControllerBank.for_law("geometric", 1, dt, {**_values(), "torque_limit": torque_limit})
 
 
 def _lyapunov(q_BN, w, q_RN, w_d):
@@ -105,7 +104,7 @@ def test_compiled_law_equals_the_numpy_reference():
     values = dict(load_scenario(CONFIG / "hawaiisat_lvlh.yaml").values["controller"])
     assert values["geometric.feedforward"]  # the preset feeds the environment forward: the test covers it
     rng = np.random.default_rng(9)
-    inertia = np.array([np.diag(J * s) for s in rng.uniform(0.8, 1.2, 6)]).reshape(6, 9)
+    inertia = np.array([(J * s).ravel() for s in rng.uniform(0.8, 1.2, 6)])  # (6, 9): one J per episode
     gains = {"k": rng.uniform(0.01, 0.1, (6, 3)), "l": rng.uniform(0.01, 0.1, (6, 3)), "inertia": inertia}
     values.update({f"geometric.{n}": v for n, v in gains.items()})
     values.update({"geometric.torque_limit": 1e-3, "controller_type": "geometric"})
