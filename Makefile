@@ -8,11 +8,13 @@ STAMP := $(VENV)/.installed
 
 .PHONY: run test lint bench soak docs clean
 
-$(STAMP): setup.py package.xml
+$(STAMP): setup.py package.xml examples/custom_law/pyproject.toml
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/pip install --quiet --upgrade pip
 	$(BIN)/pip install --quiet 'ros-jazzy-rclpy[fastrtps]' ros-jazzy-common-interfaces ros-jazzy-std-srvs ros-jazzy-rosgraph-msgs
 	$(BIN)/pip install --quiet -e '.[test]'
+	# the example law package, installed as a user installs theirs: the suite proves the plugin path with it
+	$(BIN)/pip install --quiet -e ./examples/custom_law
 	$(BIN)/python -m attitude_sil.tools.warm
 	touch $(STAMP)
 

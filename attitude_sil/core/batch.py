@@ -284,9 +284,10 @@ def run_compiled(plant, wheels, dist, guide, ctrl, n_steps: int, dt: float, stri
 
 
 def _rows(field, lo: int, hi: int, P: int):
-    """Rows lo..hi-1 of a record field with a leading episode axis, as a contiguous copy; scalars as they are."""
+    """Rows lo..hi-1 of a record field with a leading episode axis, as a writable contiguous copy; scalars as
+    they are (one numba type for every chunk)."""
     if isinstance(field, np.ndarray) and field.ndim >= 1 and field.shape[0] == P:
-        return np.ascontiguousarray(field[lo:hi])
+        return np.array(field[lo:hi], order="C")
     return field
 
 

@@ -12,6 +12,7 @@ description, with the reason.
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 from typing import Any
 
 from .control import registry
@@ -287,6 +288,7 @@ def parameters_markdown() -> str:
     """
     lines = ["<!-- generated from attitude_sil/core/params.py by parameters_markdown(); "
              "test/test_docs.py keeps it equal -->", ""]
+    plugins = tuple(f"{n}." for n in set(registry.names()) - set(registry.builtin_names()))
     for node, specs in NODE_PARAMS.items():
         if node == GLOBAL_NODE:
             continue
@@ -295,7 +297,12 @@ def parameters_markdown() -> str:
                   "| name | type | default | range / choices | set at runtime | meaning |",
                   "| --- | --- | --- | --- | --- | --- |"]
         for spec in specs:
+            if spec.name.startswith(plugins):  # an installed plugin documents its own law
+                continue
             desc = spec.description.replace("|", "\\|")
+            if spec.name in ("controller_type", "schedule.controller_types"):
+                desc += " (and any law a plugin registers, docs/writing-a-law.md)"
+                spec = replace(spec, choices=tuple(c for c in spec.choices if c in registry.builtin_names()))
             lines.append(f"| `{spec.name}` | {spec.kind} | {_default_text(spec.default)} | {_range_text(spec)} | "
                          f"{'yes' if spec.runtime else 'no'} | {desc} |")
         lines.append("")

@@ -169,9 +169,11 @@ class GraphSession:
         localhost_environment()
         # compile (or load from numba's cache) every law's kernels before the clock
         # starts, so no node compiles mid-episode and node processes find the cache
-        for law in registry.names():
+        first = self.scn.param("controller", "controller_type")
+        for law in registry.names():  # each law's step, and a swap (the bumpless entry) where it is not the first
             try:
-                simulate(self.scn, 1, duration=self.scn.dt, controller=law, schedule=[])
+                simulate(self.scn, 1, duration=2 * self.scn.dt, controller=first, driver="stepwise",
+                         schedule=[] if law == first else [(1, law)])
             except (AttitudeSilError, ValueError):
                 pass  # a law this preset's actuator cannot take (e.g. torque into speed-loop wheels)
         self.context = rclpy.Context()

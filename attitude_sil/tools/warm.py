@@ -34,10 +34,14 @@ def warm(config_dir: str | Path | None = None) -> float:
     t0 = time.perf_counter()
     for name in PRESETS:
         scn = load_scenario(folder / f"{name}.yaml")
+        first = scn.param("controller", "controller_type")
         for controller in registry.names():
             for driver in ("auto", "stepwise"):
-                try:
+                try:  # the law alone, then a swap to it (the bumpless entry)
                     simulate(scn, 1, duration=2 * scn.dt, controller=controller, driver=driver)
+                    if controller != first:
+                        simulate(scn, 1, duration=2 * scn.dt, controller=first, driver=driver,
+                                 schedule=[(1, controller)])
                 except ScenarioError:  # a law the preset's plant cannot take: nothing to compile for it
                     break
     return time.perf_counter() - t0

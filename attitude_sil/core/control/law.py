@@ -149,13 +149,15 @@ class Law:
 
 
 def lanes(value: Any, n: int, tail: tuple[int, ...] = (3,), dtype: Any = float) -> np.ndarray:
-    """``value`` as a contiguous (n, *tail) array: a scalar, one (*tail) value for all, or (n, *tail) rows.
+    """``value`` as a new writable contiguous (n, *tail) array: a scalar, a (*tail) value or (n, *tail) rows.
 
-    The helper every ``record`` uses to give each episode its own row.
+    The helper every ``record`` uses to give each episode its own row. Always
+    a fresh array: a read-only or broadcast view would be another numba type
+    and compile the law's loops a second time.
     """
     a = np.asarray(value, dtype=dtype)
     if a.shape == (n, *tail):
-        return np.ascontiguousarray(a)
+        return np.array(a, order="C")
     if a.size != 1:
         size = int(np.prod(tail))
         if a.size == size:
@@ -164,7 +166,7 @@ def lanes(value: Any, n: int, tail: tuple[int, ...] = (3,), dtype: Any = float) 
             a = a.reshape((n, *tail))
         else:
             raise ValueError(f"a value of shape {a.shape} fits neither {tail} nor ({n}, *{tail})")
-    return np.ascontiguousarray(np.broadcast_to(a, (n, *tail)))
+    return np.array(np.broadcast_to(a, (n, *tail)), order="C")
 
 
 def state_record(law: Law, n: int) -> tuple:

@@ -29,7 +29,8 @@ from ..paramspec import ParamSpec
 from . import laws as _builtin
 from .law import Law
 
-__all__ = ["ENTRY_POINT_GROUP", "laws", "get", "names", "output_of", "parameter_table", "plugin_problems"]
+__all__ = ["ENTRY_POINT_GROUP", "laws", "get", "names", "builtin_names", "output_of", "parameter_table",
+           "plugin_problems"]
 
 #: the entry-point group through which other packages add laws (a contract)
 ENTRY_POINT_GROUP = "attitude_sil.laws"
@@ -84,6 +85,11 @@ def plugin_problems() -> list[str]:
 def names() -> tuple[str, ...]:
     """The ``controller_type`` values, built-ins first."""
     return tuple(laws())
+
+
+def builtin_names() -> tuple[str, ...]:
+    """The laws this package ships (:mod:`attitude_sil.core.control.laws`), without plugins."""
+    return tuple(name for name, law in laws().items() if law.step.py_func.__module__.startswith(_builtin.__name__))
 
 
 def get(name: str) -> Law:
