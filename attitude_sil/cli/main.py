@@ -25,6 +25,7 @@ from rclpy.signals import SignalHandlerOptions
 
 from attitude_sil.cli.format import format_bar, format_campaign, format_segments, format_table
 from attitude_sil.core import yaml12
+from attitude_sil.core.control import registry
 from attitude_sil.core.linearize import PAPER_000_COMPARISON_GAINS, PAPER_000_TABLE_1_DURATION, rmse_table
 from attitude_sil.core.linearize import format_table as format_rmse_table
 from attitude_sil.core.scenario import load_scenario, with_parameter_file
@@ -418,7 +419,9 @@ def build_parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="command", required=True)
     run = sub.add_parser("run", help="run a scenario headless through the ROS 2 graph")
     run.add_argument("scenario", help="scenario parameter YAML (config/*.yaml)")
-    run.add_argument("--controller", help="controller_type to start with")
+    laws = ", ".join(registry.names())
+    run.add_argument("--controller", metavar="TYPE",
+                     help=f"controller_type to start with: {laws} (plugins: docs/writing-a-law.md)")
     run.add_argument("--duration", type=float, help="episode length, s (default: plant.duration)")
     rec = run.add_mutually_exclusive_group()
     rec.add_argument("--record", metavar="DIR", help="bag directory (default bags/<scenario>_<time>)")
@@ -430,7 +433,7 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--params", help="parameter file laid over the scenario (e.g. a tuner's best.yaml)")
     run.add_argument("--namespace", help="run the whole graph, its /clock included, under this namespace")
     run.add_argument("--swap", action="append", metavar="TIME:TYPE",
-                     help="swap controller_type at a sim time (repeatable), e.g. --swap 2.0:fuzzy_pid")
+                     help=f"swap controller_type at a sim time (repeatable), e.g. --swap 2.0:fuzzy_pid; TYPE: {laws}")
     run.add_argument("--foxglove", nargs="?", const=DEFAULT_PORT, type=_port, metavar="PORT",
                      help=f"serve every topic live to Foxglove over WebSocket (default port {DEFAULT_PORT}); "
                      "paces the run at real time")

@@ -29,9 +29,10 @@ import numpy as np
 from attitude_sil.errors import ScenarioError
 
 from ..kernels import measure
+from ..params import NODE_PARAMS
 from . import registry
 from .compiled import dispatch_module
-from .law import Law
+from .law import Law, state_layout
 
 __all__ = ["ControllerBank", "law_values"]
 
@@ -85,8 +86,6 @@ class ControllerBank:
         controller parameter (``output_limit``, ``orbit.mu``, ``pid.kp``); for
         a law in isolation (tests, notebooks) without a scenario.
         """
-        from ..params import NODE_PARAMS
-
         law = registry.get(name)
         v = {s.name: s.default for s in NODE_PARAMS["controller"]}
         short = {s.name for s in law.params}
@@ -95,8 +94,6 @@ class ControllerBank:
         return cls(v, dt, n_episodes)
 
     def _zeros(self, law: Law) -> list[np.ndarray]:
-        from .law import state_layout
-
         return [np.zeros((self.n, int(w)), dtype=d) for w, d in state_layout(law).values()]
 
     def configure(self, values: dict) -> None:

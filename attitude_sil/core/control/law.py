@@ -48,7 +48,7 @@ import numpy as np
 
 from ..paramspec import ParamSpec
 
-__all__ = ["Law", "OUTPUTS", "lanes", "state_record", "state_layout"]
+__all__ = ["Law", "OUTPUTS", "lanes", "state_layout"]
 
 #: what a law commands: ``command`` follows the controller's ``command`` parameter
 #: (volts for wheel presets, N m for torque presets); ``torque`` is always N m
@@ -169,24 +169,6 @@ def lanes(value: Any, n: int, tail: tuple[int, ...] = (3,), dtype: Any = float) 
     return np.array(np.broadcast_to(a, (n, *tail)), order="C")
 
 
-def state_record(law: Law, n: int) -> tuple:
-    """A zeroed state record of ``law`` for n episodes (a NamedTuple of (n, width) arrays)."""
-    cls = _state_class(law)
-    return cls(*(np.zeros((n, int(w)), dtype=dt) for w, dt in state_layout(law).values()))
-
-
 def state_layout(law: Law) -> Mapping[str, tuple[int, Any]]:
     # a stateless law still gets a record (numba needs a type): one unused column
     return law.state or {"unused": (1, np.bool_)}
-
-
-_STATE_CLASSES: dict[tuple, type] = {}
-
-
-def _state_class(law: Law) -> type:
-    from collections import namedtuple
-
-    key = (law.name, tuple(law.state))
-    if key not in _STATE_CLASSES:
-        _STATE_CLASSES[key] = namedtuple(f"{law.name}_state", list(state_layout(law)))
-    return _STATE_CLASSES[key]
