@@ -126,14 +126,14 @@ class SumsSpec(NamedTuple):
     out: np.ndarray
 
 
-_LOOPS: dict[str, object] = {}
+_LOOPS: dict[tuple[str, ...], object] = {}
 
 
-def _loop(dispatch):
+def _loop(law_names: tuple[str, ...]):
     """The compiled loop of :mod:`attitude_sil.core.batch_loop` for the bank's law set."""
-    if dispatch.__name__ not in _LOOPS:
-        _LOOPS[dispatch.__name__] = from_template(batch_loop, dispatch)
-    return _LOOPS[dispatch.__name__]
+    if law_names not in _LOOPS:
+        _LOOPS[law_names] = from_template(batch_loop, law_names)
+    return _LOOPS[law_names]
 
 
 #: threads of the compiled driver: one per core (numba's count, which NUMBA_NUM_THREADS sets)
@@ -244,7 +244,7 @@ def run_compiled(plant, wheels, dist, guide, ctrl, n_steps: int, dt: float, stri
                       (np.array([k for k, _ in sw], dtype=np.int64),
                        np.array([ctrl.codes[law] for _, law in sw], dtype=np.int64)))
     outputs = Outputs(*(out[f] for f in TRAJECTORY_FIELDS))
-    loop = _loop(ctrl.dispatch)
+    loop = _loop(ctrl.names)
     layouts = [state_layout(get_law(name)) for name in ctrl.names]
     state_classes = [getattr(ctrl.dispatch, f"State_{i}") for i in range(len(ctrl.names))]
 

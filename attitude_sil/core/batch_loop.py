@@ -4,8 +4,12 @@
 into a generated module with the law dispatch of the registered laws in
 place of the stubs below (numba cannot call a run-time choice of function
 otherwise), and :mod:`attitude_sil.core.batch` runs that module's
-:func:`chunk`. Read it as ordinary code: ``law_step`` & co. are the laws'
-compiled steps selected by each episode's law code (:mod:`attitude_sil.core.control.law`).
+:func:`chunk`. Read it as ordinary code where the ``# @laws stage`` line
+runs every law's compiled step on the episodes whose code is that law's (a
+loop per law, written out there by the generator), and ``law_enter`` & co. do
+the bumpless swap (:mod:`attitude_sil.core.control.law`).
+The loop runs in stages over the chunk's episodes (swaps, commands, wheels),
+each episode's arithmetic in the order of the stepwise driver.
 Its imports are absolute because the copy lives outside the package.
 """
 
@@ -19,19 +23,11 @@ from attitude_sil.core.kernels import measure_row, rk4_body_into, wheel_row
 # >>> law dispatch stubs (replaced by the generated dispatch; see the module docstring)
 
 
-def law_step(code, q, w, q_r, w_r, p, pars, sts, dt, u):  # pragma: no cover - a stand-in
-    raise NotImplementedError
-
-
 def law_reset(code, p, sts):  # pragma: no cover - a stand-in
     raise NotImplementedError
 
 
 def law_enter(code, q, w, q_r, w_r, p, pars, sts, dt, decay, u_last, offset, scratch):  # pragma: no cover
-    raise NotImplementedError
-
-
-def law_finish(code, p, pars, u, offset, has_off, decay):  # pragma: no cover - a stand-in
     raise NotImplementedError
 
 
@@ -77,47 +73,39 @@ def _swap_row(k, p, swap, law, qs, ws, q_r, omega_r, pars, sts, dt, sim, u_last,
 
 
 @njit(cache=True, inline="always")
-def _ext_torque(tau_e, m, k, lo, sim, noise, noise_lo):
-    # the disturbance torque of step k: constant, step and the noise drawn for this group of episodes
-    t_ns = k * sim.dt_ns
-    with_noise = noise.shape[0] > 0
+def _ext_torque(tau_e, m, t_ns, step_ns, tau_constant, tau_step, noise, row0, k):
+    # the disturbance torque of step k: constant, step and the noise (rows from row0; no rows: no noise)
     for p in range(m):
         for i in range(3):
-            tau_e[p, i] = 0.0 + sim.tau_constant[i]
-            if t_ns >= sim.step_ns:
-                tau_e[p, i] += sim.tau_step[i]
-            if with_noise:
-                tau_e[p, i] += noise[lo + p - noise_lo, k, i]
+            tau_e[p, i] = 0.0 + tau_constant[i]
+            if t_ns >= step_ns:
+                tau_e[p, i] += tau_step[i]
+            if noise.shape[0] > 0:
+                tau_e[p, i] += noise[row0 + p, k, i]
 
 
 @njit(cache=True, inline="always")
-def _keep(out, r, lo, m, q, w, q_r, h0, u, tau_c, tau_e, x, k_i):
-    # write the kept step r of every row into the outputs that have rows
+def _keep_rows(dst, r, lo, m, src):
+    # rows 0..m-1 of src (m, width) into step r of episodes lo.. of dst (P, kept, width); no rows: not kept
+    if dst.shape[0] == 0:
+        return
+    for p in range(m):
+        for i in range(src.shape[1]):
+            dst[lo + p, r, i] = src[p, i]
+
+
+@njit(cache=True, inline="always")
+def _keep_wheels(o_ws, o_wa, o_we, r, lo, m, x, k_i):
+    # the wheels' speed, angle and effort of step r (an output with no rows is not kept)
     for p in range(m):
         e = lo + p
-        for i in range(4):
-            if out.q.shape[0] > 0:
-                out.q[e, r, i] = q[p, i]
-            if out.qr.shape[0] > 0:
-                out.qr[e, r, i] = q_r[p, i]
-        for i in range(3):
-            if out.w.shape[0] > 0:
-                out.w[e, r, i] = w[p, i]
-            if out.h.shape[0] > 0:
-                out.h[e, r, i] = h0[p, i]
-            if out.u.shape[0] > 0:
-                out.u[e, r, i] = u[p, i]
-            if out.tc.shape[0] > 0:
-                out.tc[e, r, i] = tau_c[p, i]
-            if out.te.shape[0] > 0:
-                out.te[e, r, i] = tau_e[p, i]
         for j in range(x.shape[1]):
-            if out.wa.shape[0] > 0:
-                out.wa[e, r, j] = x[p, j, 0]
-            if out.ws.shape[0] > 0:
-                out.ws[e, r, j] = x[p, j, 2]
-            if out.we.shape[0] > 0:
-                out.we[e, r, j] = k_i[e if k_i.shape[0] > 1 else 0] * x[p, j, 1]
+            if o_wa.shape[0] > 0:
+                o_wa[e, r, j] = x[p, j, 0]
+            if o_ws.shape[0] > 0:
+                o_ws[e, r, j] = x[p, j, 2]
+            if o_we.shape[0] > 0:
+                o_we[e, r, j] = k_i[e if k_i.shape[0] > 1 else 0] * x[p, j, 1]
 
 
 @njit(cache=True, nogil=True)
@@ -145,6 +133,10 @@ def chunk(lo, hi, sim, pars, sts, noise, noise_lo, out, sums):
     ii = sim.inertia[lo:hi].copy()
     iv = sim.inertia_inv[lo:hi].copy()
     law = sim.law0[lo:hi].copy()
+    # @laws records
+    present = np.zeros(len(pars), dtype=np.bool_)  # the laws some episode of the chunk runs
+    for p in range(m):
+        present[law[p]] = True
     offset = np.zeros((m, 3))
     has_off = np.zeros(m, dtype=np.bool_)
     u_last = np.zeros((m, 3))
@@ -163,9 +155,12 @@ def chunk(lo, hi, sim, pars, sts, noise, noise_lo, out, sums):
     h0 = np.empty((m, 3))
     x_next = np.empty_like(x)
     h_out = np.empty((m, 3))
-    keep = out.q.shape[0] > 0 or out.qr.shape[0] > 0 or out.w.shape[0] > 0 or out.h.shape[0] > 0
-    keep = keep or out.u.shape[0] > 0 or out.tc.shape[0] > 0 or out.te.shape[0] > 0 or out.wa.shape[0] > 0
-    keep = keep or out.ws.shape[0] > 0 or out.we.shape[0] > 0
+    # arrays are taken out of their records once: inside the step loop each take would cost reference counts
+    o_q, o_w, o_qr, o_h, o_u, o_tc, o_te, o_ws, o_wa, o_we = out
+    keep = (o_q.shape[0] > 0 or o_w.shape[0] > 0 or o_qr.shape[0] > 0 or o_h.shape[0] > 0 or o_u.shape[0] > 0
+            or o_tc.shape[0] > 0 or o_te.shape[0] > 0 or o_ws.shape[0] > 0 or o_wa.shape[0] > 0 or o_we.shape[0] > 0)
+    tau_constant, tau_step, e_hold = sim.tau_constant.copy(), sim.tau_step.copy(), sim.e_hold
+    y0, r_fin, sums_out = sums.y0, sums.r, sums.out
     with_sums = sums.out.shape[0] > 0
     # running sums (see SUMMARY_COLUMNS) and what each needs of the previous sample
     acc = np.zeros((m, N_SUMS))
@@ -184,30 +179,40 @@ def chunk(lo, hi, sim, pars, sts, noise, noise_lo, out, sums):
             if sw_k[s_next] == k:
                 swap = sw_law[s_next]
             s_next += 1
-        _ext_torque(tau_e, m, k, lo, sim, noise, noise_lo)
+        _ext_torque(tau_e, m, t_ns, sim.step_ns, tau_constant, tau_step, noise, lo - noise_lo, k)
         if sim.noisy:  # the law sees the measurements (ControllerBank.measure)
             for p in range(m):
                 measure_row(q, w, p, lo + p, k, s_seeds, s_att, s_rate, qm, wm)
         qs, ws = (qm, wm) if sim.noisy else (q, w)
+        if swap >= 0:  # ControllerBank.compute with a swap pending
+            present[swap] = True
+            for p in range(m):
+                if law[p] != swap:
+                    _swap_row(k, p, swap, law, qs, ws, q_r, omega_r, pars, sts, dt, sim, u_last, offset, has_off, u)
+        # @laws stage q=qs w=ws w_r=omega_r decay=sim.decay
         for p in range(m):
-            if swap >= 0 and law[p] != swap:
-                _swap_row(k, p, swap, law, qs, ws, q_r, omega_r, pars, sts, dt, sim, u_last, offset, has_off, u)
             lp = law[p]
-            law_step(lp, qs, ws, q_r, omega_r, p, pars, sts, dt, u)
-            law_finish(lp, p, pars, u, offset, has_off, sim.decay)
             for i in range(3):
                 u_last[p, i] = u[p, i]
             wheel_row(x, u, p, lo + p, k, allocation, axes, phi_T, gamma, sim.j_m, k_b, headroom, sim.speed_max,
                       sim.v_max, dt, sim.command_torque or law_is_torque(lp), k_i, r_a, sim.b_m, fail_j, fail_k,
-                      fail_stuck, sim.e_hold, coast, x_next, tau_c, h0)
+                      fail_stuck, e_hold, coast, x_next, tau_c, h0)
         if keep and k % sim.stride == 0:
-            _keep(out, k // sim.stride, lo, m, q, w, q_r, h0, u, tau_c, tau_e, x, k_i)
+            r = k // sim.stride
+            _keep_rows(o_q, r, lo, m, q)
+            _keep_rows(o_qr, r, lo, m, q_r)
+            _keep_rows(o_w, r, lo, m, w)
+            _keep_rows(o_h, r, lo, m, h0)
+            _keep_rows(o_u, r, lo, m, u)
+            _keep_rows(o_tc, r, lo, m, tau_c)
+            _keep_rows(o_te, r, lo, m, tau_e)
+            _keep_wheels(o_ws, o_wa, o_we, r, lo, m, x, k_i)
         if with_sums:
             t = k * dt
             after = t >= sim.step_time - 1e-12
             for p in range(m):
-                _accumulate_row(acc, last_out, prev, p, lo + p, k, sim.n_steps, t, dt, after, n_after,
-                                sim.step_time, q, w, u, tau_c, x, sums)
+                _accumulate_row(acc, last_out, prev, p, k, sim.n_steps, t, dt, after, n_after, sim.step_time,
+                                q, w, u, tau_c, x, sums.axis, y0[lo + p], r_fin[lo + p], sums.band)
             n_after += after
         if k < sim.n_steps:
             rk4_body_into(q, w, h0, ii, iv, tau_c, tau_e, dt, sim.substeps, q, w, h_out)
@@ -220,12 +225,12 @@ def chunk(lo, hi, sim, pars, sts, noise, noise_lo, out, sums):
                 acc[p, 4] = np.nan
             acc[p, 5] = abs(prev[p, 2])
             for c in range(N_SUMS):
-                sums.out[lo + p, c] = acc[p, c]
+                sums_out[lo + p, c] = acc[p, c]
 
 
 @njit(cache=True, inline="always")
-def _accumulate_row(acc, last_out, prev, p, e, k, n_steps, t, dt, after, n_after, step_time,
-                    q, w, u, tau_c, x, sums):
+def _accumulate_row(acc, last_out, prev, p, k, n_steps, t, dt, after, n_after, step_time,
+                    q, w, u, tau_c, x, axis, y0, r_fin, band):
     # one step of row p's running sums (SUMMARY_COLUMNS), as metrics.summarize computes them
     for i in range(3):
         if not (np.isfinite(w[p, i]) and np.isfinite(u[p, i])):
@@ -237,10 +242,9 @@ def _accumulate_row(acc, last_out, prev, p, e, k, n_steps, t, dt, after, n_after
         acc[p, 9] += np.sqrt(tau_c[p, 0] ** 2 + tau_c[p, 1] ** 2 + tau_c[p, 2] ** 2) * ((k + 1) * dt - t)
     if not after:
         return
-    y0, r_fin = sums.y0[e], sums.r[e]
     span = r_fin - y0
     ta = t - step_time
-    y = _euler_axis(q, p, sums.axis)
+    y = _euler_axis(q, p, axis)
     f = (y - y0) / (1.0 if span == 0.0 else span)
     first = n_after == 0
     f_prev, ta_prev, err_prev = prev[p, 0], prev[p, 1], prev[p, 2]
@@ -248,7 +252,7 @@ def _accumulate_row(acc, last_out, prev, p, e, k, n_steps, t, dt, after, n_after
     acc[p, 1] = _crossing(acc[p, 1], 0.1, f, f_prev, ta, ta_prev, first)
     acc[p, 2] = _crossing(acc[p, 2], 0.9, f, f_prev, ta, ta_prev, first)
     acc[p, 3] = max(acc[p, 3], f)
-    if abs(y - r_fin) > sums.band * abs(span):
+    if abs(y - r_fin) > band * abs(span):
         last_out[p] = n_after
     elif last_out[p] == n_after - 1 and last_out[p] >= 0:
         acc[p, 4] = ta  # settled: the first sample after the last one outside the band, unless it leaves again

@@ -20,6 +20,7 @@ from __future__ import annotations
 import numpy as np
 
 from attitude_sil.core.engine import simulate
+from attitude_sil.core.papers import PAPER_000_COMPARISON_GAINS, PAPER_000_TABLE_1_DURATION
 from attitude_sil.core.quaternion import euler_from_quat
 from attitude_sil.core.scenario import Scenario
 from attitude_sil.errors import ScenarioError
@@ -35,11 +36,6 @@ PAPER_000_TABLE_1 = {
     25: (0.396, 0.656, 0.499),
     35: (1.0219, 2.696, 1.434),
 }
-#: the PID used for the comparison in paper 000 (Kp, Ki, Kd, N)
-PAPER_000_COMPARISON_GAINS = (52.995, 2.488, 132.442, 4.748)
-#: run length of the Table 1 comparison, s: identified by least squares of log(project / paper) over the 15
-#: cells (the paper gives none; 9-14 s scanned, residual RMS of the log ratio 0.47 at 10.5 s, docs/fidelity.md)
-PAPER_000_TABLE_1_DURATION = 10.5
 
 
 def euler_eq9_unit_scalar(q: np.ndarray) -> np.ndarray:

@@ -31,6 +31,7 @@ from attitude_sil.core.actuators import SpeedLoopWheels
 from attitude_sil.core.engine import flexible_states, simulate
 from attitude_sil.core.linearize import PAPER_000_TABLE_1, PAPER_000_TABLE_1_DURATION, rmse_table
 from attitude_sil.core.metrics import flexible_split, scenario_metrics, step_metrics, tracking_metrics
+from attitude_sil.core.papers import PAPERS
 from attitude_sil.core.plants import FLEXIBLE_CASES
 from attitude_sil.core.scenario import PRESETS, Scenario, default_config_dir, load_scenario
 from attitude_sil.errors import AttitudeSilError
@@ -40,7 +41,6 @@ from .rootlocus import closed_loop, place_poles, reduced_roll_loop
 __all__ = ["PAPERS", "Row", "RowResult", "Presets", "ROWS", "PAPER_000_GAINS", "PAPER_001_DESIGNS",
            "PAPER_002_GAINS", "check", "format_report", "default_config_dir"]
 
-PAPERS = ("000", "001", "002", "003", "004")
 STATUSES = ("PASS", "EXPLAINED", "FAIL")
 
 #: paper 000 PID gains (Kp, Ki, Kd, N): "Genetic algorithm based tuning" and "Root locus-based tuning"

@@ -74,6 +74,7 @@ class ControllerBank:
             registry.get(self.active)  # the error names the known laws
         self.pending: str | None = None
         self.u_last: np.ndarray | None = None
+        self._law_rows: tuple[str, np.ndarray, np.ndarray] | None = None
         self.offset = np.zeros((self.n, 3))
         self.has_offset = np.zeros(self.n, dtype=np.bool_)
         self.reset()
@@ -131,6 +132,14 @@ class ControllerBank:
         return measure(np.ascontiguousarray(q_BN, dtype=float), np.ascontiguousarray(omega_BN_B, dtype=float),
                        int(k), self.sensor_seeds, self.sensor_att_std, self.sensor_rate_std)
 
+    def _codes_of(self, name: str) -> tuple[np.ndarray, np.ndarray]:
+        """Every row's law code (the active law's) and which laws run, as the compiled stage takes them."""
+        if self._law_rows is None or self._law_rows[0] != name:
+            present = np.zeros(len(self.names), dtype=np.bool_)
+            present[self.codes[name]] = True
+            self._law_rows = (name, np.full(self.n, self.codes[name], dtype=np.int64), present)
+        return self._law_rows[1], self._law_rows[2]
+
     def _zero_state(self, name: str) -> None:
         for a in self.states[self.codes[name]]:
             a[...] = 0
@@ -183,9 +192,9 @@ class ControllerBank:
             if self.u_last is not None and self.kind == old_kind:
                 d.lanes_enter(self.codes[self.active], q, w, q_r, w_r, self.records, self.states, self.dt,
                               self.decay, c(self.u_last, dtype=float), self.offset, self.has_offset)
-        code = self.codes[self.active]
         u = np.empty((q.shape[0], 3))
-        d.lanes_step(code, q, w, q_r, w_r, self.records, self.states, self.dt, u)
-        d.lanes_finish(code, self.records, u, self.offset, self.has_offset, self.decay)
+        law, present = self._codes_of(self.active)
+        d.lanes_stage(law, present, q, w, q_r, w_r, self.records, self.states, self.dt, u, self.offset,
+                      self.has_offset, self.decay)
         self.u_last = u
         return u

@@ -9,11 +9,16 @@ named by a hash of the laws' source, into the user cache folder
 beside it like any other module, and an edited law gets a new hash. The
 generated module holds:
 
-* ``law_step(code, ...)``, ``law_enter(...)``, ``law_reset(...)``,
-  ``law_finish(...)``, ``law_is_torque(code)``: an if-chain over the laws'
-  codes (their order in the set), inlined where they are called;
-* ``lanes_step``, ``lanes_enter``, ``lanes_finish``: the same over P rows, for
-  the controller bank (the nodes with P = 1 and the stepwise driver);
+* ``law_stage(law, present, ...)``: every row's command, as one loop per law
+  over the rows whose code (``law[p]``, the law's index in the set) is that
+  law's, calling the law's step directly, for the laws ``present`` says run.
+  A per-row if-chain over the laws, inlined into one loop, ran the PID 2.7x
+  slower than the same loop with the PID alone, and taking an absent law's
+  records out of their tuple every step cost P = 1 another 3x (bench/README.md);
+* ``law_enter``, ``law_reset``, ``law_is_torque``: an if-chain over the codes,
+  for the rare swap;
+* ``lanes_stage``, ``lanes_enter``: the same as compiled entry points over P
+  rows, for the controller bank (the nodes with P = 1 and the stepwise driver);
 * ``State_<code>``: each law's state record class.
 
 :func:`from_template` makes a module of another compiled loop (the batch
@@ -44,6 +49,7 @@ STUB_END = "# <<< law dispatch stubs"
 
 _LOCK = threading.Lock()
 _MODULES: dict[str, ModuleType] = {}
+_BY_NAMES: dict[tuple[str, ...], ModuleType] = {}
 
 
 def cache_dir() -> Path:
@@ -66,6 +72,37 @@ def _source_digest(law: Law) -> str:
 
 def _zero(dtype) -> str:
     return "False" if np.dtype(dtype) == np.bool_ else "0"
+
+
+#: the names the stage code uses for the loop's variables, and what a template may rename them to
+_STAGE_NAMES = ("law", "present", "q", "w", "q_r", "w_r", "dt", "u", "offset", "has_off", "decay")
+
+
+def _record_lines(laws: list[Law]) -> list[str]:
+    """Each law's records out of their tuples, once (inside a loop each take costs reference counts)."""
+    return [f"par_{i}, st_{i} = pars[{i}], sts[{i}]" for i in range(len(laws))]
+
+
+def _stage_lines(laws: list[Law], names: dict[str, str]) -> list[str]:
+    """Every row's command: a loop per law present over its rows, the law's step called directly.
+
+    Then the transfer offset and, for a law that does not saturate, the clip.
+    ``names`` renames the loop's variables (:data:`_STAGE_NAMES`).
+    """
+    n = {k: names.get(k, k) for k in _STAGE_NAMES}
+    inp = f"{n['q']}, {n['w']}, {n['q_r']}, {n['w_r']}, p"
+    out = []
+    for i, law in enumerate(laws):
+        clip = ["for j in range(3):", f"    {n['u']}[p, j] = min(max({n['u']}[p, j], -par_{i}.u_max), par_{i}.u_max)"]
+        out += [f"if {n['present']}[{i}]:", f"    for p in range({n['law']}.shape[0]):",
+                f"        if {n['law']}[p] == {i}:",
+                f"            _step_{i}({inp}, par_{i}, st_{i}, {n['dt']}, {n['u']})",
+                f"            if {n['has_off']}[p]:",
+                f"                offset_row({n['u']}, p, {n['offset']}, {n['has_off']}, {n['decay']})",
+                *("                " + c for c in clip)]
+        if not law.saturated:
+            out += ["            else:", *("                " + c for c in clip)]
+    return out
 
 
 def _dispatch_source(laws: list[Law]) -> str:
@@ -107,36 +144,27 @@ def _dispatch_source(laws: list[Law]) -> str:
                 "    return True",
                 "return False"]
 
-    def finish_lines(i, law):
-        clip = ["for j in range(3):", f"    u[p, j] = min(max(u[p, j], -pars[{i}].u_max), pars[{i}].u_max)"]
-        out = ["if has_off[p]:", "    offset_row(u, p, offset, has_off, decay)"] + ["    " + c for c in clip]
-        if not law.saturated:
-            out += ["else:"] + ["    " + c for c in clip]
-        return out
-
     jit = "@njit(cache=True, inline='always')"
     torque = " or ".join(f"code == {i}" for i, x in enumerate(laws) if x.output == "torque") or "False"
-    lines += ["", "", jit, f"def law_step(code, {inp}, pars, sts, dt, u):",
-              "    # the law's step for row p",
-              *chain(lambda i, law: [f"_step_{i}({inp}, pars[{i}], sts[{i}], dt, u)"]),
+    stages = ["    " + x for x in _record_lines(laws) + _stage_lines(laws, {})]
+    lines += ["", "", jit, "def law_stage(law, present, q, w, q_r, w_r, pars, sts, dt, u, offset, has_off, decay):",
+              "    # every row's command: one loop per law present over the rows that run it (each law's step",
+              "    # called directly, so its loop compiles as if it were alone; an absent law costs one test)",
+              *stages,
               "", "", jit, "def law_reset(code, p, sts):", "    # zero row p of the law's state",
               *chain(reset_lines),
               "", "", jit, f"def law_enter(code, {inp}, pars, sts, dt, decay, u_last, offset, scratch):",
               "    # bumpless entry of row p; True when a decaying offset remains", *chain(enter_lines),
               "    return False",
-              "", "", jit, "def law_finish(code, p, pars, u, offset, has_off, decay):",
-              "    # the transfer offset, then the saturation of a law whose step does not saturate",
-              *chain(finish_lines),
-              "", "", jit, "def law_is_torque(code):",
-              f"    return {torque}",
-              "", "", "@njit(cache=True)", "def lanes_step(code, q, w, q_r, w_r, pars, sts, dt, u):",
-              "    for p in range(q.shape[0]):", "        law_step(code, q, w, q_r, w_r, p, pars, sts, dt, u)",
+              "", "", jit, "def law_is_torque(code):", f"    return {torque}",
+              "", "", "@njit(cache=True)",
+              "def lanes_stage(law, present, q, w, q_r, w_r, pars, sts, dt, u, offset, has_off, decay):",
+              "    law_stage(law, present, q, w, q_r, w_r, pars, sts, dt, u, offset, has_off, decay)",
               "", "", "@njit(cache=True)",
               "def lanes_enter(code, q, w, q_r, w_r, pars, sts, dt, decay, u_last, offset, has_off):",
               "    scratch = u_last.copy()", "    for p in range(q.shape[0]):",
               "        has_off[p] = law_enter(code, q, w, q_r, w_r, p, pars, sts, dt, decay, u_last, offset, scratch)",
-              "", "", "@njit(cache=True)", "def lanes_finish(code, pars, u, offset, has_off, decay):",
-              "    for p in range(u.shape[0]):", "        law_finish(code, p, pars, u, offset, has_off, decay)", ""]
+              ""]
     return "\n".join(lines)
 
 
@@ -161,7 +189,14 @@ def _load(name: str, source: str) -> ModuleType:
 
 def dispatch_module(law_names: tuple[str, ...] | None = None) -> ModuleType:
     """The generated dispatch module of these laws (default: every registered law), in that order."""
-    laws = [registry.get(n) for n in (law_names or registry.names())]
+    key = tuple(law_names or registry.names())
+    if key not in _BY_NAMES:  # the laws' sources are read and hashed once per process
+        _BY_NAMES[key] = _dispatch_module(key)
+    return _BY_NAMES[key]
+
+
+def _dispatch_module(law_names: tuple[str, ...]) -> ModuleType:
+    laws = [registry.get(n) for n in law_names]
     source = _dispatch_source(laws)
     digest = hashlib.sha256(source.encode())
     for law in laws:
@@ -169,17 +204,40 @@ def dispatch_module(law_names: tuple[str, ...] | None = None) -> ModuleType:
     return _load(f"attitude_sil_laws_{digest.hexdigest()[:16]}", source)
 
 
-def from_template(template: ModuleType, dispatch: ModuleType) -> ModuleType:
-    """``template``'s source with its dispatch stubs replaced by an import of ``dispatch``'s functions.
+def from_template(template: ModuleType, law_names: tuple[str, ...] | None = None) -> ModuleType:
+    """``template``'s source with the law set's dispatch in place of its stubs and markers.
 
     The template is an ordinary module of the package (linted and read like
-    any other) whose stand-ins between :data:`STUB_BEGIN` and :data:`STUB_END`
-    keep it importable; its imports must be absolute.
+    any other); its imports must be absolute. Between :data:`STUB_BEGIN` and
+    :data:`STUB_END` it has stand-ins that keep it importable: they become an
+    import of the generated ``law_enter``, ``law_reset`` and ``law_is_torque``
+    and of each law's step. A line ``# @laws records`` becomes the laws'
+    records taken out of ``pars`` and ``sts`` once, and a line ``# @laws stage
+    NAME=VAR ...`` the command stage written out in place (no call: an
+    inlined call would copy every law's records each step), with the loop's
+    variables renamed as given.
     """
+    key = tuple(law_names or registry.names())
+    dispatch = dispatch_module(key)
+    laws = [registry.get(n) for n in key]
     text = Path(inspect.getsourcefile(template)).read_text()
     head, rest = text.split(STUB_BEGIN, 1)
     _, tail = rest.split(STUB_END, 1)
-    source = (head + f"from {dispatch.__name__} import law_enter, law_finish, law_is_torque, law_reset, law_step"
-              + tail)
+    imports = [f"from {dispatch.__name__} import law_enter, law_is_torque, law_reset",
+               "from attitude_sil.core.control.kernels import offset_row"]
+    imports += [f"from {x.step.py_func.__module__} import {x.step.py_func.__name__} as _step_{i}"
+                for i, x in enumerate(laws)]
+    lines = []
+    for line in (head + "\n".join(imports) + "\n" + tail).split("\n"):
+        marker = line.strip()
+        indent = line[: len(line) - len(line.lstrip())]
+        if marker == "# @laws records":
+            lines += [indent + x for x in _record_lines(laws)]
+        elif marker.startswith("# @laws stage"):
+            names = dict(item.split("=", 1) for item in marker.split()[3:])
+            lines += [indent + x for x in _stage_lines(laws, names)]
+        else:
+            lines.append(line)
+    source = "\n".join(lines)
     digest = hashlib.sha256((source + dispatch.__name__).encode()).hexdigest()[:16]
     return _load(f"{template.__name__.rpartition('.')[2]}_{digest}", source)

@@ -156,17 +156,18 @@ def lanes(value: Any, n: int, tail: tuple[int, ...] = (3,), dtype: Any = float) 
     and compile the law's loops a second time.
     """
     a = np.asarray(value, dtype=dtype)
-    if a.shape == (n, *tail):
-        return np.array(a, order="C")
-    if a.size != 1:
-        size = int(np.prod(tail))
-        if a.size == size:
-            a = a.reshape(tail)
-        elif a.size == n * size:
-            a = a.reshape((n, *tail))
-        else:
-            raise ValueError(f"a value of shape {a.shape} fits neither {tail} nor ({n}, *{tail})")
-    return np.array(np.broadcast_to(a, (n, *tail)), order="C")
+    out = np.empty((n, *tail), dtype=dtype)
+    if a.shape == out.shape or a.size == 1:
+        out[...] = a
+        return out
+    size = out[0].size
+    if a.size == size:
+        out[...] = a.reshape(tail)
+    elif a.size == n * size:
+        out[...] = a.reshape(out.shape)
+    else:
+        raise ValueError(f"a value of shape {a.shape} fits neither {tail} nor ({n}, *{tail})")
+    return out
 
 
 def state_layout(law: Law) -> Mapping[str, tuple[int, Any]]:

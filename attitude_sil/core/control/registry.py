@@ -29,8 +29,8 @@ from ..paramspec import ParamSpec
 from . import laws as _builtin
 from .law import Law
 
-__all__ = ["ENTRY_POINT_GROUP", "laws", "get", "names", "builtin_names", "output_of", "parameter_table",
-           "plugin_problems"]
+__all__ = ["ENTRY_POINT_GROUP", "laws", "get", "names", "declared_names", "builtin_names", "output_of",
+           "parameter_table", "plugin_problems"]
 
 #: the entry-point group through which other packages add laws (a contract)
 ENTRY_POINT_GROUP = "attitude_sil.laws"
@@ -53,6 +53,9 @@ def laws() -> dict[str, Law]:
         module = importlib.import_module(f"{_builtin.__name__}.{info.name}")
         if hasattr(module, "LAW"):
             law = _law_of(module, module.__name__)
+            if law.name != info.name:
+                raise TypeError(f"{module.__name__} defines the law {law.name!r}; a built-in law's module must carry "
+                                "its name")
             found[law.name] = law
     for ep in sorted(entry_points(group=ENTRY_POINT_GROUP), key=lambda e: e.name):
         where = f"law plugin {ep.name!r} ({ep.value})"
@@ -85,6 +88,17 @@ def plugin_problems() -> list[str]:
 def names() -> tuple[str, ...]:
     """The ``controller_type`` values, built-ins first."""
     return tuple(laws())
+
+
+def declared_names() -> tuple[str, ...]:
+    """The law names, read without importing any law (for ``--help``): built-in module names, then entry points.
+
+    A built-in law's module carries its name (checked by :func:`laws`), a
+    plugin's entry point too; :func:`names` is the checked list.
+    """
+    builtin = sorted(m.name for m in pkgutil.iter_modules(_builtin.__path__))
+    return tuple(builtin) + tuple(sorted(ep.name for ep in entry_points(group=ENTRY_POINT_GROUP)
+                                         if ep.name not in builtin))
 
 
 def builtin_names() -> tuple[str, ...]:

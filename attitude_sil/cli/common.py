@@ -1,0 +1,41 @@
+"""Helpers several ``attitude-sil`` verbs share (imported by a verb's ``execute``, never at start-up)."""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+
+from attitude_sil.core.scenario import Scenario, load_scenario, with_parameter_file
+from attitude_sil.errors import AttitudeSilError
+from attitude_sil.ros.environment import isolated_domain
+from attitude_sil.tuning.executor import check_scheduler_address
+
+__all__ = ["announce_domain", "load_with_params", "scheduler_address"]
+
+
+def announce_domain() -> None:
+    """Take a ROS domain of the run's own (unless the user set one) and say which, so tools can reach it."""
+    domain, chosen = isolated_domain()
+    if chosen:
+        print(f"graph on ROS_DOMAIN_ID={domain} (its own; reach it with ROS_DOMAIN_ID={domain} attitude-sil param ...)",
+              file=sys.stderr, flush=True)
+
+
+def load_with_params(scenario: str, params: str | None) -> Scenario:
+    """A scenario with a controller parameter file (e.g. a tuner's best.yaml) laid over it."""
+    scn = load_scenario(scenario)
+    return with_parameter_file(scn, params) if params else scn
+
+
+def scheduler_address(args: argparse.Namespace) -> str | None:
+    """``--scheduler`` or ``$DASK_SCHEDULER_ADDRESS``, checked (one line if malformed), or None."""
+    if args.scheduler is not None:
+        return check_scheduler_address(args.scheduler)
+    address = os.environ.get("DASK_SCHEDULER_ADDRESS") or None
+    if address is not None:
+        try:
+            check_scheduler_address(address)
+        except AttitudeSilError as exc:
+            raise AttitudeSilError(f"DASK_SCHEDULER_ADDRESS: {exc}") from None
+    return address
