@@ -152,7 +152,7 @@ def fused_setup(scn, n_episodes: int, kp=None, stride: int = 1):
     wheels = build_wheels(scn, P)
     guide = build_guidance(scn, P)
     ctrl = build_controller(scn, P, params=None if kp is None else {"pid.kp": kp})
-    pid = ctrl.records[ctrl.codes["pid"]]
+    pid = ctrl.record("pid")
     gains = (pid.kp, pid.ki, pid.kd, pid.n, pid.a)
     asm, mot = wheels.assembly, wheels.assembly.motor
     K = scn.steps()

@@ -244,6 +244,7 @@ def run_compiled(plant, wheels, dist, guide, ctrl, n_steps: int, dt: float, stri
                       (np.array([k for k, _ in sw], dtype=np.int64),
                        np.array([ctrl.codes[law] for _, law in sw], dtype=np.int64)))
     outputs = Outputs(*(out[f] for f in TRAJECTORY_FIELDS))
+    records = ctrl.records_for({str(x) for x in laws} | set(swaps.values()))
     loop = _loop(ctrl.names)
     layouts = [state_layout(get_law(name)) for name in ctrl.names]
     state_classes = [getattr(ctrl.dispatch, f"State_{i}") for i in range(len(ctrl.names))]
@@ -251,7 +252,7 @@ def run_compiled(plant, wheels, dist, guide, ctrl, n_steps: int, dt: float, stri
     def run(span, noise, g_lo):
         lo, hi = span
         # each chunk gets its own rows of the law records (contiguous copies) and a fresh state
-        pars = tuple(type(r)(*(_rows(f, lo, hi, P) for f in r)) for r in ctrl.records)
+        pars = tuple(type(r)(*(_rows(f, lo, hi, P) for f in r)) for r in records)
         sts = tuple(cls(*(np.zeros((hi - lo, int(wd)), dtype=d) for wd, d in lay.values()))
                     for cls, lay in zip(state_classes, layouts, strict=True))
         loop.chunk(lo, hi, sim, pars, sts, noise, g_lo, outputs, spec)
@@ -284,9 +285,11 @@ def run_compiled(plant, wheels, dist, guide, ctrl, n_steps: int, dt: float, stri
 
 
 def _rows(field, lo: int, hi: int, P: int):
-    """Rows lo..hi-1 of a record field with a leading episode axis, as a writable contiguous copy; scalars as
-    they are (one numba type for every chunk)."""
+    """Rows lo..hi-1 of a record field with a leading episode axis, as a writable contiguous copy (the field
+    itself for one chunk of all: records are read-only in the loop); scalars as they are."""
     if isinstance(field, np.ndarray) and field.ndim >= 1 and field.shape[0] == P:
+        if lo == 0 and hi == P:
+            return field
         return np.array(field[lo:hi], order="C")
     return field
 

@@ -45,6 +45,19 @@ def law_values(law: Law, values: Mapping[str, Any]) -> dict[str, Any]:
     return view
 
 
+_STAND_INS: dict[tuple[str, float], tuple] = {}
+
+
+def _stand_in(name: str, dt: float) -> tuple:
+    """Law ``name``'s record for no episodes, from the defaults: its numba type, built once per process."""
+    key = (name, dt)
+    if key not in _STAND_INS:
+        law = registry.get(name)
+        defaults = {s.name: s.default for s in NODE_PARAMS["controller"]}
+        _STAND_INS[key] = law.record(law_values(law, defaults), 0, dt)
+    return _STAND_INS[key]
+
+
 class ControllerBank:
     """One record and state of each registered law for P episodes; the active law computes.
 
@@ -75,6 +88,7 @@ class ControllerBank:
         self.pending: str | None = None
         self.u_last: np.ndarray | None = None
         self._law_rows: tuple[str, np.ndarray, np.ndarray] | None = None
+        self._stage_records: tuple | None = None
         self.offset = np.zeros((self.n, 3))
         self.has_offset = np.zeros(self.n, dtype=np.bool_)
         self.reset()
@@ -102,12 +116,29 @@ class ControllerBank:
         v = dict(values)
         v.update(self.per_episode)
         self.values = v
+        self._records = {}
+        self._stage_records = None
         self.command = v["command"]
         tau_b = float(v["bumpless_time_constant"])
         self.decay = float(np.exp(-self.dt / tau_b)) if tau_b > 0.0 else 0.0
-        self.records = tuple(registry.get(name).record(law_values(registry.get(name), v), self.n, self.dt)
-                             for name in self.names)
+        self._records: dict[str, tuple] = {}  # built on first use (records_for)
         self._set_sensor(v)
+
+    def record(self, name: str) -> tuple:
+        """Law ``name``'s parameter record for the bank's P episodes (built on first use after a configure)."""
+        if name not in self._records:
+            law = registry.get(name)
+            self._records[name] = law.record(law_values(law, self.values), self.n, self.dt)
+        return self._records[name]
+
+    def records_for(self, names) -> tuple:
+        """Every law's record in code order: those ``names`` run, real; the others empty stand-ins of their type.
+
+        A run compiles against every law's record type, but only the laws it
+        runs need their P rows built (at P = 1 the building cost more than the run).
+        """
+        wanted = set(names)
+        return tuple(self.record(n) if n in wanted else _stand_in(n, self.dt) for n in self.names)
 
     def _set_sensor(self, v: dict) -> None:
         """Sensor noise on the law's inputs (``sensor_noise.*``, scalars or per-episode (P,) arrays)."""
@@ -131,6 +162,11 @@ class ControllerBank:
             return q_BN, omega_BN_B
         return measure(np.ascontiguousarray(q_BN, dtype=float), np.ascontiguousarray(omega_BN_B, dtype=float),
                        int(k), self.sensor_seeds, self.sensor_att_std, self.sensor_rate_std)
+
+    def _active_records(self) -> tuple:
+        if self._stage_records is None or self._stage_records[0] != (self.active, len(self._records)):
+            self._stage_records = ((self.active, len(self._records)), self.records_for((self.active,)))
+        return self._stage_records[1]
 
     def _codes_of(self, name: str) -> tuple[np.ndarray, np.ndarray]:
         """Every row's law code (the active law's) and which laws run, as the compiled stage takes them."""
@@ -190,11 +226,11 @@ class ControllerBank:
             self.offset[...] = 0.0
             self.has_offset[...] = False
             if self.u_last is not None and self.kind == old_kind:
-                d.lanes_enter(self.codes[self.active], q, w, q_r, w_r, self.records, self.states, self.dt,
+                d.lanes_enter(self.codes[self.active], q, w, q_r, w_r, self._active_records(), self.states, self.dt,
                               self.decay, c(self.u_last, dtype=float), self.offset, self.has_offset)
         u = np.empty((q.shape[0], 3))
         law, present = self._codes_of(self.active)
-        d.lanes_stage(law, present, q, w, q_r, w_r, self.records, self.states, self.dt, u, self.offset,
+        d.lanes_stage(law, present, q, w, q_r, w_r, self._active_records(), self.states, self.dt, u, self.offset,
                       self.has_offset, self.decay)
         self.u_last = u
         return u

@@ -160,7 +160,7 @@ def lanes(value: Any, n: int, tail: tuple[int, ...] = (3,), dtype: Any = float) 
     if a.shape == out.shape or a.size == 1:
         out[...] = a
         return out
-    size = out[0].size
+    size = int(np.prod(tail))
     if a.size == size:
         out[...] = a.reshape(tail)
     elif a.size == n * size:
