@@ -154,8 +154,14 @@ def test_node_executables_import_without_the_tuner_dependencies():
     proc = subprocess.run([sys.executable, "-c", block + nodes], cwd=ROOT, capture_output=True, text=True,
                           timeout=300, stdin=subprocess.DEVNULL)
     assert proc.returncode == 0, proc.stderr
+    # the verbs import what they need when they run: run works without the tuner, tune says what is missing
+    run = subprocess.run([sys.executable, "-c", block + "from attitude_sil.cli import main\n"
+                          "raise SystemExit(main(['run', 'config/hst_roll_step.yaml', '--duration', '0.05', "
+                          "'--no-record', '--quiet']))"],
+                         cwd=ROOT, capture_output=True, text=True, timeout=300, stdin=subprocess.DEVNULL)
+    assert run.returncode == 0, run.stderr
     cli = subprocess.run([sys.executable, "-c", block + "from attitude_sil.cli import main\n"
-                          "raise SystemExit(main(['run', 'config/hst_roll_step.yaml']))"],
+                          "raise SystemExit(main(['tune', 'config/tune_hst_pid_ga.yaml']))"],
                          cwd=ROOT, capture_output=True, text=True, timeout=300, stdin=subprocess.DEVNULL)
     assert cli.returncode == 2 and "Traceback" not in cli.stderr, cli.stderr
     assert cli.stderr.count("\n") == 1 and "pip install 'attitude_sil[tune]'" in cli.stderr

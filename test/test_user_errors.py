@@ -36,12 +36,13 @@ import rclpy
 from geometry_msgs.msg import QuaternionStamped
 from rclpy.serialization import serialize_message
 
+from attitude_sil.cli import common as cli_common
 from attitude_sil.cli import main
 from attitude_sil.core import linearize
 from attitude_sil.core.params import GLOBAL_NODE, NODE_PARAMS, ParamSpec
 from attitude_sil.graph.session import GraphSession
 from attitude_sil.storage import BagWriter
-from attitude_sil.tuning import fidelity, robustness
+from attitude_sil.tuning import executor, fidelity, montecarlo, robustness
 from conftest import CONFIG, ROOT
 
 SCENARIO = str(CONFIG / "hst_roll_step.yaml")
@@ -588,10 +589,11 @@ def no_start(monkeypatch):
     monkeypatch.setattr(GraphSession, "__enter__", started)
     monkeypatch.setattr(linearize, "simulate", started)
     monkeypatch.setattr(robustness, "simulate", started)
-    monkeypatch.setattr(sys.modules["attitude_sil.cli.main"], "run_campaign", started)
-    monkeypatch.setattr(sys.modules["attitude_sil.cli.main"], "make_executor", started)
+    # the verbs import these when they run (attitude_sil/cli/<verb>.py execute): patch them where they live
+    monkeypatch.setattr(montecarlo, "run_campaign", started)
+    monkeypatch.setattr(executor, "make_executor", started)
     monkeypatch.setattr(fidelity, "simulate", started)
-    monkeypatch.setattr(sys.modules["attitude_sil.cli.main"], "isolated_domain", lambda: (77, True))
+    monkeypatch.setattr(cli_common, "isolated_domain", lambda: (77, True))
 
 
 def _materialise(tmp: Path, files: dict, good: Path) -> None:
