@@ -6,7 +6,7 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
-.PHONY: run test lint bench soak docs clean
+.PHONY: run test test-unit lint bench soak docs clean
 
 $(STAMP): setup.py package.xml examples/custom_law/pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -22,10 +22,14 @@ run: $(STAMP)
 	$(BIN)/attitude-sil run config/hst_roll_step.yaml --swap 5:fuzzy_pid
 
 lint: $(STAMP)
-	$(BIN)/ruff check attitude_sil test bench launch
+	$(BIN)/ruff check attitude_sil test bench launch examples
 
 test: $(STAMP) lint
 	$(BIN)/python -m pytest -q test
+
+# the ROS-free layer alone (no graph): about 20 s
+test-unit: $(STAMP)
+	$(BIN)/python -m pytest -q test/unit
 
 bench: $(STAMP)
 	$(BIN)/python bench/bench_engine.py

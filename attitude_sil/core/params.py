@@ -287,7 +287,7 @@ def parameters_markdown() -> str:
     document cannot drift from the schema.
     """
     lines = ["<!-- generated from attitude_sil/core/params.py by parameters_markdown(); "
-             "test/test_docs.py keeps it equal -->", ""]
+             "test/unit/test_docs.py keeps it equal -->", ""]
     plugins = tuple(f"{n}." for n in set(registry.names()) - set(registry.builtin_names()))
     for node, specs in NODE_PARAMS.items():
         if node == GLOBAL_NODE:

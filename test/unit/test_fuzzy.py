@@ -18,7 +18,7 @@ from attitude_sil.core.fuzzy import (
     vertices_from_ratios,
 )
 
-DATA = Path(__file__).parent / "data"
+DATA = Path(__file__).resolve().parents[1] / "data"
 CODES = {"NL": 1, "NB": 1, "NM": 2, "NS": 3, "ZR": 4, "ZO": 4, "PS": 5, "PM": 6, "PL": 7, "PB": 7}
 
 

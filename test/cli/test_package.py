@@ -124,7 +124,7 @@ def test_every_import_of_the_package_is_declared(setup_kwargs):
 
 
 def test_every_import_of_the_tests_and_the_launch_file_is_declared(setup_kwargs):
-    imports = _third_party(sorted((ROOT / "test").glob("*.py")))
+    imports = _third_party(sorted((ROOT / "test").rglob("*.py")))
     test_requirements = _requirement_names(setup_kwargs["install_requires"]) | _requirement_names(
         setup_kwargs["extras_require"]["test"])
     assert undeclared(imports, ("test_depend", "exec_depend", "depend", "buildtool_depend"),

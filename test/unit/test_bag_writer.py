@@ -38,7 +38,7 @@ from attitude_sil.storage import (
     type_description_hash,
 )
 
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(__file__).resolve().parents[2]
 SHARE = Path(sys.prefix) / 'share'
 
 TOPIC_TYPES = {
