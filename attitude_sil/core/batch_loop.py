@@ -19,6 +19,7 @@ import numpy as np
 from numba import njit
 
 from attitude_sil.core.kernels import measure_row, rk4_body_into, wheel_row
+from attitude_sil.core.metric_rows import euler_axis, first_crossing
 
 # >>> law dispatch stubs (replaced by the generated dispatch; see the module docstring)
 
@@ -37,28 +38,6 @@ def law_is_torque(code):  # pragma: no cover - a stand-in
 
 #: number of running-sum columns (batch.SUMMARY_COLUMNS)
 N_SUMS = 13
-
-
-@njit(cache=True, inline="always")
-def _euler_axis(q, p, axis):
-    # roll, pitch or yaw (ZYX, paper 000 eq. 9) of row p, as quaternion.euler_from_quat computes it
-    x, y, z, w = q[p, 0], q[p, 1], q[p, 2], q[p, 3]
-    if axis == 0:
-        return np.arctan2(2.0 * (w * x + y * z), 1.0 - 2.0 * (x * x + y * y))
-    if axis == 1:
-        return np.arcsin(min(max(2.0 * (w * y - z * x), -1.0), 1.0))
-    return np.arctan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
-
-
-@njit(cache=True, inline="always")
-def _crossing(found, level, f, f_prev, ta, ta_prev, first):
-    # metrics._first_crossing, one sample at a time: the interpolated time frac reaches level, or found
-    if not np.isnan(found) or not f >= level:
-        return found
-    if first:
-        return ta
-    frac = (level - f_prev) / (f - f_prev) if f != f_prev else 0.0
-    return ta_prev + frac * (ta - ta_prev)
 
 
 @njit(cache=True, inline="always")
@@ -244,13 +223,13 @@ def _accumulate_row(acc, last_out, prev, p, k, n_steps, t, dt, after, n_after, s
         return
     span = r_fin - y0
     ta = t - step_time
-    y = _euler_axis(q, p, axis)
+    y = euler_axis(q[p, 0], q[p, 1], q[p, 2], q[p, 3], axis)
     f = (y - y0) / (1.0 if span == 0.0 else span)
     first = n_after == 0
     f_prev, ta_prev, err_prev = prev[p, 0], prev[p, 1], prev[p, 2]
-    acc[p, 0] = _crossing(acc[p, 0], 0.632, f, f_prev, ta, ta_prev, first)
-    acc[p, 1] = _crossing(acc[p, 1], 0.1, f, f_prev, ta, ta_prev, first)
-    acc[p, 2] = _crossing(acc[p, 2], 0.9, f, f_prev, ta, ta_prev, first)
+    acc[p, 0] = first_crossing(acc[p, 0], 0.632, f, f_prev, ta, ta_prev, first)
+    acc[p, 1] = first_crossing(acc[p, 1], 0.1, f, f_prev, ta, ta_prev, first)
+    acc[p, 2] = first_crossing(acc[p, 2], 0.9, f, f_prev, ta, ta_prev, first)
     acc[p, 3] = max(acc[p, 3], f)
     if abs(y - r_fin) > band * abs(span):
         last_out[p] = n_after

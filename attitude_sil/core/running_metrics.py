@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import math
 
+from .metric_rows import euler_axis, first_crossing
 from .metrics import _EXTRA_KEYS, METRIC_KEYS, PAPER_001_SETTLING_ANGLE, _finite_or_none
 
 __all__ = ["EpisodeAccumulator"]
@@ -36,13 +37,8 @@ _NAN = float("nan")
 
 
 def _euler(q, axis: int) -> float:
-    # quaternion.euler_from_quat for one quaternion and one axis
-    x, y, z, w = q
-    if axis == 0:
-        return math.atan2(2.0 * (w * x + y * z), 1.0 - 2.0 * (x * x + y * y))
-    if axis == 1:
-        return math.asin(min(max(2.0 * (w * y - z * x), -1.0), 1.0))
-    return math.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
+    # quaternion.euler_from_quat for one quaternion and one axis (the batch engine's compiled function)
+    return float(euler_axis(float(q[0]), float(q[1]), float(q[2]), float(q[3]), axis))
 
 
 def _principal_angle(q_BN, q_RN) -> float:
@@ -232,13 +228,8 @@ class EpisodeAccumulator:
         self.candidates.append((value, t_next))
 
     def _crossing(self, found: float, level: float, f: float, ta: float) -> float:
-        if not math.isnan(found) or not f >= level:
-            return found
-        if self.n_after == 0:
-            return ta
         f_prev, ta_prev, _ = self.prev
-        frac = (level - f_prev) / (f - f_prev) if f != f_prev else 0.0
-        return ta_prev + frac * (ta - ta_prev)
+        return float(first_crossing(found, level, f, f_prev, ta, ta_prev, self.n_after == 0))
 
     def _after(self, ta: float, y: float) -> None:
         span = self.r - self.y0
