@@ -70,6 +70,20 @@ def _source_digest(law: Law) -> str:
     return h.hexdigest()
 
 
+def _core_digest() -> str:
+    """Every source file of ``attitude_sil.core``: what a law's step and the loop inline from the package.
+
+    numba's cache sees only the generated module's own file, so an edit of an
+    inlined helper (``control/kernels.py``, the wheel kernel) must change the
+    generated module's name to be compiled again.
+    """
+    root = Path(__file__).resolve().parents[1]
+    h = hashlib.sha256()
+    for path in sorted(root.rglob("*.py")):
+        h.update(path.read_bytes())
+    return h.hexdigest()
+
+
 def _zero(dtype) -> str:
     return "False" if np.dtype(dtype) == np.bool_ else "0"
 
@@ -198,7 +212,7 @@ def dispatch_module(law_names: tuple[str, ...] | None = None) -> ModuleType:
 def _dispatch_module(law_names: tuple[str, ...]) -> ModuleType:
     laws = [registry.get(n) for n in law_names]
     source = _dispatch_source(laws)
-    digest = hashlib.sha256(source.encode())
+    digest = hashlib.sha256((source + _core_digest()).encode())
     for law in laws:
         digest.update(_source_digest(law).encode())
     return _load(f"attitude_sil_laws_{digest.hexdigest()[:16]}", source)
