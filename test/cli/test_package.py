@@ -115,6 +115,16 @@ def undeclared(imports: dict[str, str], depend_tags: tuple[str, ...], requiremen
     return problems
 
 
+def test_every_folder_of_the_package_is_installed():
+    # a folder of modules without __init__.py is left out of a non-editable install (pip install ., colcon)
+    from setuptools import find_packages
+
+    found = set(find_packages(str(ROOT), exclude=["test", "test.*", "bench", "examples", "examples.*"]))
+    folders = {".".join(p.parent.relative_to(ROOT).parts) for p in (ROOT / "attitude_sil").rglob("*.py")
+               if "__pycache__" not in p.parts}
+    assert folders <= found, f"not installed: {sorted(folders - found)}"
+
+
 def test_every_import_of_the_package_is_declared(setup_kwargs):
     imports = _third_party(sorted((ROOT / "attitude_sil").rglob("*.py")))
     assert {"rclpy", "numpy", "yaml", "numba", "pymoo"} <= set(imports)  # the scan sees them
