@@ -227,45 +227,23 @@ def run_compiled(plant, wheels, dist, guide, ctrl, n_steps: int, dt: float, stri
     law0 = np.array([ctrl.codes[str(law)] for law in laws], dtype=np.int64)
     sw = sorted(swaps.items())
     kept = n_steps // stride + 1
-    nw = wheels.assembly.n_wheels
-    # episode-major (episode, step, .): each episode's series is contiguous, as the Trajectory holds it
-    width = dict(q_BN=4, q_RN=4, wheel_speed=nw, wheel_angle=nw, wheel_effort=nw)
-    out = {f: np.empty((P, kept, width.get(f, 3)) if f in keep else (0, 0, width.get(f, 3)))
-           for f in TRAJECTORY_FIELDS}
-    if sums is None:
-        spec = SumsSpec(0, np.zeros(P), np.zeros(P), 0.0, np.empty((0, len(SUMMARY_COLUMNS))))
-    else:
-        spec = SumsSpec(int(sums[0]), _c(sums[1], (P,)), _c(sums[2], (P,)), float(sums[3]),
-                        np.empty((P, len(SUMMARY_COLUMNS))))
+    out = _outputs(P, kept, wheels.assembly.n_wheels, keep)
+    spec = _sums_spec(sums, P)
     n_threads = _POOL_SIZE if threads is None else max(1, min(int(threads), _POOL_SIZE))
     size = max(1, min(int(chunk), -(-P // n_threads)))  # every thread gets work, chunks stay cache-sized
-    bounds = np.unique(np.append(np.arange(0, P, size), P)).astype(np.int64)
     sim = _sim_arrays(plant, wheels, dist, guide, ctrl, n_steps, stride, dt, law0,
                       (np.array([k for k, _ in sw], dtype=np.int64),
                        np.array([ctrl.codes[law] for _, law in sw], dtype=np.int64)))
-    outputs = Outputs(*(out[f] for f in TRAJECTORY_FIELDS))
-    records = ctrl.records_for({str(x) for x in laws} | set(swaps.values()))
-    loop = _loop(ctrl.names)
-    layouts = [state_layout(get_law(name)) for name in ctrl.names]
-    state_classes = [getattr(ctrl.dispatch, f"State_{i}") for i in range(len(ctrl.names))]
-
-    def run(span, noise, g_lo):
-        lo, hi = span
-        # each chunk gets its own rows of the law records (contiguous copies) and a fresh state
-        pars = tuple(type(r)(*(_rows(f, lo, hi, P) for f in r)) for r in records)
-        sts = tuple(cls(*(np.zeros((hi - lo, int(wd)), dtype=d) for wd, d in lay.values()))
-                    for cls, lay in zip(state_classes, layouts, strict=True))
-        loop.chunk(lo, hi, sim, pars, sts, noise, g_lo, outputs, spec)
-
+    run = _chunk_runner(ctrl, {str(x) for x in laws} | set(swaps.values()), sim,
+                        Outputs(*(out[f] for f in TRAJECTORY_FIELDS)), spec)
     # disturbance noise is drawn in numpy (the stepwise driver's streams) for a group of episodes at a time,
     # so its memory is that of the group, not of the run
-    models = set(dist.models)
-    groups = [(0, P)]
-    if "noise" in models:
-        group = max(size * n_threads, 256)
-        groups = [(g, min(g + group, P)) for g in range(0, P, group)]
-    for g_lo, g_hi in groups:
-        noise = (dist.noise_torque(g_lo, g_hi, n_steps) if "noise" in models else np.zeros((0, 0, 3)))
+    noisy = "noise" in set(dist.models)
+    group = max(size * n_threads, 256) if noisy else P
+    bounds = np.unique(np.append(np.arange(0, P, size), P)).astype(np.int64)
+    for g_lo in range(0, P, group):
+        g_hi = min(g_lo + group, P)
+        noise = dist.noise_torque(g_lo, g_hi, n_steps) if noisy else np.zeros((0, 0, 3))
         b = bounds[(bounds >= g_lo) & (bounds <= g_hi)]
         b = np.unique(np.concatenate(([g_lo], b, [g_hi]))).astype(np.int64).tolist()
         spans = list(zip(b[:-1], b[1:], strict=True))
@@ -282,6 +260,40 @@ def run_compiled(plant, wheels, dist, guide, ctrl, n_steps: int, dt: float, stri
         trajectory = Trajectory(t=steps * dt, kind=_kinds(ctrl, laws, swaps, steps),
                                 omega_RN_R=omega_rn if "omega_RN_R" in keep else None, **got)
     return trajectory, (None if sums is None else spec.out)
+
+
+def _outputs(P: int, kept: int, n_wheels: int, keep) -> dict[str, np.ndarray]:
+    """The trajectory arrays, episode-major (episode, step, .) as the Trajectory holds them; no rows: not kept."""
+    width = dict(q_BN=4, q_RN=4, wheel_speed=n_wheels, wheel_angle=n_wheels, wheel_effort=n_wheels)
+    return {f: np.empty((P, kept, width.get(f, 3)) if f in keep else (0, 0, width.get(f, 3)))
+            for f in TRAJECTORY_FIELDS}
+
+
+def _sums_spec(sums: tuple | None, P: int) -> SumsSpec:
+    """The running sums' settings and output (P, columns), or no rows without ``sums``."""
+    if sums is None:
+        return SumsSpec(0, np.zeros(P), np.zeros(P), 0.0, np.empty((0, len(SUMMARY_COLUMNS))))
+    return SumsSpec(int(sums[0]), _c(sums[1], (P,)), _c(sums[2], (P,)), float(sums[3]),
+                    np.empty((P, len(SUMMARY_COLUMNS))))
+
+
+def _chunk_runner(ctrl, used: set[str], sim: SimArrays, outputs: Outputs, spec: SumsSpec):
+    """``run((lo, hi), noise, noise_lo)``: the compiled loop on episodes lo..hi-1 of the bank's law set."""
+    P = ctrl.n
+    records = ctrl.records_for(used)
+    loop = _loop(ctrl.names)
+    layouts = [state_layout(get_law(name)) for name in ctrl.names]
+    state_classes = [getattr(ctrl.dispatch, f"State_{i}") for i in range(len(ctrl.names))]
+
+    def run(span, noise, noise_lo):
+        lo, hi = span
+        # each chunk gets its own rows of the law records (contiguous copies) and a fresh state
+        pars = tuple(type(r)(*(_rows(f, lo, hi, P) for f in r)) for r in records)
+        sts = tuple(cls(*(np.zeros((hi - lo, int(wd)), dtype=d) for wd, d in lay.values()))
+                    for cls, lay in zip(state_classes, layouts, strict=True))
+        loop.chunk(lo, hi, sim, pars, sts, noise, noise_lo, outputs, spec)
+
+    return run
 
 
 def _rows(field, lo: int, hi: int, P: int):

@@ -32,7 +32,7 @@ def test_each_controller_settles_the_hst_step_in_graph_and_batch(controller):
     tr = simulate(scn, 1, controller=controller)
     assert np.max(np.abs(result.trajectory.q_BN[0] - tr.q_BN[0])) <= 1e-9
     assert np.max(np.abs(result.trajectory.omega_BN_B[0] - tr.omega_BN_B[0])) <= 1e-9
-    kind_topic = "torque_cmd" if controller == "geometric" else "voltage_cmd"
+    kind_topic = "torque_cmd" if registry.output_of(controller) == "torque" else "voltage_cmd"
     assert result.counts[kind_topic] == 2001
 
 
