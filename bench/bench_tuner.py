@@ -1,6 +1,6 @@
 """Benchmark of the tuner (not a test).
 
-Prints the wall time of the README's tuning example as a user runs it
+Prints the wall time of the tuning example (docs/tuning.md) as a user runs it
 (``attitude-sil tune config/tune_hst_pid_ga.yaml``: paper 000's 50 x 40 GA on
 the HST roll step, each generation's best written as a bag, the final best
 recorded through the node graph), the optimisation alone, the resident memory
@@ -57,7 +57,7 @@ def main() -> None:
         t0 = time.perf_counter()
         subprocess.run(cli, cwd=ROOT, check=True, stdout=subprocess.DEVNULL)
         bags = len(list(Path(tmp, "example", "bags").iterdir()))
-        print(f"attitude-sil tune config/tune_hst_pid_ga.yaml (the README's example, {bags} bags): "
+        print(f"attitude-sil tune config/tune_hst_pid_ga.yaml (the tuning example, {bags} bags): "
               f"{time.perf_counter() - t0:.1f} s wall, process start included")
         out = subprocess.run([sys.executable, "-c", _EVALUATE_10K], cwd=ROOT, check=True, capture_output=True,
                              text=True).stdout.split()

@@ -73,7 +73,7 @@ PAPER_004_TABLE_2 = np.array(
 #: (Δe, e) = (ZR, ZR), which would push at zero error; its rows NL..PM are the
 #: standard table's rows NM..PL, so the print lost the first row and repeated a
 #: last one. This is that standard (MacVicar-Whelan) table, odd-symmetric with
-#: ZO at the centre (assumed; README).
+#: ZO at the centre (assumed; docs/getting-started.md, "Controllers and live swaps").
 FUZZY_PID_DEFAULT_RULES = np.vstack([[1, 1, 1, 1, 2, 3, 4], PAPER_003_TABLE_3[:-1]])
 
 

@@ -28,3 +28,27 @@ def test_readme_and_docs_point_inside_the_repository():
     for path in [ROOT / "README.md", *DOCS.glob("*.md")]:
         text = path.read_text()
         assert "../shared" not in text and "DESIGN.md" not in text, path
+
+
+def test_every_relative_link_of_the_docs_resolves():
+    # the broken-link check: README, the guides and the bench notes link files that exist
+    import re
+
+    pages = [ROOT / "README.md", ROOT / "bench" / "README.md", *DOCS.glob("*.md")]
+    broken = []
+    for page in pages:
+        for target in re.findall(r"\]\(([^)\s]+)\)", page.read_text()):
+            if re.match(r"[a-z]+:", target) or target.startswith("#"):
+                continue
+            path = (page.parent / target.split("#")[0]).resolve()
+            if not path.exists():
+                broken.append(f"{page.relative_to(ROOT)} -> {target}")
+    assert not broken, "broken links:\n" + "\n".join(broken)
+
+
+def test_readme_is_a_tour_that_links_every_guide():
+    text = (ROOT / "README.md").read_text()
+    assert len(text.splitlines()) <= 200
+    assert text.startswith("# attitude_sil\n\n```bash\nmake run") and "make test" in text.split("```")[1]
+    for guide in DOCS.glob("*.md"):
+        assert f"(docs/{guide.name})" in text, guide.name

@@ -153,7 +153,7 @@ LAW = Law(
         double_array("u_scale", [2.0] * 3, "fuzzy output universe, V", lengths=(3,), min=0.0, runtime=True),
         ParamSpec("rules", "integer_array", FUZZY_PID_DEFAULT_RULES.ravel().tolist(),
                   "49 rule outputs 1..7 (NL..PL), row-major: rows change of error NL..PL, columns error NL..PL "
-                  "(assumed: paper 003 Table 3 with its misprinted row restored, README)",
+                  "(assumed: paper 003 Table 3 with its misprinted row restored, docs/getting-started.md)",
                   lengths=(49,), min=1, max=7, runtime=True),
     ),
     state={"integral": (3, np.float64), "filt": (3, np.float64), "e_prev": (3, np.float64),
