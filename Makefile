@@ -40,7 +40,7 @@ soak: $(STAMP)
 	$(BIN)/python bench/bench_soak.py
 
 docs: $(STAMP)
-	$(BIN)/python -c "from attitude_sil.core.params import parameters_markdown as p; \
+	$(BIN)/python -c "from attitude_sil.core.sim.params import parameters_markdown as p; \
 	head = open('docs/parameters.md').read().split('<!-- generated')[0]; \
 	open('docs/parameters.md', 'w').write(head + p() + '\n')"
 

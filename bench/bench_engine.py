@@ -33,9 +33,9 @@ os.environ.setdefault("ROS_DOMAIN_ID", str(150 + os.getpid() % 50))
 from fused_reference import fused_parallel, fused_serial, fused_setup  # noqa: E402
 
 from attitude_sil.core.control.registry import names as law_names  # noqa: E402
-from attitude_sil.core.engine import build_controller, simulate, simulate_summary  # noqa: E402
-from attitude_sil.core.quaternion import quat_from_euler  # noqa: E402
-from attitude_sil.core.scenario import load_scenario  # noqa: E402
+from attitude_sil.core.plant.quaternion import quat_from_euler  # noqa: E402
+from attitude_sil.core.sim.engine import build_controller, simulate, simulate_summary  # noqa: E402
+from attitude_sil.core.sim.scenario import load_scenario  # noqa: E402
 from attitude_sil.graph.session import run_graph  # noqa: E402
 
 

@@ -28,18 +28,18 @@ from scipy.optimize import minimize
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from attitude_sil.core.engine import flexible_states, simulate, simulate_summary  # noqa: E402
-from attitude_sil.core.linearize import (  # noqa: E402
+from attitude_sil.core.analysis.metrics import flexible_split  # noqa: E402
+from attitude_sil.core.plant.plants import FLEXIBLE_CASES  # noqa: E402
+from attitude_sil.core.plant.quaternion import euler_from_quat  # noqa: E402
+from attitude_sil.core.sim.engine import flexible_states, simulate, simulate_summary  # noqa: E402
+from attitude_sil.core.sim.scenario import load_scenario  # noqa: E402
+from attitude_sil.tuning.fidelity import PAPER_000_GAINS, PAPER_002_GAINS, PAPER_002_SETTLING  # noqa: E402
+from attitude_sil.tuning.linearize import (  # noqa: E402
     PAPER_000_TABLE_1,
     PAPER_000_TABLE_1_DURATION,
     euler_eq9_unit_scalar,
     rmse_table,
 )
-from attitude_sil.core.metrics import flexible_split  # noqa: E402
-from attitude_sil.core.plants import FLEXIBLE_CASES  # noqa: E402
-from attitude_sil.core.quaternion import euler_from_quat  # noqa: E402
-from attitude_sil.core.scenario import load_scenario  # noqa: E402
-from attitude_sil.tuning.fidelity import PAPER_000_GAINS, PAPER_002_GAINS, PAPER_002_SETTLING  # noqa: E402
 from attitude_sil.tuning.rootlocus import closed_loop, reduced_roll_loop  # noqa: E402
 
 CONFIG = ROOT / "config"

@@ -2,7 +2,7 @@
 
 Needs a full ROS 2 install (``launch`` and ``launch_ros`` are not on PyPI) and
 the package built with colcon. The five node executables, from the node list
-the runner starts (:data:`attitude_sil.core.scenario.GRAPH_NODES`), each on
+the runner starts (:data:`attitude_sil.core.sim.scenario.GRAPH_NODES`), each on
 simulation time (``use_sim_time: true``, the plant publishes ``/clock``) and
 given one parameter file.
 
@@ -30,7 +30,7 @@ from launch.substitutions import LaunchConfiguration, PathJoinSubstitution, Pyth
 from launch_ros.actions import Node
 from launch_ros.substitutions import FindPackageShare
 
-from attitude_sil.core.scenario import GRAPH_NODES
+from attitude_sil.core.sim.scenario import GRAPH_NODES
 
 PACKAGE = "attitude_sil"
 DEFAULT_PARAMS = ("config", "hst_roll_step.yaml")

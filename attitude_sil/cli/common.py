@@ -6,7 +6,7 @@ import argparse
 import os
 import sys
 
-from attitude_sil.core.scenario import Scenario, load_scenario, with_parameter_file
+from attitude_sil.core.sim.scenario import Scenario, load_scenario, with_parameter_file
 from attitude_sil.errors import AttitudeSilError
 from attitude_sil.ros.environment import isolated_domain
 from attitude_sil.tuning.executor import check_scheduler_address

@@ -28,11 +28,11 @@ def execute(args: argparse.Namespace) -> int:
     """Run the verb; returns the exit code."""
     import json
 
-    from attitude_sil.core.linearize import format_table as format_rmse_table
-    from attitude_sil.core.linearize import rmse_table
     from attitude_sil.core.papers import PAPER_000_COMPARISON_GAINS
-    from attitude_sil.core.scenario import load_scenario
+    from attitude_sil.core.sim.scenario import load_scenario
     from attitude_sil.errors import AttitudeSilError
+    from attitude_sil.tuning.linearize import format_table as format_rmse_table
+    from attitude_sil.tuning.linearize import rmse_table
 
     scn = load_scenario(args.scenario)
     if scn.param("plant", "model") not in ("rigid_body", "linearized"):

@@ -1,7 +1,7 @@
 """One parameter's schema: type, default, unit, range, and the check a value must pass.
 
 :class:`ParamSpec` is the unit of every parameter table: the nodes'
-(:mod:`attitude_sil.core.params`) and each control law's own
+(:mod:`attitude_sil.core.sim.params`) and each control law's own
 (:mod:`attitude_sil.core.control.law`). It lives apart from both so a law
 module can declare its table without importing the node tables.
 """

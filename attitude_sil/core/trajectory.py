@@ -47,7 +47,7 @@ class Trajectory:
     wheel_effort : (P, K+1, n) motor torque, N m, or None
     omega_RN_R : (P, K+1, 3) rate setpoint, rad/s, or None
 
-    The batch engine (:func:`attitude_sil.core.engine.simulate`) and a graph
+    The batch engine (:func:`attitude_sil.core.sim.engine.simulate`) and a graph
     run (:func:`attitude_sil.graph.trajectory.trajectory_from_messages`, P = 1)
     both return this type, so the cost functions and metrics take either.
     An array the run was asked not to keep (``simulate(keep=...)``) is None.
@@ -88,7 +88,7 @@ class EpisodeSummary:
     Attributes
     ----------
     metrics : dict of (P,) arrays
-        The scenario's metrics (:func:`attitude_sil.core.metrics.scenario_metrics`).
+        The scenario's metrics (:func:`attitude_sil.core.analysis.metrics.scenario_metrics`).
     finite : (P,) bool
         Body rate and command stayed finite at every step.
     peak_command : (P,)

@@ -22,8 +22,8 @@ from rcl_interfaces.msg import ParameterEvent
 from rclpy.parameter import Parameter
 from rclpy.serialization import serialize_message
 
-from attitude_sil.core.quaternion import euler_from_quat, quat_conjugate, quat_error
-from attitude_sil.core.scenario import Scenario
+from attitude_sil.core.plant.quaternion import euler_from_quat, quat_conjugate, quat_error
+from attitude_sil.core.sim.scenario import Scenario
 from attitude_sil.core.trajectory import Trajectory
 from attitude_sil.errors import RunError
 from attitude_sil.graph.session import extra_parameters
@@ -65,7 +65,7 @@ def record_episode(scn: Scenario, tr: Trajectory, run_dir: str | Path, *, episod
         The scenario the trajectory ran (its parameters go into the snapshot).
     tr : Trajectory
         Every step kept (stride 1) and the wheel angle and effort recorded
-        (both drivers of :func:`attitude_sil.core.engine.simulate` do).
+        (both drivers of :func:`attitude_sil.core.sim.engine.simulate` do).
     run_dir : path
         The bag directory to create.
     episode : int

@@ -26,9 +26,9 @@ import yaml
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 
-from attitude_sil.core.paramfile import node_key
-from attitude_sil.core.params import spec_for
-from attitude_sil.core.scenario import GRAPH_NODES, Scenario
+from attitude_sil.core.sim.paramfile import node_key
+from attitude_sil.core.sim.params import spec_for
+from attitude_sil.core.sim.scenario import GRAPH_NODES, Scenario
 from attitude_sil.errors import RunError
 from attitude_sil.nodes.controller_node import ControllerNode
 from attitude_sil.nodes.disturbance_node import DisturbanceNode

@@ -28,12 +28,12 @@ import rclpy
 from rclpy.experimental import EventsExecutor
 from rclpy.signals import SignalHandlerOptions
 
+from attitude_sil.core.analysis.metrics import episode_report
+from attitude_sil.core.analysis.running_metrics import EpisodeAccumulator
 from attitude_sil.core.control import registry
-from attitude_sil.core.engine import check_episode, schedule_from_scenario, simulate
-from attitude_sil.core.metrics import episode_report
-from attitude_sil.core.params import spec_for
-from attitude_sil.core.running_metrics import EpisodeAccumulator
-from attitude_sil.core.scenario import Scenario
+from attitude_sil.core.sim.engine import check_episode, schedule_from_scenario, simulate
+from attitude_sil.core.sim.params import spec_for
+from attitude_sil.core.sim.scenario import Scenario
 from attitude_sil.core.trajectory import Trajectory
 from attitude_sil.errors import AttitudeSilError, BagWriteError, RunError
 from attitude_sil.graph.launcher import (
@@ -212,7 +212,7 @@ class GraphSession:
         """Play one episode; returns its metrics, counts, bag and (if asked) trajectory.
 
         Without ``keep_trajectory`` the metrics come from running sums
-        (:class:`~attitude_sil.core.running_metrics.EpisodeAccumulator`): the
+        (:class:`~attitude_sil.core.analysis.running_metrics.EpisodeAccumulator`): the
         episode's memory does not grow with its length. With it, the episode's
         messages are kept and decoded into a Trajectory (about 1.5 kB a step).
 

@@ -10,7 +10,7 @@ from __future__ import annotations
 import numpy as np
 from rclpy.serialization import deserialize_message
 
-from attitude_sil.core.running_metrics import EpisodeAccumulator
+from attitude_sil.core.analysis.running_metrics import EpisodeAccumulator
 from attitude_sil.core.trajectory import Trajectory
 from attitude_sil.ros.contract import (
     ATTITUDE,

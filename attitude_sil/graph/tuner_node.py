@@ -33,7 +33,7 @@ from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 
-from attitude_sil.core.engine import simulate
+from attitude_sil.core.sim.engine import simulate
 from attitude_sil.errors import AttitudeSilError, SpecError
 from attitude_sil.graph.engine_bag import record_episode
 from attitude_sil.graph.evaluator import GraphEpisodes, GraphEvaluator, best_parameters

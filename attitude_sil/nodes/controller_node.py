@@ -18,9 +18,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from attitude_sil.core.engine import build_controller
-from attitude_sil.core.lockstep import StepSequencer
-from attitude_sil.core.quaternion import euler_from_quat, quat_conjugate, quat_error, unit_or_none
+from attitude_sil.core.plant.quaternion import euler_from_quat, quat_conjugate, quat_error, unit_or_none
+from attitude_sil.core.sim.engine import build_controller
+from attitude_sil.core.sim.lockstep import StepSequencer
 from attitude_sil.ros.contract import ATTITUDE, ATTITUDE_ERROR, ATTITUDE_SETPOINT, COMMAND_TOPIC, CONTROLLER_INPUTS
 from attitude_sil.ros.convert import message_to_array, stamp_to_ns, vector_msg
 from attitude_sil.ros.node import SchemaNode, run_node

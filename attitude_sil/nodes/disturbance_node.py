@@ -1,16 +1,16 @@
 """``disturbance`` node: external torques of paper 000 section 2.A.
 
 On ``attitude`` stamped t_k it publishes ``disturbance_torque`` stamped t_k,
-held over the step (:class:`attitude_sil.core.disturbance.DisturbanceModel`).
+held over the step (:class:`attitude_sil.core.plant.disturbance.DisturbanceModel`).
 With ``models: []`` (the default) it publishes zeros, so the lockstep has
 every input whatever the scenario.
 """
 
 from __future__ import annotations
 
-from attitude_sil.core.engine import build_disturbance
-from attitude_sil.core.lockstep import StepSequencer
-from attitude_sil.core.quaternion import unit_or_none
+from attitude_sil.core.plant.quaternion import unit_or_none
+from attitude_sil.core.sim.engine import build_disturbance
+from attitude_sil.core.sim.lockstep import StepSequencer
 from attitude_sil.ros.contract import ATTITUDE, DISTURBANCE_TORQUE
 from attitude_sil.ros.convert import quaternion_to_array, stamp_to_ns, vector_msg
 from attitude_sil.ros.node import SchemaNode, run_node

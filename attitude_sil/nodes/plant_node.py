@@ -3,7 +3,7 @@
 Publishes ``/clock``, ``attitude`` and ``body_rate`` for step k (stamp t_k)
 (and ``flexible_mode``, alpha and its rate, for paper 002's flexible model),
 waits for ``wheel_torque``, ``wheel_momentum`` and ``disturbance_torque``
-stamped t_k, integrates to t_k+1 with :class:`attitude_sil.core.engine.Plant`
+stamped t_k, integrates to t_k+1 with :class:`attitude_sil.core.sim.engine.Plant`
 and publishes the next step (docs/architecture.md, "Lockstep"). An input that
 does not arrive within ``input_timeout`` (wall time) stops the episode with an
 error; one stamped for another step, non-finite, or a second one for a step is
@@ -20,7 +20,7 @@ scheduled controller swaps this way); setting ``hold_at`` to a later time (or
 -1) releases it.
 
 The decisions (which input completes a step, hold, pacing, timeout,
-autostart) are :class:`attitude_sil.core.lockstep.PlantLockstep`; this node
+autostart) are :class:`attitude_sil.core.sim.lockstep.PlantLockstep`; this node
 carries them out with rclpy timers and publishers.
 """
 
@@ -32,8 +32,8 @@ import numpy as np
 from rosgraph_msgs.msg import Clock
 from std_srvs.srv import Trigger
 
-from attitude_sil.core.engine import build_plant
-from attitude_sil.core.lockstep import Action, PlantLockstep
+from attitude_sil.core.sim.engine import build_plant
+from attitude_sil.core.sim.lockstep import Action, PlantLockstep
 from attitude_sil.errors import AttitudeSilError
 from attitude_sil.ros.contract import ATTITUDE, BODY_RATE, CLOCK, FLEXIBLE_MODE, PLANT_INPUTS
 from attitude_sil.ros.convert import ns_to_stamp, quaternion_msg, stamp_to_ns, vector_msg, vector_to_array

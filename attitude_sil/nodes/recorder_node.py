@@ -30,7 +30,7 @@ from rcl_interfaces.msg import ParameterEvent
 from rclpy.node import Node
 from rclpy.serialization import deserialize_message
 
-from attitude_sil.core.quaternion import unit_or_none
+from attitude_sil.core.plant.quaternion import unit_or_none
 from attitude_sil.errors import BagWriteError
 from attitude_sil.ros.contract import CLOCK, PARAMETER_EVENTS, RECORDED_TOPICS, message_class
 from attitude_sil.ros.qos import LOCKSTEP_QOS, PARAMETER_EVENTS_QOS, offered_qos_yaml, publishers_qos_yaml, volatile

@@ -2,7 +2,7 @@
 
 On ``voltage_cmd`` (or ``torque_cmd``, turned into voltages by the inverse
 motor model) stamped t_k it integrates the motors exactly over
-``[t_k, t_k+1]`` with the voltage held (:class:`attitude_sil.core.engine.Wheels`)
+``[t_k, t_k+1]`` with the voltage held (:class:`attitude_sil.core.sim.engine.Wheels`)
 and publishes, stamped t_k: ``wheel_torque`` (mean torque on the body over the
 step, so momentum is exchanged exactly), ``wheel_momentum`` (h_w at t_k, in B)
 and ``wheel_state`` (per wheel angle, speed and motor torque at t_k).
@@ -10,8 +10,8 @@ and ``wheel_state`` (per wheel angle, speed and motor torque at t_k).
 
 from __future__ import annotations
 
-from attitude_sil.core.engine import build_wheels
-from attitude_sil.core.lockstep import StepSequencer
+from attitude_sil.core.sim.engine import build_wheels
+from attitude_sil.core.sim.lockstep import StepSequencer
 from attitude_sil.ros.contract import TORQUE_CMD, VOLTAGE_CMD, WHEEL_MOMENTUM, WHEEL_STATE, WHEEL_TORQUE
 from attitude_sil.ros.convert import joint_state_msg, stamp_to_ns, vector_msg, vector_to_array
 from attitude_sil.ros.node import SchemaNode, run_node

@@ -1,7 +1,7 @@
 """The base of every graph node: parameters from the schema, validation, and ``main()``.
 
 Nodes stay thin: they declare their parameters from
-:mod:`attitude_sil.core.params` (through :class:`SchemaNode`), turn messages
+:mod:`attitude_sil.core.sim.params` (through :class:`SchemaNode`), turn messages
 into arrays with :mod:`attitude_sil.ros.convert`, call a core step object and
 publish the result. :func:`run_node` is the body of every node's ``main()``.
 """
@@ -25,9 +25,9 @@ from rclpy.parameter import Parameter
 from rclpy.signals import SignalHandlerOptions
 
 from attitude_sil.core import yaml12
-from attitude_sil.core.paramfile import node_key, sections_for
-from attitude_sil.core.params import NODE_PARAMS
-from attitude_sil.core.scenario import Scenario, scenario_from_dict
+from attitude_sil.core.sim.paramfile import node_key, sections_for
+from attitude_sil.core.sim.params import NODE_PARAMS
+from attitude_sil.core.sim.scenario import Scenario, scenario_from_dict
 from attitude_sil.errors import AttitudeSilError, ScenarioError
 from attitude_sil.ros.contract import RECORDED_TOPICS as TOPIC_TYPES
 from attitude_sil.ros.contract import message_class
@@ -45,7 +45,7 @@ def steady_clock() -> Clock:
 
 
 class SchemaNode(Node):
-    """A node whose parameters come from :data:`~attitude_sil.core.params.NODE_PARAMS`.
+    """A node whose parameters come from :data:`~attitude_sil.core.sim.params.NODE_PARAMS`.
 
     Every parameter is declared with a descriptor (type, description, range);
     a set request is validated by the schema rule and then by

@@ -1,7 +1,7 @@
 """ROS parameters from the project's schema: descriptors, typed values.
 
-The schema (:mod:`attitude_sil.core.params`) is ROS-free; this module turns a
-:class:`~attitude_sil.core.params.ParamSpec` into a ``ParameterDescriptor``
+The schema (:mod:`attitude_sil.core.sim.params`) is ROS-free; this module turns a
+:class:`~attitude_sil.core.sim.params.ParamSpec` into a ``ParameterDescriptor``
 (type, description, ranges, constraints) and a value into a typed
 ``Parameter``.
 """
@@ -14,7 +14,7 @@ from typing import Any
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor, ParameterType
 from rclpy.parameter import Parameter
 
-from attitude_sil.core.params import ParamSpec
+from attitude_sil.core.sim.params import ParamSpec
 
 __all__ = ["typed_parameter", "descriptor", "PARAMETER_TYPES"]
 

@@ -33,10 +33,10 @@ from rclpy.parameter_client import AsyncParameterClient
 from rclpy.signals import SignalHandlerOptions
 
 from attitude_sil.core import yaml12
-from attitude_sil.core.metrics import episode_report
-from attitude_sil.core.paramfile import node_key, section_node
-from attitude_sil.core.params import NODE_PARAMS, SCENARIO_NODE
-from attitude_sil.core.scenario import GRAPH_NODES, Scenario, load_scenario, scenario_from_dict, yaml_problem
+from attitude_sil.core.analysis.metrics import episode_report
+from attitude_sil.core.sim.paramfile import node_key, section_node
+from attitude_sil.core.sim.params import NODE_PARAMS, SCENARIO_NODE
+from attitude_sil.core.sim.scenario import GRAPH_NODES, Scenario, load_scenario, scenario_from_dict, yaml_problem
 from attitude_sil.errors import AttitudeSilError, BagError, RunError, ScenarioError
 from attitude_sil.graph.launcher import namespace_kwargs
 from attitude_sil.graph.session import Progress, spin_episode

@@ -31,7 +31,7 @@ from rclpy.parameter import Parameter, parameter_value_to_python
 from rclpy.parameter_client import AsyncParameterClient
 
 from attitude_sil.core import yaml12
-from attitude_sil.core.paramfile import sections_for
+from attitude_sil.core.sim.paramfile import sections_for
 from attitude_sil.errors import ParamClientError
 from attitude_sil.ros.contract import check_node_name, check_parameter_name
 from attitude_sil.ros.environment import localhost_environment

@@ -21,7 +21,7 @@ from matplotlib.figure import Figure
 from matplotlib.lines import Line2D
 from matplotlib.transforms import blended_transform_factory
 
-from attitude_sil.core.quaternion import euler_from_quat
+from attitude_sil.core.plant.quaternion import euler_from_quat
 from attitude_sil.errors import BagError
 from attitude_sil.ros.contract import (
     ATTITUDE,

@@ -26,9 +26,9 @@ from rclpy.node import Node
 from rclpy.parameter import Parameter, parameter_value_to_python
 
 from attitude_sil.core import yaml12
-from attitude_sil.core.paramfile import sections_for
-from attitude_sil.core.params import GLOBAL_NODE, spec_for
-from attitude_sil.core.scenario import load_scenario, scenario_from_dict, yaml_problem
+from attitude_sil.core.sim.paramfile import sections_for
+from attitude_sil.core.sim.params import GLOBAL_NODE, spec_for
+from attitude_sil.core.sim.scenario import load_scenario, scenario_from_dict, yaml_problem
 from attitude_sil.errors import AttitudeSilError, BagError, ScenarioError
 from attitude_sil.nodes.controller_node import ControllerNode
 from attitude_sil.ros.contract import COMMAND_TOPICS, CONTROLLER_INPUTS, STEP_TOPICS, message_class

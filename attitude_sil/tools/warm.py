@@ -1,6 +1,6 @@
 """Compile the step kernels once, into numba's on-disk cache, before anything else needs them.
 
-The kernels (:mod:`attitude_sil.core.kernels`, the laws' steps and the batch loop
+The kernels (:mod:`attitude_sil.core.plant.kernels`, the laws' steps and the batch loop
 generated for the registered laws, :mod:`attitude_sil.core.control.compiled`)
 are compiled on first use and cached next to their modules (``cache=True``). On
 a fresh install that first use is typically a graph run: five node processes
@@ -18,8 +18,8 @@ import time
 from pathlib import Path
 
 from attitude_sil.core.control import registry
-from attitude_sil.core.engine import simulate
-from attitude_sil.core.scenario import PRESETS, ScenarioError, default_config_dir, load_scenario
+from attitude_sil.core.sim.engine import simulate
+from attitude_sil.core.sim.scenario import PRESETS, ScenarioError, default_config_dir, load_scenario
 
 
 def warm(config_dir: str | Path | None = None) -> float:
@@ -28,7 +28,7 @@ def warm(config_dir: str | Path | None = None) -> float:
     Parameters
     ----------
     config_dir : path, optional
-        Where the preset scenarios are (default: :func:`~attitude_sil.core.scenario.default_config_dir`).
+        Where the preset scenarios are (default: :func:`~attitude_sil.core.sim.scenario.default_config_dir`).
     """
     folder = Path(config_dir) if config_dir is not None else default_config_dir()
     t0 = time.perf_counter()

@@ -20,8 +20,8 @@ order, so a run's values depend only on the seed and its index: not on the
 chunk, the worker or which other dispersions are on.
 
 Every dispersed value is a scenario value (:func:`episode_values` gives them
-per run for :func:`attitude_sil.core.engine.simulate`, :func:`run_scenario`
-one run's as a :class:`~attitude_sil.core.scenario.Scenario`), so a run
+per run for :func:`attitude_sil.core.sim.engine.simulate`, :func:`run_scenario`
+one run's as a :class:`~attitude_sil.core.sim.scenario.Scenario`), so a run
 re-runs through the node graph exactly.
 """
 
@@ -33,8 +33,8 @@ from typing import Any
 import numpy as np
 from scipy.special import ndtri
 
-from attitude_sil.core.scenario import Scenario
-from attitude_sil.core.wheels import GEOMETRIES
+from attitude_sil.core.plant.wheels import GEOMETRIES
+from attitude_sil.core.sim.scenario import Scenario
 from attitude_sil.errors import ScenarioError, SpecError
 
 __all__ = ["DISPERSION_KEYS", "check_dispersions", "draw", "episode_values", "run_scenario", "value_columns"]

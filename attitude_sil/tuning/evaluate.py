@@ -1,7 +1,7 @@
 """Cost of a population of candidates: batch-engine runs and the papers' cost functions.
 
 Every candidate of a population runs as one episode of one vectorised
-:func:`attitude_sil.core.engine.simulate` call per scenario and condition
+:func:`attitude_sil.core.sim.engine.simulate` call per scenario and condition
 (costs are summed over them); with ``workers > 1`` the population is split
 over processes. A candidate that diverges (non-finite state), runs a wheel
 into its speed limit, or breaks a cost's rule gets :data:`PENALTY` and a
@@ -32,9 +32,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from attitude_sil.core.engine import simulate, simulate_summary
-from attitude_sil.core.metrics import summarize
-from attitude_sil.core.quaternion import euler_from_quat
+from attitude_sil.core.analysis.metrics import summarize
+from attitude_sil.core.plant.quaternion import euler_from_quat
+from attitude_sil.core.sim.engine import simulate, simulate_summary
 from attitude_sil.core.trajectory import EpisodeSummary, Trajectory
 
 from .dispersions import episode_values

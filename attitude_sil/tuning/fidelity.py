@@ -27,14 +27,14 @@ from pathlib import Path
 import control
 import numpy as np
 
-from attitude_sil.core.actuators import SpeedLoopWheels
-from attitude_sil.core.engine import flexible_states, simulate
-from attitude_sil.core.linearize import PAPER_000_TABLE_1, PAPER_000_TABLE_1_DURATION, rmse_table
-from attitude_sil.core.metrics import flexible_split, scenario_metrics, step_metrics, tracking_metrics
+from attitude_sil.core.analysis.metrics import flexible_split, scenario_metrics, step_metrics, tracking_metrics
 from attitude_sil.core.papers import PAPERS
-from attitude_sil.core.plants import FLEXIBLE_CASES
-from attitude_sil.core.scenario import PRESETS, Scenario, default_config_dir, load_scenario
+from attitude_sil.core.plant.actuators import SpeedLoopWheels
+from attitude_sil.core.plant.plants import FLEXIBLE_CASES
+from attitude_sil.core.sim.engine import flexible_states, simulate
+from attitude_sil.core.sim.scenario import PRESETS, Scenario, default_config_dir, load_scenario
 from attitude_sil.errors import AttitudeSilError
+from attitude_sil.tuning.linearize import PAPER_000_TABLE_1, PAPER_000_TABLE_1_DURATION, rmse_table
 
 from .rootlocus import closed_loop, place_poles, reduced_roll_loop
 

@@ -7,9 +7,9 @@ from pathlib import Path
 import numpy as np
 from matplotlib.figure import Figure
 
-from attitude_sil.core.engine import simulate
-from attitude_sil.core.metrics import principal_angle
-from attitude_sil.core.quaternion import euler_from_quat
+from attitude_sil.core.analysis.metrics import principal_angle
+from attitude_sil.core.plant.quaternion import euler_from_quat
+from attitude_sil.core.sim.engine import simulate
 
 from .dispersions import episode_values
 from .montecarlo import METRIC_KEYS, MonteCarloSpec

@@ -8,8 +8,8 @@ from pathlib import Path
 import numpy as np
 import yaml
 
-from attitude_sil.core.paramfile import node_key
-from attitude_sil.core.params import spec_for
+from attitude_sil.core.sim.paramfile import node_key
+from attitude_sil.core.sim.params import spec_for
 
 from .spec import TuningSpec, decode
 

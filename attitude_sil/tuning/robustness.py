@@ -5,7 +5,7 @@
   controller keeps its nominal model (``geometric.inertia``);
 * the flexible satellite (paper 002): its nominal plant and the four mismatch
   cases, with the rigid body's and the appendage's settling times apart
-  (:func:`attitude_sil.core.metrics.flexible_split`), as the paper reports them.
+  (:func:`attitude_sil.core.analysis.metrics.flexible_split`), as the paper reports them.
 
 The figures are the scenario's metrics (``scenario.metrics.mode``).
 """
@@ -14,10 +14,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from attitude_sil.core.engine import flexible_states, inertia_matrix, simulate
-from attitude_sil.core.metrics import flexible_split, scenario_metrics
-from attitude_sil.core.plants import FLEXIBLE_CASES
-from attitude_sil.core.scenario import Scenario
+from attitude_sil.core.analysis.metrics import flexible_split, scenario_metrics
+from attitude_sil.core.plant.plants import FLEXIBLE_CASES
+from attitude_sil.core.sim.engine import flexible_states, inertia_matrix, simulate
+from attitude_sil.core.sim.scenario import Scenario
 
 __all__ = ["INERTIA_ERRORS", "robustness", "format_robustness"]
 

@@ -1,7 +1,7 @@
 """Model-based PID tuning on the linearised HST (paper 000, "Root locus-based tuning").
 
 The loop from the roll voltage command to the roll angle is built from the
-linearised body (:func:`attitude_sil.core.linear.linear_model`, eq. 20-28)
+linearised body (:func:`attitude_sil.core.plant.linear.linear_model`, eq. 20-28)
 and the linear part of the wheel motors (eq. 15-16 through the allocation of
 eq. 14) as a python-control state-space model. The paper moved the
 closed-loop poles along the root locus in MATLAB's Control System Designer
@@ -30,9 +30,9 @@ import control
 import numpy as np
 from matplotlib.figure import Figure
 
-from attitude_sil.core.engine import build_wheels, inertia_matrix, simulate
-from attitude_sil.core.linear import linear_model
-from attitude_sil.core.metrics import scenario_metrics
+from attitude_sil.core.analysis.metrics import scenario_metrics
+from attitude_sil.core.plant.linear import linear_model
+from attitude_sil.core.sim.engine import build_wheels, inertia_matrix, simulate
 from attitude_sil.errors import SpecError
 
 from .results import TuningResult, write_best_yaml

@@ -35,8 +35,8 @@ import numpy as np
 
 from attitude_sil.core import yaml12
 from attitude_sil.core.control import registry
-from attitude_sil.core.params import NODE_PARAMS
-from attitude_sil.core.scenario import Scenario, load_scenario
+from attitude_sil.core.sim.params import NODE_PARAMS
+from attitude_sil.core.sim.scenario import Scenario, load_scenario
 from attitude_sil.errors import ScenarioError, SpecError
 
 from .dispersions import check_dispersions

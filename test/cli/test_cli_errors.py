@@ -11,7 +11,7 @@ import sys
 
 import pytest
 
-from attitude_sil.core.scenario import ScenarioError, load_scenario
+from attitude_sil.core.sim.scenario import ScenarioError, load_scenario
 from conftest import CONFIG, ROOT
 
 GOOD = (CONFIG / "hst_roll_step.yaml").read_text()

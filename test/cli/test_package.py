@@ -20,7 +20,7 @@ import xml.etree.ElementTree as ET
 import pytest
 import setuptools
 
-from attitude_sil.core.scenario import GRAPH_NODES
+from attitude_sil.core.sim.scenario import GRAPH_NODES
 from conftest import ROOT
 
 #: import name -> (package.xml key, or None where only a comment can say it is pip-only;

@@ -38,11 +38,10 @@ from rclpy.serialization import serialize_message
 
 from attitude_sil.cli import common as cli_common
 from attitude_sil.cli import main
-from attitude_sil.core import linearize
-from attitude_sil.core.params import GLOBAL_NODE, NODE_PARAMS, ParamSpec
+from attitude_sil.core.sim.params import GLOBAL_NODE, NODE_PARAMS, ParamSpec
 from attitude_sil.graph.session import GraphSession
 from attitude_sil.storage import BagWriter
-from attitude_sil.tuning import executor, fidelity, montecarlo, robustness
+from attitude_sil.tuning import executor, fidelity, linearize, montecarlo, robustness
 from conftest import CONFIG, ROOT
 
 SCENARIO = str(CONFIG / "hst_roll_step.yaml")

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 import yaml
 
-from attitude_sil.core.scenario import load_scenario
+from attitude_sil.core.sim.scenario import load_scenario
 from attitude_sil.graph.session import run_graph
 from attitude_sil.storage.reader import open_bag
 from attitude_sil.tools.plot import controller_swaps
@@ -42,7 +42,7 @@ def test_replay_drives_a_live_controller_like_the_recorded_run(tmp_path):
     from geometry_msgs.msg import Vector3Stamped
     from rclpy.experimental import EventsExecutor
 
-    from attitude_sil.core.params import spec_for
+    from attitude_sil.core.sim.params import spec_for
     from attitude_sil.nodes.controller_node import ControllerNode
     from attitude_sil.ros.convert import stamp_to_ns, vector_to_array
     from attitude_sil.ros.parameters import typed_parameter

@@ -12,8 +12,8 @@ from mcap.reader import make_reader
 from mcap_ros2.decoder import DecoderFactory
 
 from attitude_sil.core.control import registry
-from attitude_sil.core.engine import simulate
-from attitude_sil.core.scenario import load_scenario
+from attitude_sil.core.sim.engine import simulate
+from attitude_sil.core.sim.scenario import load_scenario
 from attitude_sil.graph.session import run_graph
 from conftest import CONFIG, ROOT
 

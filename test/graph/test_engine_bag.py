@@ -11,8 +11,8 @@ import math
 import numpy as np
 import yaml
 
-from attitude_sil.core.engine import simulate
-from attitude_sil.core.scenario import load_scenario
+from attitude_sil.core.sim.engine import simulate
+from attitude_sil.core.sim.scenario import load_scenario
 from attitude_sil.graph.engine_bag import record_episode
 from attitude_sil.graph.session import GraphSession
 from attitude_sil.storage.reader import open_bag

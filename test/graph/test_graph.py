@@ -5,8 +5,8 @@ import pytest
 from mcap.reader import make_reader
 from mcap_ros2.decoder import DecoderFactory
 
-from attitude_sil.core.engine import simulate
-from attitude_sil.core.scenario import load_scenario
+from attitude_sil.core.sim.engine import simulate
+from attitude_sil.core.sim.scenario import load_scenario
 from attitude_sil.graph.session import run_graph
 from attitude_sil.ros.contract import RECORDED_TOPICS, STEP_TOPICS
 from conftest import CONFIG

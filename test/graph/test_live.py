@@ -28,8 +28,8 @@ import time
 import yaml
 
 from attitude_sil.cli import main
-from attitude_sil.core.metrics import METRIC_KEYS
-from attitude_sil.core.scenario import GRAPH_NODES
+from attitude_sil.core.analysis.metrics import METRIC_KEYS
+from attitude_sil.core.sim.scenario import GRAPH_NODES
 from attitude_sil.ros.contract import RECORDED_TOPICS, STEP_TOPICS
 from attitude_sil.storage.reader import open_bag
 from conftest import CONFIG, ROOT

@@ -13,8 +13,8 @@ import pytest
 import rclpy
 import yaml
 
-from attitude_sil.core.paramfile import applies_to, node_key, section_node
-from attitude_sil.core.scenario import GRAPH_NODES, load_scenario, scenario_from_dict
+from attitude_sil.core.sim.paramfile import applies_to, node_key, section_node
+from attitude_sil.core.sim.scenario import GRAPH_NODES, load_scenario, scenario_from_dict
 from attitude_sil.errors import ParamClientError
 from attitude_sil.graph import launcher
 from attitude_sil.ros.node import params_file_warning

@@ -18,10 +18,10 @@ import pytest
 import yaml
 
 from attitude_sil.core.control import registry
-from attitude_sil.core.engine import simulate
-from attitude_sil.core.params import NODE_PARAMS, spec_for
-from attitude_sil.core.quaternion import quat_error, quat_to_dcm
-from attitude_sil.core.scenario import load_scenario
+from attitude_sil.core.plant.quaternion import quat_error, quat_to_dcm
+from attitude_sil.core.sim.engine import simulate
+from attitude_sil.core.sim.params import NODE_PARAMS, spec_for
+from attitude_sil.core.sim.scenario import load_scenario
 from attitude_sil.errors import SpecError
 from attitude_sil.tuning.evaluate import PENALTY
 from conftest import CONFIG, ROOT

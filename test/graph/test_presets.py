@@ -3,13 +3,13 @@
 import numpy as np
 import pytest
 
-from attitude_sil.core.engine import build_disturbance, simulate
-from attitude_sil.core.linearize import rmse_table
-from attitude_sil.core.metrics import tracking_metrics
-from attitude_sil.core.plants import FlexibleAxisPlant, PitchNormalizedPlant
-from attitude_sil.core.quaternion import euler_from_quat, quat_from_euler
-from attitude_sil.core.scenario import load_scenario
+from attitude_sil.core.analysis.metrics import tracking_metrics
+from attitude_sil.core.plant.plants import FlexibleAxisPlant, PitchNormalizedPlant
+from attitude_sil.core.plant.quaternion import euler_from_quat, quat_from_euler
+from attitude_sil.core.sim.engine import build_disturbance, simulate
+from attitude_sil.core.sim.scenario import load_scenario
 from attitude_sil.graph.session import run_graph
+from attitude_sil.tuning.linearize import rmse_table
 from conftest import CONFIG
 
 HST = [31.046, 77.217, 78.754]

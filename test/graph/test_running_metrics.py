@@ -1,4 +1,4 @@
-"""A graph run's metrics from running sums (core/running_metrics.py) equal the trajectory's metrics.
+"""A graph run's metrics from running sums (core/analysis/running_metrics.py) equal the trajectory's metrics.
 
 The graph no longer keeps an episode's messages to compute its metrics at the
 end (memory grew 1.5 kB per step); it feeds each step to an
@@ -14,10 +14,10 @@ import math
 import numpy as np
 import pytest
 
-from attitude_sil.core.engine import schedule_from_scenario, simulate
-from attitude_sil.core.metrics import episode_report
-from attitude_sil.core.running_metrics import EpisodeAccumulator
-from attitude_sil.core.scenario import load_scenario
+from attitude_sil.core.analysis.metrics import episode_report
+from attitude_sil.core.analysis.running_metrics import EpisodeAccumulator
+from attitude_sil.core.sim.engine import schedule_from_scenario, simulate
+from attitude_sil.core.sim.scenario import load_scenario
 from attitude_sil.graph.session import GraphSession
 from conftest import CONFIG
 

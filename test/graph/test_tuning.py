@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 import yaml
 
-from attitude_sil.core.engine import simulate
-from attitude_sil.core.metrics import scenario_metrics
+from attitude_sil.core.analysis.metrics import scenario_metrics
+from attitude_sil.core.sim.engine import simulate
 from attitude_sil.graph.evaluator import GraphEvaluator
 from attitude_sil.tuning.evaluate import PENALTY, evaluate
 from attitude_sil.tuning.optimize import run_tuning
@@ -140,7 +140,7 @@ def test_same_seed_same_result(tmp_path):
 
 
 def test_robustness_over_inertia_errors_and_flexible_cases():
-    from attitude_sil.core.scenario import load_scenario
+    from attitude_sil.core.sim.scenario import load_scenario
     from attitude_sil.tuning.robustness import robustness
 
     rows = robustness(load_scenario(CONFIG / "hawaiisat_lvlh.yaml"))

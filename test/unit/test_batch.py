@@ -1,4 +1,4 @@
-"""The compiled episode driver (core/batch.py) gives the stepwise driver's numbers, bit for bit.
+"""The compiled episode driver (core/sim/batch.py) gives the stepwise driver's numbers, bit for bit.
 
 The stepwise driver calls the step objects once per step from Python, exactly
 as the nodes do per message (graph == stepwise is tested at 1e-9 in
@@ -10,9 +10,9 @@ arithmetic in the same order, whatever the chunking or the thread count.
 import numpy as np
 import pytest
 
-from attitude_sil.core.engine import simulate, simulate_summary
-from attitude_sil.core.metrics import summarize
-from attitude_sil.core.scenario import load_scenario
+from attitude_sil.core.analysis.metrics import summarize
+from attitude_sil.core.sim.engine import simulate, simulate_summary
+from attitude_sil.core.sim.scenario import load_scenario
 from attitude_sil.errors import ScenarioError
 from conftest import CONFIG
 

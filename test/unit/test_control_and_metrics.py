@@ -3,17 +3,16 @@
 import numpy as np
 import pytest
 
-from attitude_sil.core.control.bank import ControllerBank
-from attitude_sil.core.engine import simulate
-from attitude_sil.core.metrics import metrics_from_trajectory, step_metrics
-from attitude_sil.core.quaternion import quat_from_euler
-from attitude_sil.core.scenario import load_scenario
+from attitude_sil.core.analysis.metrics import metrics_from_trajectory, step_metrics
+from attitude_sil.core.plant.quaternion import quat_from_euler
+from attitude_sil.core.sim.engine import law_bank, simulate
+from attitude_sil.core.sim.scenario import load_scenario
 from conftest import CONFIG
 
 
 def _pid(kp, ki, kd, n, dt, u_max):
     """The pid law alone, through the bank the nodes use."""
-    return ControllerBank.for_law("pid", 1, dt, {"kp": [kp] * 3, "ki": [ki] * 3, "kd": [kd] * 3, "n": [n] * 3,
+    return law_bank("pid", 1, dt, {"kp": [kp] * 3, "ki": [ki] * 3, "kd": [kd] * 3, "n": [n] * 3,
                                                  "output_limit": u_max})
 
 

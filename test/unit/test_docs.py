@@ -3,7 +3,7 @@
 import argparse
 
 from attitude_sil.cli import build_parser
-from attitude_sil.core.params import parameters_markdown
+from attitude_sil.core.sim.params import parameters_markdown
 from attitude_sil.ros.contract import RECORDED_TOPICS
 from conftest import ROOT
 

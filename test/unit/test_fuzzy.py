@@ -5,10 +5,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from attitude_sil.core.control.bank import ControllerBank
-from attitude_sil.core.control.kernels import fuzzy_infer
-from attitude_sil.core.control.laws.fuzzy_pid import mix
-from attitude_sil.core.fuzzy import (
+from attitude_sil.core.control.fuzzy import (
     FUZZY_PID_DEFAULT_RULES,
     PAPER_003_TABLE_3,
     PAPER_004_TABLE_2,
@@ -17,6 +14,9 @@ from attitude_sil.core.fuzzy import (
     memberships,
     vertices_from_ratios,
 )
+from attitude_sil.core.control.kernels import fuzzy_infer
+from attitude_sil.core.control.laws.fuzzy_pid import mix
+from attitude_sil.core.sim.engine import law_bank
 
 DATA = Path(__file__).resolve().parents[1] / "data"
 CODES = {"NL": 1, "NB": 1, "NM": 2, "NS": 3, "ZR": 4, "ZO": 4, "PS": 5, "PM": 6, "PL": 7, "PB": 7}
@@ -100,7 +100,7 @@ def test_mixing_cases_of_paper_003():
 
 
 def _random_states(rng, n):
-    from attitude_sil.core.quaternion import quat_from_euler
+    from attitude_sil.core.plant.quaternion import quat_from_euler
 
     q_BN = quat_from_euler(np.radians(rng.uniform(-3, 3, (n, 3))))
     q_RN = quat_from_euler(np.radians(rng.uniform(-1, 1, (n, 3))))
@@ -115,14 +115,14 @@ def _mix_reference(u_pid, u_f, f):
 
 
 def test_compiled_fuzzy_pid_equals_its_documented_steps():
-    from attitude_sil.core.quaternion import error_vector
+    from attitude_sil.core.plant.quaternion import error_vector
 
     rng = np.random.default_rng(3)
     args = dict(e_scale=[0.02, 0.03, 0.01], de_scale=[0.01, 0.02, 0.01], u_scale=[2.0, 1.0, 3.0],
                 rules=FUZZY_PID_DEFAULT_RULES.ravel().tolist())
     gains = dict(kp=[40.0] * 3, ki=[0.5] * 3, kd=[90.0] * 3, n=[2.0] * 3)
-    fast = ControllerBank.for_law("fuzzy_pid", 6, 0.01, {**gains, **args, "output_limit": 5.0})
-    ref_pid = ControllerBank.for_law("pid", 6, 0.01, {**gains, "output_limit": 5.0})
+    fast = law_bank("fuzzy_pid", 6, 0.01, {**gains, **args, "output_limit": 5.0})
+    ref_pid = law_bank("pid", 6, 0.01, {**gains, "output_limit": 5.0})
     e_prev = None
     for _ in range(30):
         states = _random_states(rng, 6)
@@ -138,12 +138,12 @@ def test_compiled_fuzzy_pid_equals_its_documented_steps():
 
 
 def test_compiled_ga_flc_equals_its_documented_steps():
-    from attitude_sil.core.quaternion import quat_error, quat_to_dcm
+    from attitude_sil.core.plant.quaternion import quat_error, quat_to_dcm
 
     rng = np.random.default_rng(4)
     ratios = rng.uniform(0.2, 2.0, 18)
     scales = [20.0, 30.0, 1.5]
-    flc = ControllerBank.for_law("ga_flc", 5, 0.01, {"rules": PAPER_004_TABLE_2.ravel().tolist(),
+    flc = law_bank("ga_flc", 5, 0.01, {"rules": PAPER_004_TABLE_2.ravel().tolist(),
                                                       "mf_ratios": ratios.tolist(), "scales": scales,
                                                       "output_limit": 1.2})
     v = vertices_from_ratios(ratios.reshape(3, 6))

@@ -5,8 +5,9 @@ import pytest
 
 from attitude_sil.core.control.bank import ControllerBank
 from attitude_sil.core.control.laws.geometric import skew_vee, torque_reference
-from attitude_sil.core.params import spec_for
-from attitude_sil.core.quaternion import quat_derivative, quat_from_euler, quat_multiply, quat_to_dcm
+from attitude_sil.core.plant.quaternion import quat_derivative, quat_from_euler, quat_multiply, quat_to_dcm
+from attitude_sil.core.sim.engine import law_bank
+from attitude_sil.core.sim.params import spec_for
 
 J = np.diag([5.69, 5.69, 4.26])  # Hawai'iSat-1
 K = np.array([0.06, 0.02, 0.03])
@@ -28,7 +29,7 @@ def _values(**extra):
 
 
 def _law(dt, torque_limit):
-    return ControllerBank.for_law("geometric", 1, dt, {**_values(), "torque_limit": torque_limit})
+    return law_bank("geometric", 1, dt, {**_values(), "torque_limit": torque_limit})
 
 
 def _lyapunov(q_BN, w, q_RN, w_d):
@@ -98,7 +99,7 @@ def test_equal_k_entries_are_refused():
 def test_compiled_law_equals_the_numpy_reference():
     """The compiled step == the numpy reference (feed-forward on), saturated, over random states and a rotating
     reference, with per-episode gains and a per-episode inertia."""
-    from attitude_sil.core.scenario import load_scenario
+    from attitude_sil.core.sim.scenario import load_scenario
     from conftest import CONFIG
 
     values = dict(load_scenario(CONFIG / "hawaiisat_lvlh.yaml").values["controller"])

@@ -25,6 +25,15 @@ ALLOWED = {
     "cli": {"errors", "core", "storage", "tuning", "ros", "nodes", "graph", "tools", "cli"},
 }
 ROS_FREE = ("errors", "core", "storage", "tuning")
+
+#: inside core: sub-package -> the sub-packages it may import from ("root": core/*.py, the base)
+CORE_ALLOWED = {
+    "root": {"root"},
+    "plant": {"root", "plant"},
+    "control": {"root", "plant", "control"},
+    "analysis": {"root", "plant", "analysis"},
+    "sim": {"root", "plant", "control", "analysis", "sim"},
+}
 ROS_PACKAGES = ("rclpy", "rcl_interfaces", "builtin_interfaces", "geometry_msgs", "sensor_msgs", "std_msgs",
                 "std_srvs", "rosgraph_msgs", "diagnostic_msgs", "rosidl_runtime_py")
 
@@ -85,6 +94,26 @@ def test_imports_flow_one_way():
             if mod in MODULES and mod != "attitude_sil" and _layer(mod) not in ALLOWED.get(src, set(ALLOWED)):
                 wrong.append(f"{name} -> {mod}")
     assert not wrong, "imports against the layering:\n" + "\n".join(wrong)
+
+
+def _core_part(module: str) -> str:
+    parts = module.split(".")
+    return parts[2] if len(parts) > 3 else "root"
+
+
+def test_core_sub_packages_import_one_way():
+    # plant < control, analysis < sim; the root modules (paramspec, yaml12, trajectory, papers) under all
+    wrong = []
+    for name, imports in IMPORTS.items():
+        if _layer(name) != "core":
+            continue
+        src = _core_part(name)
+        assert src in CORE_ALLOWED, f"{name}: core has no sub-package {src!r} (add it to CORE_ALLOWED)"
+        for mod, _ in imports:
+            if mod in MODULES and _layer(mod) == "core" and mod != "attitude_sil.core":
+                if _core_part(mod) not in CORE_ALLOWED[src]:
+                    wrong.append(f"{name} -> {mod}")
+    assert not wrong, "imports against core's order (plant < control, analysis < sim):\n" + "\n".join(wrong)
 
 
 def test_ros_free_layers_import_no_ros():

@@ -1,4 +1,4 @@
-"""The lockstep protocol as plain code (core/lockstep.py): sequencing, hold, pacing, timeout, autostart.
+"""The lockstep protocol as plain code (core/sim/lockstep.py): sequencing, hold, pacing, timeout, autostart.
 
 These rules used to be testable only through a live rclpy graph; here each one
 is checked directly, with the wall clock passed in.
@@ -6,7 +6,7 @@ is checked directly, with the wall clock passed in.
 
 import numpy as np
 
-from attitude_sil.core.lockstep import Action, PlantLockstep, StepSequencer
+from attitude_sil.core.sim.lockstep import Action, PlantLockstep, StepSequencer
 
 DT = 10_000_000  # 10 ms in ns
 ZERO = np.zeros((1, 3))

@@ -4,11 +4,11 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
-from attitude_sil.core.engine import build_plant, build_wheels, simulate
-from attitude_sil.core.quaternion import euler_from_quat
-from attitude_sil.core.rigid_body import BodyState, inertial_momentum, rk4_step
-from attitude_sil.core.scenario import load_scenario, scenario_from_dict
-from attitude_sil.core.wheels import MotorParams, WheelAssembly, hst_pyramid
+from attitude_sil.core.plant.quaternion import euler_from_quat
+from attitude_sil.core.plant.rigid_body import BodyState, inertial_momentum, rk4_step
+from attitude_sil.core.plant.wheels import MotorParams, WheelAssembly, hst_pyramid
+from attitude_sil.core.sim.engine import build_plant, build_wheels, simulate
+from attitude_sil.core.sim.scenario import load_scenario, scenario_from_dict
 from conftest import CONFIG
 
 
@@ -118,7 +118,7 @@ def test_compiled_wheel_step_equals_reference():
 
 def test_compiled_rk4_equals_the_documented_numpy_step():
     """kernels.rk4_body does the RK4 of rigid_body.body_derivatives (eq. 3, 4, 10-11)."""
-    from attitude_sil.core.rigid_body import body_derivatives
+    from attitude_sil.core.plant.rigid_body import body_derivatives
 
     rng = np.random.default_rng(11)
     inertia = np.array([np.diag([31.0, 77.0, 78.0]), [[5.0, 0.1, 0.0], [0.1, 6.0, 0.2], [0.0, 0.2, 4.0]]])

@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from attitude_sil.core import quaternion as qm
+from attitude_sil.core.plant import quaternion as qm
 
 
 def rand_quats(n, seed=0):

@@ -1,7 +1,7 @@
 """The controller bank: every registered law for P episodes, one active, swapped bumplessly.
 
 The bank is what the controller node (P = 1) and the stepwise batch driver
-call each control step; the compiled driver (:mod:`attitude_sil.core.batch`)
+call each control step; the compiled driver (:mod:`attitude_sil.core.sim.batch`)
 takes its records and runs the same law steps in its own loop. Each law's
 parameters come from the controller's values (``pid.kp``, ...) through the
 law's ``record``; its state is the law's declared layout
@@ -26,13 +26,11 @@ from typing import Any
 
 import numpy as np
 
+from attitude_sil.core.control import registry
+from attitude_sil.core.control.compiled import dispatch_module
+from attitude_sil.core.control.law import Law, state_layout
+from attitude_sil.core.plant.kernels import measure
 from attitude_sil.errors import ScenarioError
-
-from ..kernels import measure
-from ..params import NODE_PARAMS
-from . import registry
-from .compiled import dispatch_module
-from .law import Law, state_layout
 
 __all__ = ["ControllerBank", "law_values"]
 
@@ -48,13 +46,12 @@ def law_values(law: Law, values: Mapping[str, Any]) -> dict[str, Any]:
 _STAND_INS: dict[tuple[str, float], tuple] = {}
 
 
-def _stand_in(name: str, dt: float) -> tuple:
-    """Law ``name``'s record for no episodes, from the defaults: its numba type, built once per process."""
+def _stand_in(name: str, dt: float, values: dict) -> tuple:
+    """Law ``name``'s record for no episodes: its numba type (the values do not matter), built once per process."""
     key = (name, dt)
     if key not in _STAND_INS:
         law = registry.get(name)
-        defaults = {s.name: s.default for s in NODE_PARAMS["controller"]}
-        _STAND_INS[key] = law.record(law_values(law, defaults), 0, dt)
+        _STAND_INS[key] = law.record(law_values(law, values), 0, dt)
     return _STAND_INS[key]
 
 
@@ -93,21 +90,6 @@ class ControllerBank:
         self.has_offset = np.zeros(self.n, dtype=np.bool_)
         self.reset()
 
-    @classmethod
-    def for_law(cls, name: str, n_episodes: int = 1, dt: float = 0.01, values: dict | None = None) -> ControllerBank:
-        """A bank running law ``name`` with the controller's defaults and ``values`` on top.
-
-        ``values`` keys are the law's short parameter names (``kp``) or any
-        controller parameter (``output_limit``, ``orbit.mu``, ``pid.kp``); for
-        a law in isolation (tests, notebooks) without a scenario.
-        """
-        law = registry.get(name)
-        v = {s.name: s.default for s in NODE_PARAMS["controller"]}
-        short = {s.name for s in law.params}
-        v.update({(f"{name}.{k}" if k in short else k): val for k, val in (values or {}).items()})
-        v["controller_type"] = name
-        return cls(v, dt, n_episodes)
-
     def _zeros(self, law: Law) -> list[np.ndarray]:
         return [np.zeros((self.n, int(w)), dtype=d) for w, d in state_layout(law).values()]
 
@@ -138,7 +120,7 @@ class ControllerBank:
         runs need their P rows built (at P = 1 the building cost more than the run).
         """
         wanted = set(names)
-        return tuple(self.record(n) if n in wanted else _stand_in(n, self.dt) for n in self.names)
+        return tuple(self.record(n) if n in wanted else _stand_in(n, self.dt, self.values) for n in self.names)
 
     def _set_sensor(self, v: dict) -> None:
         """Sensor noise on the law's inputs (``sensor_noise.*``, scalars or per-episode (P,) arrays)."""
@@ -155,7 +137,7 @@ class ControllerBank:
         """What the law sees at step ``k``: the state with this step's sensor noise (or the state itself).
 
         Each draw is a pure function of (``sensor_noise.seed``, k, channel)
-        (:func:`attitude_sil.core.kernels.measure`), so a node that knows its
+        (:func:`attitude_sil.core.plant.kernels.measure`), so a node that knows its
         step draws what the batch engine drew for that episode.
         """
         if not self.noisy:

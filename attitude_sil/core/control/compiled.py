@@ -38,8 +38,8 @@ from types import ModuleType
 
 import numpy as np
 
-from . import registry
-from .law import Law, state_layout
+from attitude_sil.core.control import registry
+from attitude_sil.core.control.law import Law, state_layout
 
 __all__ = ["dispatch_module", "from_template", "cache_dir", "STUB_BEGIN", "STUB_END"]
 

@@ -46,7 +46,7 @@ from typing import Any
 
 import numpy as np
 
-from ..paramspec import ParamSpec
+from attitude_sil.core.paramspec import ParamSpec
 
 __all__ = ["Law", "OUTPUTS", "lanes", "state_layout"]
 

@@ -23,11 +23,10 @@ from functools import lru_cache
 from importlib.metadata import entry_points
 from types import ModuleType
 
+from attitude_sil.core.control import laws as _builtin
+from attitude_sil.core.control.law import Law
+from attitude_sil.core.paramspec import ParamSpec
 from attitude_sil.errors import ScenarioError
-
-from ..paramspec import ParamSpec
-from . import laws as _builtin
-from .law import Law
 
 __all__ = ["ENTRY_POINT_GROUP", "laws", "get", "names", "declared_names", "builtin_names", "output_of",
            "parameter_table", "plugin_problems"]

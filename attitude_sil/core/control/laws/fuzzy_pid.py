@@ -32,11 +32,11 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit
 
-from ...fuzzy import FUZZY_PID_DEFAULT_RULES, UNIFORM_VERTICES
-from ...paramspec import ParamSpec, double_array
-from ..kernels import error3_row, error_and_rate_row, infer_uniform_row, infer_vertices_row
-from ..law import Law, lanes
-from .pid import pid_bumpless_row, pid_record
+from attitude_sil.core.control.fuzzy import FUZZY_PID_DEFAULT_RULES, UNIFORM_VERTICES
+from attitude_sil.core.control.kernels import error3_row, error_and_rate_row, infer_uniform_row, infer_vertices_row
+from attitude_sil.core.control.law import Law, lanes
+from attitude_sil.core.control.laws.pid import pid_bumpless_row, pid_record
+from attitude_sil.core.paramspec import ParamSpec, double_array
 
 __all__ = ["LAW", "Params", "mix"]
 

@@ -27,10 +27,10 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit
 
-from ...fuzzy import PAPER_004_TABLE_2, vertices_from_ratios
-from ...paramspec import ParamSpec, double_array
-from ..kernels import error_quat_row, infer_row, reference_rate_row
-from ..law import Law, lanes
+from attitude_sil.core.control.fuzzy import PAPER_004_TABLE_2, vertices_from_ratios
+from attitude_sil.core.control.kernels import error_quat_row, infer_row, reference_rate_row
+from attitude_sil.core.control.law import Law, lanes
+from attitude_sil.core.paramspec import ParamSpec, double_array
 
 __all__ = ["LAW", "Params", "ga_flc_row"]
 

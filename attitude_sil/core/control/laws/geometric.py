@@ -30,11 +30,11 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit
 
-from ...disturbance import aerodynamic_torque, gravity_gradient_torque, orbit_rate
-from ...paramspec import ParamSpec, distinct, double, double_array, inertia_rule
-from ...quaternion import cross, quat_to_dcm
-from ..kernels import error_quat_row
-from ..law import Law, lanes
+from attitude_sil.core.control.kernels import error_quat_row
+from attitude_sil.core.control.law import Law, lanes
+from attitude_sil.core.paramspec import ParamSpec, distinct, double, double_array, inertia_rule
+from attitude_sil.core.plant.disturbance import aerodynamic_torque, gravity_gradient_torque, orbit_rate
+from attitude_sil.core.plant.quaternion import cross, quat_to_dcm
 
 __all__ = ["LAW", "Params", "geometric_row", "torque_reference", "skew_vee", "inertia_matrix"]
 

@@ -6,7 +6,7 @@ torque preset).
 Discretisation at the control period ``dt`` (state held between steps):
 
 * the error vector is ``e = -vec(q_RN* ⊗ q_BN)`` with the scalar part made
-  non-negative (:func:`attitude_sil.core.kernels.error3_row`); in the angle
+  non-negative (:func:`attitude_sil.core.plant.kernels.error3_row`); in the angle
   mode (``error_mode: angle``) each component becomes ``2 asin(e_i)``;
 * derivative filter: low-pass state ``x_f`` of ``N / (s + N)`` discretised
   exactly for a held error, ``x_f[k+1] = a x_f[k] + (1 - a) e[k]`` with
@@ -19,7 +19,7 @@ Discretisation at the control period ``dt`` (state held between steps):
 
 Bumpless entry (:func:`enter`): the filter state is set so the derivative
 term starts at the measured error rate (``x_f = e - ė / N``, ``ė`` from
-:func:`attitude_sil.core.kernels.error_and_rate_row`), and the integrator
+:func:`attitude_sil.core.plant.kernels.error_and_rate_row`), and the integrator
 takes the rest, ``I = (u_last - Kp e - Kd ė) / Ki``; the first command then
 equals ``u_last`` exactly when ``Ki > 0``, and the integrator holds only the
 real difference between the two laws.
@@ -32,9 +32,9 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit
 
-from ...paramspec import double_array
-from ..kernels import error3_row, error_and_rate_row
-from ..law import Law, lanes
+from attitude_sil.core.control.kernels import error3_row, error_and_rate_row
+from attitude_sil.core.control.law import Law, lanes
+from attitude_sil.core.paramspec import double_array
 
 __all__ = ["LAW", "Params", "pid_row", "pid_bumpless_row", "pid_record"]
 

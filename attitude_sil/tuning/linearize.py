@@ -19,10 +19,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from attitude_sil.core.engine import simulate
 from attitude_sil.core.papers import PAPER_000_COMPARISON_GAINS, PAPER_000_TABLE_1_DURATION
-from attitude_sil.core.quaternion import euler_from_quat
-from attitude_sil.core.scenario import Scenario
+from attitude_sil.core.plant.quaternion import euler_from_quat
+from attitude_sil.core.sim.engine import simulate
+from attitude_sil.core.sim.scenario import Scenario
 from attitude_sil.errors import ScenarioError
 
 __all__ = ["PAPER_000_TABLE_1", "PAPER_000_COMPARISON_GAINS", "PAPER_000_TABLE_1_DURATION", "euler_eq9_unit_scalar",

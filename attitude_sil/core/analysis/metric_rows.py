@@ -1,9 +1,9 @@
 """The step metrics' scalar pieces, one sample at a time: one home for every driver.
 
-The graph's running metrics (:mod:`attitude_sil.core.running_metrics`, from
-Python) and the batch engine's running sums (:mod:`attitude_sil.core.batch_loop`,
+The graph's running metrics (:mod:`attitude_sil.core.analysis.running_metrics`, from
+Python) and the batch engine's running sums (:mod:`attitude_sil.core.sim.batch_loop`,
 inlined into the compiled loop) call these same compiled functions, so both
-read a step the same way as :func:`attitude_sil.core.metrics.step_metrics`
+read a step the same way as :func:`attitude_sil.core.analysis.metrics.step_metrics`
 does on a whole trajectory (``quaternion.euler_from_quat``, ``metrics._first_crossing``).
 """
 

@@ -3,7 +3,7 @@
 Both are linear with inputs held over each control step, so each step is
 integrated exactly with the matrix exponential of the augmented system
 ``[[A, B], [0, 0]]``. They present the same interface as
-:class:`attitude_sil.core.engine.Plant` (``state.q_BN``, ``state.omega_BN_B``,
+:class:`attitude_sil.core.sim.engine.Plant` (``state.q_BN``, ``state.omega_BN_B``,
 ``advance``, ``reset``): the attitude is a rotation about the model's axis, so
 the rest of the graph (controller, recorder, metrics) is unchanged.
 
@@ -23,8 +23,8 @@ from __future__ import annotations
 import numpy as np
 from scipy.linalg import expm
 
-from .quaternion import quat_from_euler
-from .rigid_body import BodyState
+from attitude_sil.core.plant.quaternion import quat_from_euler
+from attitude_sil.core.plant.rigid_body import BodyState
 
 __all__ = ["FLEXIBLE_CASES", "FlexibleAxisPlant", "PitchNormalizedPlant", "exact_discretization"]
 

@@ -20,8 +20,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .kernels import rk4_body
-from .quaternion import cross, quat_derivative, quat_to_dcm
+from attitude_sil.core.plant.kernels import rk4_body
+from attitude_sil.core.plant.quaternion import cross, quat_derivative, quat_to_dcm
 
 __all__ = ["BodyState", "body_derivatives", "rk4_step", "inertial_momentum"]
 
@@ -91,7 +91,7 @@ def rk4_step(
     """Advance the body over one held-input interval with classic RK4.
 
     The arithmetic of :func:`body_derivatives`, compiled
-    (:func:`attitude_sil.core.kernels.rk4_body`).
+    (:func:`attitude_sil.core.plant.kernels.rk4_body`).
 
     The torques are held over ``[t, t + dt]``; the interval is split into
     ``substeps`` equal RK4 steps. The quaternion is renormalised at the end.

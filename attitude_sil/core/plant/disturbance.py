@@ -35,9 +35,15 @@ from __future__ import annotations
 
 import numpy as np
 
+from attitude_sil.core.plant.quaternion import (
+    cross,
+    euler_from_quat,
+    quat_conjugate,
+    quat_from_euler,
+    quat_multiply,
+    quat_to_dcm,
+)
 from attitude_sil.errors import ScenarioError
-
-from .quaternion import cross, euler_from_quat, quat_conjugate, quat_from_euler, quat_multiply, quat_to_dcm
 
 __all__ = [
     "DISTURBANCE_MODELS",

@@ -14,7 +14,7 @@ from __future__ import annotations
 import re
 from typing import Any
 
-from .params import GLOBAL_NODE
+from attitude_sil.core.sim.params import GLOBAL_NODE
 
 __all__ = ["applies_to", "node_key", "section_node", "sections_for"]
 
@@ -69,7 +69,7 @@ def section_node(key: str) -> str:
 
     ``/**/controller``, ``controller``, ``/controller`` and ``/sat1/controller``
     all name ``controller``; ``/**`` (and a key ending in a wildcard, such as
-    ``/*``) names every node: :data:`~attitude_sil.core.params.GLOBAL_NODE`.
+    ``/*``) names every node: :data:`~attitude_sil.core.sim.params.GLOBAL_NODE`.
 
     Parameters
     ----------

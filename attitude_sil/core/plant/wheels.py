@@ -32,9 +32,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from attitude_sil.core.plant.kernels import expm_small, wheel_step
 from attitude_sil.errors import ScenarioError
-
-from .kernels import expm_small, wheel_step
 
 __all__ = [
     "MotorParams",
@@ -119,8 +118,8 @@ def _motor_transition(resistance: float, inductance: float, torque_constant: flo
     """Exact one-step transition of the motor state (angle, current, speed) with the voltage held.
 
     The zero-order-hold discretisation of eq. 15-16 by the matrix exponential of
-    the augmented system (:func:`attitude_sil.core.kernels.expm_small`): returns ``(phi_T (3, 3), gamma (3,))`` with
-    ``x_next = x @ phi_T + e_a * gamma``. Cached: every episode of a batch and
+    the augmented system (:func:`attitude_sil.core.plant.kernels.expm_small`): returns
+    ``(phi_T (3, 3), gamma (3,))`` with ``x_next = x @ phi_T + e_a * gamma``. Cached: every episode of a batch and
     every run of one set of constants shares it (callers copy).
     """
     a_m = np.array(
@@ -263,7 +262,7 @@ class WheelAssembly:
         1 ms electrical lag neglected), then the same drive limits apply.
         ``failure`` is ``(wheel (F,) int, -1 none; step (F,) int; stuck (F,) bool;
         held voltage (F,) V, updated in place)`` for step ``k`` (see
-        :func:`attitude_sil.core.kernels.wheel_step`); None: no failure.
+        :func:`attitude_sil.core.plant.kernels.wheel_step`); None: no failure.
 
         Returns
         -------

@@ -13,7 +13,7 @@ so the weighted average needs no division guard.
 
 The functions here are the numpy reference (vectorised over a leading batch
 shape, no loop over rules); the controllers call the compiled
-:func:`attitude_sil.core.kernels.fuzzy_infer`, which exploits that at most two
+:func:`attitude_sil.core.plant.kernels.fuzzy_infer`, which exploits that at most two
 sets per input are active (4 of the 49 rules fire) and is tested equal to
 :func:`infer`.
 """

@@ -10,8 +10,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from .quaternion import euler_from_quat, quat_error, quat_multiply
-from .trajectory import EpisodeSummary, Trajectory
+from attitude_sil.core.plant.quaternion import euler_from_quat, quat_error, quat_multiply
+from attitude_sil.core.trajectory import EpisodeSummary, Trajectory
 
 
 def principal_angle(q_BN: np.ndarray, q_RN: np.ndarray) -> np.ndarray:
@@ -276,7 +276,7 @@ def step_summary(sums: np.ndarray, scenario_values: dict, span: np.ndarray) -> E
     Parameters
     ----------
     sums : (P, len(batch.SUMMARY_COLUMNS))
-        Running sums (:func:`attitude_sil.core.batch.run_compiled` with ``sums``).
+        Running sums (:func:`attitude_sil.core.sim.batch.run_compiled` with ``sums``).
     scenario_values : dict
         The ``scenario`` node's values (``metrics.tau_d``, ``metrics.w_os``).
     span : (P,) rad

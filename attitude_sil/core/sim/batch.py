@@ -1,8 +1,8 @@
 """Whole episodes in compiled code: the batch engine's second driver of the step kernels.
 
-The nodes call the compiled step kernels of :mod:`attitude_sil.core.kernels`
-once per message, through the objects of :mod:`attitude_sil.core.engine`; the
-stepwise :func:`~attitude_sil.core.engine.simulate` loop calls the same objects
+The nodes call the compiled step kernels of :mod:`attitude_sil.core.plant.kernels`
+once per message, through the objects of :mod:`attitude_sil.core.sim.engine`; the
+stepwise :func:`~attitude_sil.core.sim.engine.simulate` loop calls the same objects
 once per step from Python. This module is the third caller: one compiled loop
 over every step of a chunk of episodes, calling the *same* kernels with the
 *same* arrays, so its numbers are the stepwise driver's to the last bit (and
@@ -20,7 +20,7 @@ scheduled swaps and the controller bank's bumpless transfer, per-episode gains,
 motor constants, wheel failures and sensor noise (the Monte Carlo's
 dispersions; the same kernels as the nodes'). Noise torques are drawn in numpy
 from the stepwise driver's streams, a group of episodes at a time.
-:func:`attitude_sil.core.engine.compiled_plan` says whether a run fits and, if
+:func:`attitude_sil.core.sim.engine.compiled_plan` says whether a run fits and, if
 not, why; everything else (the flexible and pitch plants, the torque actuator,
 LVLH guidance, the orbit disturbances) runs in the stepwise driver, which
 handles every model.
@@ -34,12 +34,12 @@ from typing import NamedTuple
 import numba
 import numpy as np
 
-from . import batch_loop
-from .control.compiled import from_template
-from .control.law import state_layout
-from .control.registry import get as get_law
-from .trajectory import Trajectory
-from .wheels import no_failure
+from attitude_sil.core.control.compiled import from_template
+from attitude_sil.core.control.law import state_layout
+from attitude_sil.core.control.registry import get as get_law
+from attitude_sil.core.plant.wheels import no_failure
+from attitude_sil.core.sim import batch_loop
+from attitude_sil.core.trajectory import Trajectory
 
 __all__ = ["COMPILED_DISTURBANCES", "SUMMARY_COLUMNS", "TRAJECTORY_FIELDS", "run_compiled"]
 
@@ -54,7 +54,7 @@ assert len(SUMMARY_COLUMNS) == batch_loop.N_SUMS
 
 
 class SimArrays(NamedTuple):
-    """The models' arrays and settings the compiled loop reads (:func:`attitude_sil.core.batch_loop.chunk`)."""
+    """The models' arrays and settings the compiled loop reads (:func:`attitude_sil.core.sim.batch_loop.chunk`)."""
 
     n_steps: int
     stride: int
@@ -130,7 +130,7 @@ _LOOPS: dict[tuple[str, ...], object] = {}
 
 
 def _loop(law_names: tuple[str, ...]):
-    """The compiled loop of :mod:`attitude_sil.core.batch_loop` for the bank's law set."""
+    """The compiled loop of :mod:`attitude_sil.core.sim.batch_loop` for the bank's law set."""
     if law_names not in _LOOPS:
         _LOOPS[law_names] = from_template(batch_loop, law_names)
     return _LOOPS[law_names]
@@ -184,9 +184,9 @@ def run_compiled(plant, wheels, dist, guide, ctrl, n_steps: int, dt: float, stri
     Parameters
     ----------
     plant, wheels, dist, guide, ctrl
-        Fresh models from the ``build_*`` functions of :mod:`attitude_sil.core.engine`
+        Fresh models from the ``build_*`` functions of :mod:`attitude_sil.core.sim.engine`
         (``Plant``, ``Wheels``, ``DisturbanceModel``, ``Guidance``, ``ControllerBank``)
-        that :func:`attitude_sil.core.engine.compiled_plan` accepted.
+        that :func:`attitude_sil.core.sim.engine.compiled_plan` accepted.
     n_steps : int
         K: states at k = 0..K.
     dt : float

@@ -24,8 +24,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from .plants import exact_discretization
-from .rigid_body import BodyState
+from attitude_sil.core.plant.plants import exact_discretization
+from attitude_sil.core.plant.rigid_body import BodyState
 
 __all__ = ["linear_model", "LinearizedPlant"]
 

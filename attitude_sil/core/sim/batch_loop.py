@@ -3,7 +3,7 @@
 :func:`attitude_sil.core.control.compiled.from_template` copies this source
 into a generated module with the law dispatch of the registered laws in
 place of the stubs below (numba cannot call a run-time choice of function
-otherwise), and :mod:`attitude_sil.core.batch` runs that module's
+otherwise), and :mod:`attitude_sil.core.sim.batch` runs that module's
 :func:`chunk`. Read it as ordinary code where the ``# @laws stage`` line
 runs every law's compiled step on the episodes whose code is that law's (a
 loop per law, written out there by the generator), and ``law_enter`` & co. do
@@ -18,8 +18,8 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from attitude_sil.core.kernels import measure_row, rk4_body_into, wheel_row
-from attitude_sil.core.metric_rows import euler_axis, first_crossing
+from attitude_sil.core.analysis.metric_rows import euler_axis, first_crossing
+from attitude_sil.core.plant.kernels import measure_row, rk4_body_into, wheel_row
 
 # >>> law dispatch stubs (replaced by the generated dispatch; see the module docstring)
 

@@ -6,7 +6,7 @@ Sections:
 
 * one per node (``plant``, ``wheels``, ``disturbance``, ``guidance``,
   ``controller``), keyed ``/**/node`` (what the project writes), ``node``,
-  ``/node`` or ``/ns/node`` (:func:`attitude_sil.core.paramfile.section_node`:
+  ``/node`` or ``/ns/node`` (:func:`attitude_sil.core.sim.paramfile.section_node`:
   the namespace part is ignored, a scenario is one graph; two keys naming
   the same node are merged in file order);
 * ``/**`` for names shared by every node that declares them (``control_period``);
@@ -27,11 +27,10 @@ from typing import Any
 
 import yaml
 
+from attitude_sil.core import yaml12
+from attitude_sil.core.sim.paramfile import node_key, section_node
+from attitude_sil.core.sim.params import GLOBAL_NODE, NODE_PARAMS, SCENARIO_NODE
 from attitude_sil.errors import ScenarioError
-
-from . import yaml12
-from .paramfile import node_key, section_node
-from .params import GLOBAL_NODE, NODE_PARAMS, SCENARIO_NODE
 
 __all__ = ["ScenarioError", "Scenario", "load_scenario", "scenario_from_dict", "with_parameter_file", "yaml_problem",
            "GRAPH_NODES", "PRESETS", "default_config_dir"]
@@ -42,7 +41,7 @@ PRESETS = ("hst_roll_step", "hawaiisat_lvlh", "flexible_axis", "cubesat_1u", "pi
 
 def default_config_dir() -> Path:
     """The presets: the repository's ``config/`` (or the installed ``share/attitude_sil/config``)."""
-    here = Path(__file__).resolve().parents[2] / "config"
+    here = Path(__file__).resolve().parents[3] / "config"
     if here.is_dir():
         return here
     return Path(sys.prefix) / "share" / "attitude_sil" / "config"

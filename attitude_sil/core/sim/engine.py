@@ -18,21 +18,21 @@ from __future__ import annotations
 
 import numpy as np
 
+from attitude_sil.core.analysis.metrics import step_summary, summarize
+from attitude_sil.core.control import registry
+from attitude_sil.core.control.bank import ControllerBank
+from attitude_sil.core.plant.actuators import SpeedLoopWheels, TorqueActuator
+from attitude_sil.core.plant.disturbance import DisturbanceModel, lvlh_attitude, orbit_rate
+from attitude_sil.core.plant.linear import LinearizedPlant
+from attitude_sil.core.plant.plants import FLEXIBLE_CASES, FlexibleAxisPlant, PitchNormalizedPlant
+from attitude_sil.core.plant.quaternion import euler_from_quat, quat_from_euler, quat_multiply
+from attitude_sil.core.plant.rigid_body import BodyState, rk4_step
+from attitude_sil.core.plant.wheels import GEOMETRIES, MotorParams, WheelAssembly
+from attitude_sil.core.sim.batch import COMPILED_DISTURBANCES, TRAJECTORY_FIELDS, run_compiled
+from attitude_sil.core.sim.params import NODE_PARAMS
+from attitude_sil.core.sim.scenario import Scenario
+from attitude_sil.core.trajectory import EpisodeSummary, Trajectory, WheelStep
 from attitude_sil.errors import ScenarioError
-
-from .actuators import SpeedLoopWheels, TorqueActuator
-from .batch import COMPILED_DISTURBANCES, TRAJECTORY_FIELDS, run_compiled
-from .control import registry
-from .control.bank import ControllerBank
-from .disturbance import DisturbanceModel, lvlh_attitude, orbit_rate
-from .linear import LinearizedPlant
-from .metrics import step_summary, summarize
-from .plants import FLEXIBLE_CASES, FlexibleAxisPlant, PitchNormalizedPlant
-from .quaternion import euler_from_quat, quat_from_euler, quat_multiply
-from .rigid_body import BodyState, rk4_step
-from .scenario import Scenario
-from .trajectory import EpisodeSummary, Trajectory, WheelStep
-from .wheels import GEOMETRIES, MotorParams, WheelAssembly
 
 __all__ = [
     "Plant",
@@ -43,6 +43,7 @@ __all__ = [
     "build_disturbance",
     "build_guidance",
     "build_controller",
+    "law_bank",
     "Trajectory",
     "simulate",
     "simulate_summary",
@@ -116,7 +117,7 @@ class Wheels:
 
     ``failure`` is ``(wheel (P,) int, -1 none; step (P,) int; stuck (P,) bool)``:
     from that step on the wheel is lost (open circuit) or its drive is stuck at
-    the voltage of the step before (:func:`attitude_sil.core.kernels.wheel_step`).
+    the voltage of the step before (:func:`attitude_sil.core.plant.kernels.wheel_step`).
     """
 
     def __init__(self, assembly: WheelAssembly, n_episodes: int, speed0: np.ndarray | None,
@@ -208,8 +209,8 @@ def build_plant(scn: Scenario, n_episodes: int = 1, inertia=None, rpy0_deg=None,
     """The body model of the scenario's ``plant`` parameters (per-episode overrides optional).
 
     ``rigid_body`` gives a :class:`Plant`, ``linearized`` the model of
-    :mod:`attitude_sil.core.linear`; ``flexible_axis`` and
-    ``pitch_normalized`` the single-axis models of :mod:`attitude_sil.core.plants`.
+    :mod:`attitude_sil.core.plant.linear`; ``flexible_axis`` and
+    ``pitch_normalized`` the single-axis models of :mod:`attitude_sil.core.plant.plants`.
     """
     p = scn.values["plant"]
     dt = p["control_period"]
@@ -346,6 +347,21 @@ def build_guidance(scn: Scenario, n_episodes: int = 1, setpoints_rpy_deg=None) -
                     orbit_rate_rad_s=orbit_rate(g["orbit.mu"], g["orbit.radius"]))
 
 
+def law_bank(name: str, n_episodes: int = 1, dt: float = 0.01, values: dict | None = None) -> ControllerBank:
+    """A controller bank running law ``name`` with the controller's defaults and ``values`` on top.
+
+    ``values`` keys are the law's short parameter names (``kp``) or any
+    controller parameter (``output_limit``, ``orbit.mu``, ``pid.kp``); for a
+    law in isolation (tests, notebooks) without a scenario.
+    """
+    law = registry.get(name)
+    v = {s.name: s.default for s in NODE_PARAMS["controller"]}
+    short = {s.name for s in law.params}
+    v.update({(f"{name}.{k}" if k in short else k): val for k, val in (values or {}).items()})
+    v["controller_type"] = name
+    return ControllerBank(v, dt, n_episodes)
+
+
 def build_controller(scn: Scenario, n_episodes: int = 1, params: dict | None = None) -> ControllerBank:
     """The controller bank of the scenario's ``controller`` parameters.
 
@@ -398,7 +414,7 @@ def schedule_from_scenario(scn: Scenario) -> list[tuple[int, str]]:
 
 
 def compiled_plan(plant, wheels, dist: DisturbanceModel, guide: Guidance, ctrl: ControllerBank) -> str:
-    """'' if built models fit the compiled driver (:mod:`attitude_sil.core.batch`), else why not."""
+    """'' if built models fit the compiled driver (:mod:`attitude_sil.core.sim.batch`), else why not."""
     if type(plant) is not Plant:
         return f"plant model {type(plant).__name__}"
     if type(wheels) is not Wheels:
@@ -461,7 +477,7 @@ def simulate(
         Per-episode step targets, (P, 3) deg.
     driver : str
         ``auto`` (default): whole episodes in compiled code
-        (:mod:`attitude_sil.core.batch`) where the run fits it, else the
+        (:mod:`attitude_sil.core.sim.batch`) where the run fits it, else the
         stepwise loop; ``compiled`` insists (ScenarioError naming why a run
         does not fit); ``stepwise`` always calls the step objects from Python,
         as the nodes do. Both give the same numbers.
@@ -516,7 +532,7 @@ def simulate_summary(
     threads: int | None = None,
     episode_values: dict | None = None,
 ) -> EpisodeSummary:
-    """The metrics and checks of P episodes, as :func:`attitude_sil.core.metrics.summarize` gives them.
+    """The metrics and checks of P episodes, as :func:`attitude_sil.core.analysis.metrics.summarize` gives them.
 
     Where the compiled driver runs the scenario and its metrics are a step's
     (``scenario.metrics.mode: step``), the episodes keep running sums only:

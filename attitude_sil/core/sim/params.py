@@ -15,12 +15,12 @@ import math
 from dataclasses import replace
 from typing import Any
 
-from .control import registry
-from .paramspec import ParamSpec
-from .paramspec import double as _d
-from .paramspec import double_array as _da
-from .paramspec import inertia_rule as _inertia_rule
-from .paramspec import nonzero as _nonzero
+from attitude_sil.core.control import registry
+from attitude_sil.core.paramspec import ParamSpec
+from attitude_sil.core.paramspec import double as _d
+from attitude_sil.core.paramspec import double_array as _da
+from attitude_sil.core.paramspec import inertia_rule as _inertia_rule
+from attitude_sil.core.paramspec import nonzero as _nonzero
 
 __all__ = ["ParamSpec", "NODE_PARAMS", "GLOBAL_NODE", "SCENARIO_NODE", "spec_for", "HST_MOTOR", "parameters_markdown"]
 
@@ -287,7 +287,7 @@ def parameters_markdown() -> str:
     The test suite regenerates this and compares it with the file, so the
     document cannot drift from the schema.
     """
-    lines = ["<!-- generated from attitude_sil/core/params.py by parameters_markdown(); "
+    lines = ["<!-- generated from attitude_sil/core/sim/params.py by parameters_markdown(); "
              "test/unit/test_docs.py keeps it equal -->", ""]
     plugins = tuple(f"{n}." for n in set(registry.names()) - set(registry.builtin_names()))
     for node, specs in NODE_PARAMS.items():

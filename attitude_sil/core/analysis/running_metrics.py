@@ -4,7 +4,7 @@ A graph run used to keep every message of the episode to compute its metrics
 at the end (about 1.5 kB per step: 13 GB for a simulated day). An
 :class:`EpisodeAccumulator` takes each step once (time, attitude, setpoint,
 torque on the body, command) and keeps only running sums, so what
-:func:`attitude_sil.core.metrics.episode_report` computes from a whole
+:func:`attitude_sil.core.analysis.metrics.episode_report` computes from a whole
 trajectory comes out of O(1) memory, to rounding (the sums are added in
 another order; the tests hold them to rtol 1e-12).
 
@@ -28,8 +28,8 @@ from __future__ import annotations
 
 import math
 
-from .metric_rows import euler_axis, first_crossing
-from .metrics import _EXTRA_KEYS, METRIC_KEYS, PAPER_001_SETTLING_ANGLE, _finite_or_none
+from attitude_sil.core.analysis.metric_rows import euler_axis, first_crossing
+from attitude_sil.core.analysis.metrics import _EXTRA_KEYS, METRIC_KEYS, PAPER_001_SETTLING_ANGLE, _finite_or_none
 
 __all__ = ["EpisodeAccumulator"]
 
@@ -93,7 +93,7 @@ class EpisodeAccumulator:
         The law at the start.
     schedule : list of (time s, step, controller_type), optional
         Scheduled swaps: the report gets ``segments``, as
-        :func:`~attitude_sil.core.metrics.episode_report` gives them.
+        :func:`~attitude_sil.core.analysis.metrics.episode_report` gives them.
     """
 
     def __init__(self, scenario_values: dict, step_time: float, controller_type: str,
@@ -255,7 +255,7 @@ class EpisodeAccumulator:
 
     # -- the result -----------------------------------------------------------
     def metrics(self) -> dict[str, float]:
-        """The scenario's metrics (the keys of :func:`attitude_sil.core.metrics.scenario_metrics`)."""
+        """The scenario's metrics (the keys of :func:`attitude_sil.core.analysis.metrics.scenario_metrics`)."""
         if self._pending is not None:
             last_t = self._pending[0]
             first_dt = (self._t1 - self._t0) if self._t1 is not None else 0.0
@@ -303,7 +303,7 @@ class EpisodeAccumulator:
         return m
 
     def report(self, scenario_name: str, duration_s: float, wall_s: float) -> dict:
-        """The ``run --json`` object without ``bag``, as :func:`~attitude_sil.core.metrics.episode_report`."""
+        """The ``run --json`` object without ``bag``, as :func:`~attitude_sil.core.analysis.metrics.episode_report`."""
         m = self.metrics()
         out: dict = {
             "scenario": scenario_name,
