@@ -283,14 +283,21 @@ def record_graph(bag: str | Path, topics: list[str] | None = None, namespace: st
         say(f"recording {len(selected)} topic(s){where} to {bag}; Ctrl-C to stop")
         clients = {n: AsyncParameterClient(rec, _target(ns, n)) for n in GRAPH_NODES}
         scn = None
+        ask_at, asked = 0.0, False  # when to ask the graph for its parameters (again)
         reported_end, counted = False, 0  # counted: messages of per_step[0] in the episodes reported
         while True:
             try:  # a stop signal (Ctrl-C, SIGTERM, SIGHUP) ends the recording: the normal way to stop it
                 ros.spin(0.05)
                 for name in rec.register_discovered():
                     say(f"subscribed to {rec.resolved[name]}")
-                if scn is None and all(c.services_are_ready() for c in clients.values()):
-                    values = _ask_graph(rec, ros.spin, ns, 5.0, say)
+                if scn is None and time.monotonic() >= ask_at and all(c.services_are_ready() for c in clients.values()):
+                    try:
+                        values = _ask_graph(rec, ros.spin, ns, 5.0, say)
+                    except RunError as exc:  # a node just started answers once it spins: ask again, keep recording
+                        if not asked:
+                            say(f"parameter snapshot: {exc}; asking again")
+                        asked, ask_at = True, time.monotonic() + 1.0
+                        continue
                     scn = graph_scenario(values, None, f"the graph{where}")
                     writer.set_custom_data(PARAMETERS_KEY, scn.parameters_yaml())
                     result.snapshot = True
