@@ -39,10 +39,15 @@ bench: $(STAMP)
 soak: $(STAMP)
 	$(BIN)/python bench/bench_soak.py
 
+# docs/parameters.md from the schema, then the site (MkDocs) into site/: the guides, the README as home
 docs: $(STAMP)
 	$(BIN)/python -c "from attitude_sil.core.sim.params import parameters_markdown as p; \
 	head = open('docs/parameters.md').read().split('<!-- generated')[0]; \
 	open('docs/parameters.md', 'w').write(head + p() + '\n')"
+	$(BIN)/pip install --quiet -e '.[docs]'
+	rm -rf build/docsite && mkdir -p build/docsite && cp docs/*.md build/docsite/
+	sed 's|](docs/|](|g' README.md > build/docsite/index.md
+	$(BIN)/mkdocs build --quiet
 
 clean:
-	rm -rf $(VENV) build *.egg-info
+	rm -rf $(VENV) build site *.egg-info
