@@ -75,8 +75,7 @@ class ControllerBank:
         self.dispatch = dispatch_module()
         self.names: tuple[str, ...] = self.dispatch.LAWS
         self.codes = {name: i for i, name in enumerate(self.names)}
-        self.states = tuple(getattr(self.dispatch, f"State_{i}")(*self._zeros(registry.get(name)))
-                            for i, name in enumerate(self.names))
+        self.states = self.new_states(self.n)
         self.per_episode = dict(per_episode or {})
         self.configure(values)
         self.active = values["controller_type"]
@@ -85,25 +84,26 @@ class ControllerBank:
         self.pending: str | None = None
         self.u_last: np.ndarray | None = None
         self._law_rows: tuple[str, np.ndarray, np.ndarray] | None = None
-        self._stage_records: tuple | None = None
         self.offset = np.zeros((self.n, 3))
         self.has_offset = np.zeros(self.n, dtype=np.bool_)
         self.reset()
 
-    def _zeros(self, law: Law) -> list[np.ndarray]:
-        return [np.zeros((self.n, int(w)), dtype=d) for w, d in state_layout(law).values()]
+    def new_states(self, n: int) -> tuple:
+        """Every law's state record for n episodes, zeroed (the generated ``State_<code>`` classes)."""
+        return tuple(getattr(self.dispatch, f"State_{i}")(
+            *(np.zeros((n, int(w)), dtype=d) for w, d in state_layout(registry.get(name)).values()))
+            for i, name in enumerate(self.names))
 
     def configure(self, values: dict) -> None:
         """Apply (possibly changed) parameters to every law; states are kept."""
         v = dict(values)
         v.update(self.per_episode)
         self.values = v
-        self._records = {}
-        self._stage_records = None
+        self._records: dict[str, tuple] = {}  # built on first use (record, records_for)
+        self._stage_records: tuple | None = None  # (active law, records_for it)
         self.command = v["command"]
         tau_b = float(v["bumpless_time_constant"])
         self.decay = float(np.exp(-self.dt / tau_b)) if tau_b > 0.0 else 0.0
-        self._records: dict[str, tuple] = {}  # built on first use (records_for)
         self._set_sensor(v)
 
     def record(self, name: str) -> tuple:
@@ -146,8 +146,9 @@ class ControllerBank:
                        int(k), self.sensor_seeds, self.sensor_att_std, self.sensor_rate_std)
 
     def _active_records(self) -> tuple:
-        if self._stage_records is None or self._stage_records[0] != (self.active, len(self._records)):
-            self._stage_records = ((self.active, len(self._records)), self.records_for((self.active,)))
+        # the records the stage takes: the active law's real, the others stand-ins; rebuilt after a swap or configure
+        if self._stage_records is None or self._stage_records[0] != self.active:
+            self._stage_records = (self.active, self.records_for((self.active,)))
         return self._stage_records[1]
 
     def _codes_of(self, name: str) -> tuple[np.ndarray, np.ndarray]:

@@ -41,7 +41,7 @@ from __future__ import annotations
 import keyword
 import re
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
@@ -55,7 +55,6 @@ __all__ = ["Law", "OUTPUTS", "lanes", "state_layout"]
 OUTPUTS = ("command", "torque")
 
 _FIELD = re.compile(r"[a-z][a-z0-9_]*")
-SNAKE = _FIELD
 
 
 @dataclass(frozen=True)
@@ -93,9 +92,6 @@ class Law:
         The step saturates its own output; False: the bank clips it to
         ``par.u_max`` after the transfer offset (the record must then have a
         ``u_max`` field).
-    linear : callable, optional
-        ``linear(values) -> (kp, ki, kd, n)`` per axis: the law's PID-shaped
-        linear form, for ``linearize`` and root-locus design; None if it has none.
     """
 
     name: str
@@ -107,8 +103,6 @@ class Law:
     enter: Any = None
     output: str = "command"
     saturated: bool = True
-    linear: Callable[[Mapping[str, Any]], tuple] | None = None
-    source: str = field(default="", compare=False)
 
     def __post_init__(self) -> None:
         problems = self.problems()
@@ -118,7 +112,7 @@ class Law:
     def problems(self) -> list[str]:
         """What breaks the contract (empty when the law is well formed)."""
         out = []
-        if not isinstance(self.name, str) or not SNAKE.fullmatch(self.name):
+        if not isinstance(self.name, str) or not _FIELD.fullmatch(self.name):
             out.append("name must be snake_case (letters, digits, underscores)")
         if self.output not in OUTPUTS:
             out.append(f"output must be one of {', '.join(OUTPUTS)}, got {self.output!r}")
@@ -142,10 +136,6 @@ class Law:
     def table(self) -> tuple[ParamSpec, ...]:
         """The parameter table with full names (``pid.kp``), as the controller node declares it."""
         return tuple(replace(s, name=f"{self.name}.{s.name}") for s in self.params)
-
-    def defaults(self) -> dict[str, Any]:
-        """Short parameter name -> default."""
-        return {s.name: s.default for s in self.params}
 
 
 def lanes(value: Any, n: int, tail: tuple[int, ...] = (3,), dtype: Any = float) -> np.ndarray:

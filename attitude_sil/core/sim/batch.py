@@ -35,8 +35,6 @@ import numba
 import numpy as np
 
 from attitude_sil.core.control.compiled import from_template
-from attitude_sil.core.control.law import state_layout
-from attitude_sil.core.control.registry import get as get_law
 from attitude_sil.core.plant.wheels import no_failure
 from attitude_sil.core.sim import batch_loop
 from attitude_sil.core.trajectory import Trajectory
@@ -282,15 +280,12 @@ def _chunk_runner(ctrl, used: set[str], sim: SimArrays, outputs: Outputs, spec: 
     P = ctrl.n
     records = ctrl.records_for(used)
     loop = _loop(ctrl.names)
-    layouts = [state_layout(get_law(name)) for name in ctrl.names]
-    state_classes = [getattr(ctrl.dispatch, f"State_{i}") for i in range(len(ctrl.names))]
 
     def run(span, noise, noise_lo):
         lo, hi = span
         # each chunk gets its own rows of the law records (contiguous copies) and a fresh state
         pars = tuple(type(r)(*(_rows(f, lo, hi, P) for f in r)) for r in records)
-        sts = tuple(cls(*(np.zeros((hi - lo, int(wd)), dtype=d) for wd, d in lay.values()))
-                    for cls, lay in zip(state_classes, layouts, strict=True))
+        sts = ctrl.new_states(hi - lo)
         loop.chunk(lo, hi, sim, pars, sts, noise, noise_lo, outputs, spec)
 
     return run

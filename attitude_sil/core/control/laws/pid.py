@@ -97,10 +97,6 @@ def pid_record(values, n: int, dt: float, prefix: str = "") -> Params:
     return Params(kp, ki, kd, nf, np.exp(-nf * dt), float(values["output_limit"]), values["error_mode"] == "angle")
 
 
-def _linear(values) -> tuple:
-    return tuple(np.asarray(values[g], dtype=float) for g in ("kp", "ki", "kd", "n"))
-
-
 LAW = Law(
     name="pid",
     summary="per-axis PID on the quaternion error with a filtered derivative (paper 000 eq. 19)",
@@ -118,5 +114,4 @@ LAW = Law(
     record=pid_record,
     step=step,
     enter=enter,
-    linear=_linear,
 )
