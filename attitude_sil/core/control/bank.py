@@ -209,11 +209,11 @@ class ControllerBank:
             self.offset[...] = 0.0
             self.has_offset[...] = False
             if self.u_last is not None and self.kind == old_kind:
-                d.lanes_enter(self.codes[self.active], q, w, q_r, w_r, self._active_records(), self.states, self.dt,
-                              self.decay, c(self.u_last, dtype=float), self.offset, self.has_offset)
+                d.lanes_enter(self.codes[self.active], (q, w, q_r, w_r), self._active_records(), self.states,
+                              self.dt, self.decay, c(self.u_last, dtype=float), self.offset, self.has_offset)
         u = np.empty((q.shape[0], 3))
         law, present = self._codes_of(self.active)
-        d.lanes_stage(law, present, q, w, q_r, w_r, self._active_records(), self.states, self.dt, u, self.offset,
-                      self.has_offset, self.decay)
+        d.lanes_stage(law, present, (q, w, q_r, w_r), self._active_records(), self.states, self.dt, u,
+                      self.offset, self.has_offset, self.decay)
         self.u_last = u
         return u

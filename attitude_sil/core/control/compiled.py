@@ -161,23 +161,26 @@ def _dispatch_source(laws: list[Law]) -> str:
     jit = "@njit(cache=True, inline='always')"
     torque = " or ".join(f"code == {i}" for i, x in enumerate(laws) if x.output == "torque") or "False"
     stages = ["    " + x for x in _record_lines(laws) + _stage_lines(laws, {})]
-    lines += ["", "", jit, "def law_stage(law, present, q, w, q_r, w_r, pars, sts, dt, u, offset, has_off, decay):",
+    lines += ["", "", jit, "def law_stage(law, present, view, pars, sts, dt, u, offset, has_off, decay):",
               "    # every row's command: one loop per law present over the rows that run it (each law's step",
-              "    # called directly, so its loop compiles as if it were alone; an absent law costs one test)",
+              "    # called directly, so its loop compiles as if it were alone; an absent law costs one test);",
+              "    # view: the laws' inputs (q, w, q_r, w_r)",
+              "    q, w, q_r, w_r = view",
               *stages,
               "", "", jit, "def law_reset(code, p, sts):", "    # zero row p of the law's state",
               *chain(reset_lines),
-              "", "", jit, f"def law_enter(code, {inp}, pars, sts, dt, decay, u_last, offset, scratch):",
-              "    # bumpless entry of row p; True when a decaying offset remains", *chain(enter_lines),
+              "", "", jit, "def law_enter(code, view, p, pars, sts, dt, decay, u_last, offset, scratch):",
+              "    # bumpless entry of row p; True when a decaying offset remains", "    q, w, q_r, w_r = view",
+              *chain(enter_lines),
               "    return False",
               "", "", jit, "def law_is_torque(code):", f"    return {torque}",
               "", "", "@njit(cache=True)",
-              "def lanes_stage(law, present, q, w, q_r, w_r, pars, sts, dt, u, offset, has_off, decay):",
-              "    law_stage(law, present, q, w, q_r, w_r, pars, sts, dt, u, offset, has_off, decay)",
+              "def lanes_stage(law, present, view, pars, sts, dt, u, offset, has_off, decay):",
+              "    law_stage(law, present, view, pars, sts, dt, u, offset, has_off, decay)",
               "", "", "@njit(cache=True)",
-              "def lanes_enter(code, q, w, q_r, w_r, pars, sts, dt, decay, u_last, offset, has_off):",
-              "    scratch = u_last.copy()", "    for p in range(q.shape[0]):",
-              "        has_off[p] = law_enter(code, q, w, q_r, w_r, p, pars, sts, dt, decay, u_last, offset, scratch)",
+              "def lanes_enter(code, view, pars, sts, dt, decay, u_last, offset, has_off):",
+              "    scratch = u_last.copy()", "    for p in range(u_last.shape[0]):",
+              "        has_off[p] = law_enter(code, view, p, pars, sts, dt, decay, u_last, offset, scratch)",
               ""]
     return "\n".join(lines)
 

@@ -18,10 +18,12 @@ The control laws' own steps live with each law
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numpy as np
 from numba import njit
 
-__all__ = ["rk4_body", "wheel_step", "measure", "expm_small"]
+__all__ = ["rk4_body", "wheel_step", "WheelParams", "WheelFailure", "measure", "expm_small"]
 
 
 @njit(cache=True, inline="always")
@@ -84,12 +86,12 @@ def _mat9(a, p):
 
 
 @njit(cache=True, inline="always")
-def rk4_body_row(q, w, h, inertia, inertia_inv, tau_c, tau_e, p, dt, substeps, qo, wo, ho):
-    """RK4 over one held interval for episode ``p``, on scalars: no temporaries, no array views.
+def rk4_body_row(q, w, h, inertia, inertia_inv, tau_c, tau_e, p, dt, substeps):
+    """RK4 over one held interval for episode ``p``, in place, on scalars: no temporaries, no array views.
 
     Reads row ``p`` of q (P, 4), w, h, tau_c, tau_e (P, 3), inertia and
-    inertia_inv (P, 3, 3); writes row ``p`` of ``qo``, ``wo``, ``ho`` (which
-    may be the inputs). The quaternion is renormalised at the end.
+    inertia_inv (P, 3, 3); writes the state at the interval's end into row
+    ``p`` of ``q``, ``w`` and ``h``. The quaternion is renormalised at the end.
     """
     step = dt / substeps
     half = 0.5 * step
@@ -108,10 +110,10 @@ def rk4_body_row(q, w, h, inertia, inertia_inv, tau_c, tau_e, p, dt, substeps, q
         ch = _combine3(ch, k1h, k2h, k3h, k4h, sixth)
     norm = np.sqrt(cq[0] * cq[0] + cq[1] * cq[1] + cq[2] * cq[2] + cq[3] * cq[3])
     for i in range(4):
-        qo[p, i] = cq[i] / norm
+        q[p, i] = cq[i] / norm
     for i in range(3):
-        wo[p, i] = cw[i]
-        ho[p, i] = ch[i]
+        w[p, i] = cw[i]
+        h[p, i] = ch[i]
 
 
 @njit(cache=True)
@@ -121,102 +123,134 @@ def rk4_body(q, w, h, inertia, inertia_inv, tau_c, tau_e, dt, substeps):
     Shapes: q (P, 4), w and h (P, 3), inertia and inertia_inv (P, 3, 3),
     tau_c and tau_e (P, 3). The quaternion is renormalised at the end.
     """
-    qo = np.empty_like(q)
-    wo = np.empty_like(w)
-    ho = np.empty_like(h)
-    rk4_body_into(q, w, h, inertia, inertia_inv, tau_c, tau_e, dt, substeps, qo, wo, ho)
+    qo, wo, ho = q.copy(), w.copy(), h.copy()
+    rk4_body_into(qo, wo, ho, inertia, inertia_inv, tau_c, tau_e, dt, substeps)
     return qo, wo, ho
 
 
 @njit(cache=True, inline="always")
-def rk4_body_into(q, w, h, inertia, inertia_inv, tau_c, tau_e, dt, substeps, qo, wo, ho):
-    """:func:`rk4_body` into given arrays; ``qo``, ``wo``, ``ho`` may be ``q``, ``w``, ``h`` (in place)."""
+def rk4_body_into(q, w, h, inertia, inertia_inv, tau_c, tau_e, dt, substeps):
+    """:func:`rk4_body` in place: ``q``, ``w``, ``h`` become the state at the interval's end."""
     for p in range(q.shape[0]):
-        rk4_body_row(q, w, h, inertia, inertia_inv, tau_c, tau_e, p, dt, substeps, qo, wo, ho)
+        rk4_body_row(q, w, h, inertia, inertia_inv, tau_c, tau_e, p, dt, substeps)
+
+
+class WheelParams(NamedTuple):
+    """The wheel step's constants: the assembly's, and each episode's motor (M = 1 for all, or P rows).
+
+    ``x_next = x @ phi_T + e gamma`` is the motors' exact step over ``dt``
+    (:mod:`attitude_sil.core.plant.wheels`); ``coast`` is a lost wheel's speed
+    decay and angle gain over one step.
+    """
+
+    allocation: np.ndarray  # (n, 3) pseudo-inverse of the axes, eq. 14
+    axes: np.ndarray  # (3, n) spin axes in B
+    phi_T: np.ndarray  # (M, 3, 3)
+    gamma: np.ndarray  # (M, 3)
+    k_b: np.ndarray  # (M,) back-EMF constant, V s/rad
+    headroom: np.ndarray  # (M,) R_a i_max, V
+    k_i: np.ndarray  # (M,) torque constant, N m/A
+    r_a: np.ndarray  # (M,) armature resistance, ohm
+    coast: np.ndarray  # (2,)
+    j_m: float  # rotor inertia, kg m^2
+    b_m: float  # viscous friction, N m s/rad
+    speed_max: float  # rad/s
+    v_max: float  # bus voltage, V
+    dt: float  # the held interval, s
+
+
+class WheelFailure(NamedTuple):
+    """Wheel failures per episode (F = 1 for all, or P rows): which wheel (-1: none), from which step, how.
+
+    A stuck drive holds the voltage of the step before the failure, which
+    ``e_hold`` keeps (state, updated until the failure); a lost wheel (open
+    circuit) coasts.
+    """
+
+    wheel: np.ndarray  # (F,) int64
+    step: np.ndarray  # (F,) int64
+    stuck: np.ndarray  # (F,) bool
+    e_hold: np.ndarray  # (F,) V
 
 
 @njit(cache=True)
-def wheel_step(x, v_cmd, k, allocation, axes, phi_T, gamma, j_m, k_b, headroom, speed_max, v_max, dt,
-               torque_mode, k_i, r_a, b_m, fail_j, fail_k, fail_stuck, e_hold, coast):
+def wheel_params_copy(wp):
+    """A private copy of every array of a :class:`WheelParams` (threads sharing one would fight over its
+    reference count)."""
+    return WheelParams(wp.allocation.copy(), wp.axes.copy(), wp.phi_T.copy(), wp.gamma.copy(), wp.k_b.copy(),
+                       wp.headroom.copy(), wp.k_i.copy(), wp.r_a.copy(), wp.coast.copy(), wp.j_m, wp.b_m,
+                       wp.speed_max, wp.v_max, wp.dt)
+
+
+@njit(cache=True)
+def wheel_step(x, v_cmd, k, torque_mode, wp, fail):
     """Drive limits, exact motor step and mean body torque for every episode at step ``k``.
 
     Shapes: x (P, n, 3) wheel state (angle, current, speed) at t_k, v_cmd (P, 3)
-    body-axis voltage (or, with ``torque_mode``, body torque in N m), allocation
-    (n, 3) pseudo-inverse, axes (3, n). Motor constants per episode (M = 1 for
-    all, or P): phi_T (M, 3, 3) and gamma (M, 3) the exact one-step transition,
-    k_b, headroom (R_a i_max), k_i, r_a (M,). Wheel failures per episode (F = 1 for
-    all, or P): fail_j (F,) the failed wheel (-1: none), fail_k (F,) the step it
-    fails at, fail_stuck (F,) its drive holds the voltage of the step before
-    (else it is lost: open circuit, it coasts), e_hold (F,) that voltage
-    (state, updated until the failure); coast (2,) the coasting wheel's speed
-    decay and angle gain over one step. Returns (x_next, tau_c (P, 3),
-    h_start (P, 3)); see ``wheels.WheelAssembly`` for the rules.
+    body-axis voltage (or, with ``torque_mode``, body torque in N m); ``wp`` a
+    :class:`WheelParams`, ``fail`` a :class:`WheelFailure`. Returns (x_next,
+    tau_c (P, 3), h_start (P, 3)); see ``wheels.WheelAssembly`` for the rules.
     """
     m = x.shape[0]
     x_next = np.empty_like(x)
     tau_c = np.empty((m, 3))
     h0 = np.empty((m, 3))
-    wheel_step_into(x, v_cmd, k, allocation, axes, phi_T, gamma, j_m, k_b, headroom, speed_max, v_max, dt,
-                    torque_mode, k_i, r_a, b_m, fail_j, fail_k, fail_stuck, e_hold, coast, x_next, tau_c, h0)
+    wheel_rows(x, v_cmd, 0, k, np.full(m, torque_mode), wp, fail, x_next, tau_c, h0)
     return x_next, tau_c, h0
 
 
 @njit(cache=True, inline="always")
-def wheel_step_into(x, v_cmd, k, allocation, axes, phi_T, gamma, j_m, k_b, headroom, speed_max, v_max, dt,
-                    torque_mode, k_i, r_a, b_m, fail_j, fail_k, fail_stuck, e_hold, coast, x_next, tau_c, h0):
-    """:func:`wheel_step` into given arrays (``x_next`` must not be ``x``)."""
-    for p in range(x.shape[0]):
-        wheel_row(x, v_cmd, p, p, k, allocation, axes, phi_T, gamma, j_m, k_b, headroom, speed_max, v_max, dt,
-                  torque_mode, k_i, r_a, b_m, fail_j, fail_k, fail_stuck, e_hold, coast, x_next, tau_c, h0)
+def wheel_rows(x, v_cmd, lo, k, torque_mode, wp, fail, x_next, tau_c, h0):
+    """:func:`wheel_step` into given arrays (``x_next`` must not be ``x``), row ``p`` in torque mode where
+    ``torque_mode[p]``.
 
-
-@njit(cache=True, inline="always")
-def wheel_row(x, v_cmd, p, e_idx, k, allocation, axes, phi_T, gamma, j_m, k_b, headroom, speed_max, v_max, dt,
-              torque_mode, k_i, r_a, b_m, fail_j, fail_k, fail_stuck, e_hold, coast, x_next, tau_c, h0):
-    """:func:`wheel_step_into` for row ``p`` of x, v_cmd, x_next, tau_c, h0 alone.
-
-    ``e_idx`` is the episode's row in the per-episode constants and failures
-    (the compiled driver's chunks hold rows ``p`` of episodes ``lo + p``).
+    Row ``p`` of x, v_cmd, x_next, tau_c, h0 is episode ``lo + p`` of the
+    per-episode constants and failures (the compiled driver's chunks hold
+    rows ``p`` of episodes ``lo + p``). The records' arrays are taken out once
+    per call: taken per row, each take costs a reference count.
     """
+    allocation, axes, phi_T, gamma, k_b, headroom, k_i, r_a, coast, j_m, b_m, speed_max, v_max, dt = wp
+    fail_j, fail_k, fail_stuck, e_hold = fail
     nw = x.shape[1]
-    pm = e_idx if phi_T.shape[0] > 1 else 0
-    pf = e_idx if fail_j.shape[0] > 1 else 0
-    kb, ki, head, ra = k_b[pm], k_i[pm], headroom[pm], r_a[pm]
-    for i in range(3):
-        tau_c[p, i] = 0.0
-        h0[p, i] = 0.0
-    for j in range(nw):
-        speed = x[p, j, 2]
-        e = -(allocation[j, 0] * v_cmd[p, 0] + allocation[j, 1] * v_cmd[p, 1] + allocation[j, 2] * v_cmd[p, 2])
-        emf = kb * speed
-        if torque_mode:
-            # inverse motor model: wheel torque -> steady current -> voltage
-            e = ra * (e + b_m * speed) / ki + emf
-        e = min(max(e, emf - head), emf + head)
-        if abs(speed) >= speed_max and (e - emf) * speed > 0.0:
-            e = emf
-        e = min(max(e, -v_max), v_max)
-        lost = False
-        if j == fail_j[pf]:
-            if k < fail_k[pf]:
-                e_hold[pf] = e
-            elif fail_stuck[pf]:
-                e = e_hold[pf]  # the drive is stuck at its last voltage
-            else:
-                lost = True
-        if lost:  # open circuit: no current, the wheel coasts down on its viscous friction
-            x_next[p, j, 0] = x[p, j, 0] + coast[1] * speed
-            x_next[p, j, 1] = 0.0
-            x_next[p, j, 2] = coast[0] * speed
-        else:
-            for r in range(3):
-                x_next[p, j, r] = (x[p, j, 0] * phi_T[pm, 0, r] + x[p, j, 1] * phi_T[pm, 1, r]
-                                   + x[p, j, 2] * phi_T[pm, 2, r] + e * gamma[pm, r])
+    for p in range(x.shape[0]):
+        pm = lo + p if phi_T.shape[0] > 1 else 0
+        pf = lo + p if fail_j.shape[0] > 1 else 0
+        kb, ki, head, ra = k_b[pm], k_i[pm], headroom[pm], r_a[pm]
         for i in range(3):
-            h0[p, i] += axes[i, j] * (speed * j_m)
-            tau_c[p, i] += axes[i, j] * (x_next[p, j, 2] * j_m)
-    for i in range(3):
-        tau_c[p, i] = -(tau_c[p, i] - h0[p, i]) / dt
+            tau_c[p, i] = 0.0
+            h0[p, i] = 0.0
+        for j in range(nw):
+            speed = x[p, j, 2]
+            e = -(allocation[j, 0] * v_cmd[p, 0] + allocation[j, 1] * v_cmd[p, 1] + allocation[j, 2] * v_cmd[p, 2])
+            emf = kb * speed
+            if torque_mode[p]:
+                # inverse motor model: wheel torque -> steady current -> voltage
+                e = ra * (e + b_m * speed) / ki + emf
+            e = min(max(e, emf - head), emf + head)
+            if abs(speed) >= speed_max and (e - emf) * speed > 0.0:
+                e = emf
+            e = min(max(e, -v_max), v_max)
+            lost = False
+            if j == fail_j[pf]:
+                if k < fail_k[pf]:
+                    e_hold[pf] = e
+                elif fail_stuck[pf]:
+                    e = e_hold[pf]  # the drive is stuck at its last voltage
+                else:
+                    lost = True
+            if lost:  # open circuit: no current, the wheel coasts down on its viscous friction
+                x_next[p, j, 0] = x[p, j, 0] + coast[1] * speed
+                x_next[p, j, 1] = 0.0
+                x_next[p, j, 2] = coast[0] * speed
+            else:
+                for r in range(3):
+                    x_next[p, j, r] = (x[p, j, 0] * phi_T[pm, 0, r] + x[p, j, 1] * phi_T[pm, 1, r]
+                                       + x[p, j, 2] * phi_T[pm, 2, r] + e * gamma[pm, r])
+            for i in range(3):
+                h0[p, i] += axes[i, j] * (speed * j_m)
+                tau_c[p, i] += axes[i, j] * (x_next[p, j, 2] * j_m)
+        for i in range(3):
+            tau_c[p, i] = -(tau_c[p, i] - h0[p, i]) / dt
 
 
 # ---------------------------------------------------------------- sensor noise

@@ -32,7 +32,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from attitude_sil.core.plant.kernels import expm_small, wheel_step
+from attitude_sil.core.plant.kernels import WheelFailure, WheelParams, expm_small, wheel_step
 from attitude_sil.errors import ScenarioError
 
 __all__ = [
@@ -194,6 +194,10 @@ class WheelAssembly:
             self.phi_e[i], self.gamma_e[i] = _motor_transition(mp.resistance, mp.inductance, mp.torque_constant,
                                                                mp.back_emf_constant, mp.rotor_inertia,
                                                                mp.viscous_friction, self.dt)
+        b = self.motor
+        self.params = WheelParams(self.allocation, self.axes_B, self.phi_e, self.gamma_e, self.k_b_e,
+                                  self.headroom_e, self.k_i_e, self.r_a_e, self.coast, float(b.rotor_inertia),
+                                  float(b.viscous_friction), float(b.speed_max), float(b.v_max), self.dt)
 
     # -- helpers -------------------------------------------------------------
     def initial_state(self, n_episodes: int, speed0: np.ndarray | None = None) -> np.ndarray:
@@ -260,9 +264,8 @@ class WheelAssembly:
         share ``-A_dagger tau`` becomes a voltage through the inverse motor
         model ``e = R_a (T + B_m omega) / K_i + K_b omega`` (steady state, the
         1 ms electrical lag neglected), then the same drive limits apply.
-        ``failure`` is ``(wheel (F,) int, -1 none; step (F,) int; stuck (F,) bool;
-        held voltage (F,) V, updated in place)`` for step ``k`` (see
-        :func:`attitude_sil.core.plant.kernels.wheel_step`); None: no failure.
+        ``failure`` is a :class:`attitude_sil.core.plant.kernels.WheelFailure`
+        for step ``k`` (its held voltages are updated in place); None: no failure.
 
         Returns
         -------
@@ -270,16 +273,14 @@ class WheelAssembly:
         tau_c_B : (P, 3) N m, mean torque on the body over the step
         h_start : (P, 3) N m s, wheel momentum at t_k
         """
-        m = self.motor
-        f = NO_FAILURE if failure is None else failure
-        return wheel_step(x, v_cmd_B, int(k), self.allocation, self.axes_B, self.phi_e, self.gamma_e,
-                          m.rotor_inertia, self.k_b_e, self.headroom_e, m.speed_max, m.v_max, self.dt,
-                          torque_mode, self.k_i_e, self.r_a_e, m.viscous_friction, *f, self.coast)
+        return wheel_step(x, v_cmd_B, int(k), bool(torque_mode), self.params,
+                          NO_FAILURE if failure is None else failure)
 
 
-def no_failure() -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """The failure arrays of :meth:`WheelAssembly.advance` for "no wheel fails" (F = 1)."""
-    return (np.full(1, -1, dtype=np.int64), np.zeros(1, dtype=np.int64), np.zeros(1, dtype=np.bool_), np.zeros(1))
+def no_failure() -> WheelFailure:
+    """The failure record of :meth:`WheelAssembly.advance` for "no wheel fails" (F = 1)."""
+    return WheelFailure(np.full(1, -1, dtype=np.int64), np.zeros(1, dtype=np.int64), np.zeros(1, dtype=np.bool_),
+                        np.zeros(1))
 
 
 NO_FAILURE = no_failure()  # read-only in use: e_hold is written only for the failed wheel, and there is none

@@ -35,6 +35,7 @@ import numba
 import numpy as np
 
 from attitude_sil.core.control.compiled import from_template
+from attitude_sil.core.plant.kernels import WheelFailure, WheelParams
 from attitude_sil.core.plant.wheels import no_failure
 from attitude_sil.core.sim import batch_loop
 from attitude_sil.core.trajectory import Trajectory
@@ -73,23 +74,8 @@ class SimArrays(NamedTuple):
     sw_law: np.ndarray  # the law code each swap goes to
     command_torque: bool
     decay: float  # bumpless offset decay per step
-    allocation: np.ndarray
-    axes: np.ndarray
-    phi_T: np.ndarray
-    gamma: np.ndarray
-    j_m: float
-    k_b: np.ndarray
-    headroom: np.ndarray
-    speed_max: float
-    v_max: float
-    k_i: np.ndarray
-    r_a: np.ndarray
-    b_m: float
-    fail_j: np.ndarray
-    fail_k: np.ndarray
-    fail_stuck: np.ndarray
-    e_hold: bool
-    coast: np.ndarray
+    wheel: WheelParams
+    failure: WheelFailure
     noisy: bool
     s_seeds: np.ndarray
     s_att: np.ndarray
@@ -306,7 +292,6 @@ def _sim_arrays(plant, wheels, dist, guide, ctrl, n_steps: int, stride: int, dt:
     """The models' arrays for the compiled loop, each contiguous and writable (one numba signature)."""
     P = plant.n_episodes
     asm = wheels.assembly
-    mot = asm.motor
     v = dist.v
     models = set(dist.models)
     failure = wheels.failure_arrays() if wheels.failure is not None else no_failure()
@@ -314,9 +299,8 @@ def _sim_arrays(plant, wheels, dist, guide, ctrl, n_steps: int, stride: int, dt:
         int(n_steps), int(stride), float(dt), int(round(dt * 1e9)), int(plant.substeps), float(guide.step_time),
         _c(plant.q0), _c(plant.omega0), np.ascontiguousarray(wheels.x), _c(guide.q_initial), _c(guide.q_final),
         _c(guide.omega, (P, 3)), _c(plant.inertia), _c(plant.inertia_inv), law0, swaps[0], swaps[1],
-        ctrl.command == "torque", float(ctrl.decay), asm.allocation, asm.axes_B, asm.phi_e, asm.gamma_e,
-        float(mot.rotor_inertia), asm.k_b_e, asm.headroom_e, float(mot.speed_max), float(mot.v_max), asm.k_i_e,
-        asm.r_a_e, float(mot.viscous_friction), *failure, asm.coast, ctrl.noisy, ctrl.sensor_seeds,
+        ctrl.command == "torque", float(ctrl.decay), WheelParams(*(_writable(a) for a in asm.params)),
+        WheelFailure(*(_writable(a) for a in failure)), ctrl.noisy, ctrl.sensor_seeds,
         ctrl.sensor_att_std, ctrl.sensor_rate_std,
         _c(v["constant.torque"]) if "constant" in models else np.zeros(3),
         _c(v["step.torque"]) if "step" in models else np.zeros(3),

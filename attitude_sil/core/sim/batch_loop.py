@@ -19,7 +19,7 @@ import numpy as np
 from numba import njit
 
 from attitude_sil.core.analysis.metric_rows import euler_axis, first_crossing
-from attitude_sil.core.plant.kernels import measure_row, rk4_body_into, wheel_row
+from attitude_sil.core.plant.kernels import WheelFailure, measure_row, rk4_body_into, wheel_params_copy, wheel_rows
 
 # >>> law dispatch stubs (replaced by the generated dispatch; see the module docstring)
 
@@ -28,7 +28,7 @@ def law_reset(code, p, sts):  # pragma: no cover - a stand-in
     raise NotImplementedError
 
 
-def law_enter(code, q, w, q_r, w_r, p, pars, sts, dt, decay, u_last, offset, scratch):  # pragma: no cover
+def law_enter(code, view, p, pars, sts, dt, decay, u_last, offset, scratch):  # pragma: no cover - a stand-in
     raise NotImplementedError
 
 
@@ -41,14 +41,27 @@ N_SUMS = 13
 
 
 @njit(cache=True, inline="always")
-def _swap_row(k, p, swap, law, qs, ws, q_r, omega_r, pars, sts, dt, sim, u_last, offset, has_off, u):
-    # ControllerBank.compute with a swap pending, for row p: reset, then the bumpless entry
+def _swap_row(k, p, swap, law, view, pars, sts, sim, xfer, u):
+    # ControllerBank.compute with a swap pending, for row p: reset, then the bumpless entry. view: the law's
+    # inputs (q, w, q_r, w_r); xfer: the transfer's (u_last, offset, has_off)
+    u_last, offset, has_off = xfer
     same_kind = law_is_torque(law[p]) == law_is_torque(swap) or sim.command_torque
     law[p] = swap
     law_reset(swap, p, sts)
     has_off[p] = False
     if k > 0 and same_kind:
-        has_off[p] = law_enter(swap, qs, ws, q_r, omega_r, p, pars, sts, dt, sim.decay, u_last, offset, u)
+        has_off[p] = law_enter(swap, view, p, pars, sts, sim.dt, sim.decay, u_last, offset, u)
+
+
+@njit(cache=True, inline="always")
+def _next_swap(sw_k, sw_law, s_next, k):
+    # the law code a swap of step k goes to (-1: none), and the index of the next swap after k
+    swap = -1
+    while s_next < sw_k.shape[0] and sw_k[s_next] <= k:
+        if sw_k[s_next] == k:
+            swap = sw_law[s_next]
+        s_next += 1
+    return swap, s_next
 
 
 @njit(cache=True, inline="always")
@@ -91,73 +104,44 @@ def _keep_wheels(o_ws, o_wa, o_we, r, lo, m, x, k_i):
 def chunk(lo, hi, sim, pars, sts, noise, noise_lo, out, sums):
     """Episodes ``lo..hi-1`` from step 0 to K, the stepwise driver's order of calls, kept every ``stride``.
 
-    ``sim`` (batch.SimArrays) holds the models' arrays; ``pars`` and ``sts``
-    each law's parameter and state records for these episodes (rows 0..hi-lo-1);
-    ``noise`` (rows from episode ``noise_lo``, K + 1, 3) the disturbance noise
-    torque, or no rows; ``out`` (batch.Outputs) the kept trajectory arrays
-    (one with no rows is not kept) and ``sums`` (batch.SumsSpec) the running
-    sums' axis, start and final values, band and output (no rows: none).
-    Each episode runs its own law (``sim.law0``) and takes the swaps
-    ``sim.sw_law[s]`` before the command of step ``sim.sw_k[s]`` (sorted),
-    with the controller bank's bumpless transfer.
+    ``sim`` (batch.SimArrays): the models' arrays; ``pars``, ``sts``: each law's parameter and state records
+    for these episodes (rows 0..hi-lo-1); ``noise`` (rows from episode ``noise_lo``, K + 1, 3): the noise
+    torque, or no rows; ``out`` (batch.Outputs): the kept trajectory arrays (no rows: not kept); ``sums``
+    (batch.SumsSpec): the running sums' axis, start and final values, band and output (no rows: none). Each
+    episode runs its own law (``sim.law0``) and takes the swaps ``sim.sw_law[s]`` before the command of
+    step ``sim.sw_k[s]`` (sorted), with the controller bank's bumpless transfer.
     """
     m = hi - lo
-    dt = sim.dt
-    q = sim.q0[lo:hi].copy()
-    w = sim.w0[lo:hi].copy()
-    x = sim.x0[lo:hi].copy()
-    qi = sim.q_initial[lo:hi].copy()
-    qf = sim.q_final[lo:hi].copy()
-    omega_r = sim.omega_ref[lo:hi].copy()
-    ii = sim.inertia[lo:hi].copy()
-    iv = sim.inertia_inv[lo:hi].copy()
+    q, w, x = sim.q0[lo:hi].copy(), sim.w0[lo:hi].copy(), sim.x0[lo:hi].copy()
+    qi, qf, omega_r = sim.q_initial[lo:hi].copy(), sim.q_final[lo:hi].copy(), sim.omega_ref[lo:hi].copy()
+    ii, iv = sim.inertia[lo:hi].copy(), sim.inertia_inv[lo:hi].copy()
     law = sim.law0[lo:hi].copy()
     # @laws records
     present = np.zeros(len(pars), dtype=np.bool_)  # the laws some episode of the chunk runs
     for p in range(m):
         present[law[p]] = True
-    offset = np.zeros((m, 3))
-    has_off = np.zeros(m, dtype=np.bool_)
-    u_last = np.zeros((m, 3))
+    offset, has_off, u_last = np.zeros((m, 3)), np.zeros(m, dtype=np.bool_), np.zeros((m, 3))
     # private copies of the shared read-only arrays: threads sharing one array would fight over its reference count
-    allocation, axes, phi_T, gamma = sim.allocation.copy(), sim.axes.copy(), sim.phi_T.copy(), sim.gamma.copy()
-    k_b, headroom, k_i, r_a = sim.k_b.copy(), sim.headroom.copy(), sim.k_i.copy(), sim.r_a.copy()
-    coast = sim.coast.copy()
-    fail_j, fail_k, fail_stuck = sim.fail_j.copy(), sim.fail_k.copy(), sim.fail_stuck.copy()
+    wp, f = wheel_params_copy(sim.wheel), sim.failure
+    fail = WheelFailure(f.wheel.copy(), f.step.copy(), f.stuck.copy(), f.e_hold.copy())  # e_hold: rows lo..hi-1
+    tau_constant, tau_step = sim.tau_constant.copy(), sim.tau_step.copy()
     s_seeds, s_att, s_rate = sim.s_seeds.copy(), sim.s_att.copy(), sim.s_rate.copy()
     sw_k, sw_law = sim.sw_k.copy(), sim.sw_law.copy()
-    qm = np.empty((m, 4))
-    wm = np.empty((m, 3))
-    tau_e = np.zeros((m, 3))
-    u = np.empty((m, 3))
-    tau_c = np.empty((m, 3))
-    h0 = np.empty((m, 3))
-    x_next = np.empty_like(x)
-    h_out = np.empty((m, 3))
+    qm, wm, tau_e, u = np.empty((m, 4)), np.empty((m, 3)), np.zeros((m, 3)), np.empty((m, 3))
+    torque = np.empty(m, dtype=np.bool_)  # the rows whose command is a torque
+    tau_c, h0, x_next = np.empty((m, 3)), np.empty((m, 3)), np.empty_like(x)
     # arrays are taken out of their records once: inside the step loop each take would cost reference counts
     o_q, o_w, o_qr, o_h, o_u, o_tc, o_te, o_ws, o_wa, o_we = out
     keep = (o_q.shape[0] > 0 or o_w.shape[0] > 0 or o_qr.shape[0] > 0 or o_h.shape[0] > 0 or o_u.shape[0] > 0
             or o_tc.shape[0] > 0 or o_te.shape[0] > 0 or o_ws.shape[0] > 0 or o_wa.shape[0] > 0 or o_we.shape[0] > 0)
-    tau_constant, tau_step, e_hold = sim.tau_constant.copy(), sim.tau_step.copy(), sim.e_hold
     y0, r_fin, sums_out = sums.y0, sums.r, sums.out
     with_sums = sums.out.shape[0] > 0
-    # running sums (see SUMMARY_COLUMNS) and what each needs of the previous sample
-    acc = np.zeros((m, N_SUMS))
-    acc[:, 0:3] = np.nan
-    acc[:, 3] = -np.inf
-    acc[:, 10] = 1.0
-    last_out = np.full(m, -1)
-    prev = np.zeros((m, 3))  # fraction of the step, time after it, error
-    n_after = 0
-    s_next = 0
+    acc, last_out, prev = _sums_start(m)
+    n_after = s_next = 0
     for k in range(sim.n_steps + 1):
         t_ns = k * sim.dt_ns
         q_r = qf if t_ns * 1e-9 >= sim.step_time - 1e-12 else qi
-        swap = -1
-        while s_next < sw_k.shape[0] and sw_k[s_next] <= k:
-            if sw_k[s_next] == k:
-                swap = sw_law[s_next]
-            s_next += 1
+        swap, s_next = _next_swap(sw_k, sw_law, s_next, k)
         _ext_torque(tau_e, m, t_ns, sim.step_ns, tau_constant, tau_step, noise, lo - noise_lo, k)
         if sim.noisy:  # the law sees the measurements (ControllerBank.measure)
             for p in range(m):
@@ -167,15 +151,13 @@ def chunk(lo, hi, sim, pars, sts, noise, noise_lo, out, sums):
             present[swap] = True
             for p in range(m):
                 if law[p] != swap:
-                    _swap_row(k, p, swap, law, qs, ws, q_r, omega_r, pars, sts, dt, sim, u_last, offset, has_off, u)
-        # @laws stage q=qs w=ws w_r=omega_r decay=sim.decay
+                    _swap_row(k, p, swap, law, (qs, ws, q_r, omega_r), pars, sts, sim, (u_last, offset, has_off), u)
+        # @laws stage q=qs w=ws w_r=omega_r dt=sim.dt decay=sim.decay
         for p in range(m):
-            lp = law[p]
+            torque[p] = sim.command_torque or law_is_torque(law[p])
             for i in range(3):
                 u_last[p, i] = u[p, i]
-            wheel_row(x, u, p, lo + p, k, allocation, axes, phi_T, gamma, sim.j_m, k_b, headroom, sim.speed_max,
-                      sim.v_max, dt, sim.command_torque or law_is_torque(lp), k_i, r_a, sim.b_m, fail_j, fail_k,
-                      fail_stuck, e_hold, coast, x_next, tau_c, h0)
+        wheel_rows(x, u, lo, k, torque, wp, fail, x_next, tau_c, h0)
         if keep and k % sim.stride == 0:
             r = k // sim.stride
             _keep_rows(o_q, r, lo, m, q)
@@ -185,32 +167,50 @@ def chunk(lo, hi, sim, pars, sts, noise, noise_lo, out, sums):
             _keep_rows(o_u, r, lo, m, u)
             _keep_rows(o_tc, r, lo, m, tau_c)
             _keep_rows(o_te, r, lo, m, tau_e)
-            _keep_wheels(o_ws, o_wa, o_we, r, lo, m, x, k_i)
+            _keep_wheels(o_ws, o_wa, o_we, r, lo, m, x, wp.k_i)
         if with_sums:
-            t = k * dt
+            t = k * sim.dt
             after = t >= sim.step_time - 1e-12
             for p in range(m):
-                _accumulate_row(acc, last_out, prev, p, k, sim.n_steps, t, dt, after, n_after, sim.step_time,
-                                q, w, u, tau_c, x, sums.axis, y0[lo + p], r_fin[lo + p], sums.band)
+                _accumulate_checks(acc, p, k, t, sim.n_steps, sim.dt, w, u, tau_c, x)
+                if after:
+                    _accumulate_response(acc, last_out, prev, p, t - sim.step_time, n_after, q, sums.axis,
+                                         sums.band, y0[lo + p], r_fin[lo + p])
             n_after += after
-        if k < sim.n_steps:
-            rk4_body_into(q, w, h0, ii, iv, tau_c, tau_e, dt, sim.substeps, q, w, h_out)
+        if k < sim.n_steps:  # h0 (the wheel momentum at t_k, kept above) becomes the body's h at t_k+1
+            rk4_body_into(q, w, h0, ii, iv, tau_c, tau_e, sim.dt, sim.substeps)
         x, x_next = x_next, x
     if with_sums:
-        for p in range(m):
-            if last_out[p] < 0:
-                acc[p, 4] = 0.0
-            elif last_out[p] == n_after - 1:
-                acc[p, 4] = np.nan
-            acc[p, 5] = abs(prev[p, 2])
-            for c in range(N_SUMS):
-                sums_out[lo + p, c] = acc[p, c]
+        _sums_end(acc, last_out, prev, n_after, sums_out, lo)
 
 
 @njit(cache=True, inline="always")
-def _accumulate_row(acc, last_out, prev, p, k, n_steps, t, dt, after, n_after, step_time,
-                    q, w, u, tau_c, x, axis, y0, r_fin, band):
-    # one step of row p's running sums (SUMMARY_COLUMNS), as metrics.summarize computes them
+def _sums_start(m):
+    # the running sums (SUMMARY_COLUMNS) before step 0, the last step outside the band, and the previous sample
+    # (fraction of the step, time after it, error)
+    acc = np.zeros((m, N_SUMS))
+    acc[:, 0:3] = np.nan
+    acc[:, 3] = -np.inf
+    acc[:, 10] = 1.0
+    return acc, np.full(m, -1), np.zeros((m, 3))
+
+
+@njit(cache=True, inline="always")
+def _sums_end(acc, last_out, prev, n_after, sums_out, lo):
+    # settling (never left the band: 0; outside at the end: never settled) and the final error, into the output
+    for p in range(acc.shape[0]):
+        if last_out[p] < 0:
+            acc[p, 4] = 0.0
+        elif last_out[p] == n_after - 1:
+            acc[p, 4] = np.nan
+        acc[p, 5] = abs(prev[p, 2])
+        for c in range(N_SUMS):
+            sums_out[lo + p, c] = acc[p, c]
+
+
+@njit(cache=True, inline="always")
+def _accumulate_checks(acc, p, k, t, n_steps, dt, w, u, tau_c, x):
+    # one step of row p's finiteness, peaks and control effort (SUMMARY_COLUMNS), as metrics.summarize computes
     for i in range(3):
         if not (np.isfinite(w[p, i]) and np.isfinite(u[p, i])):
             acc[p, 10] = 0.0
@@ -219,10 +219,12 @@ def _accumulate_row(acc, last_out, prev, p, k, n_steps, t, dt, after, n_after, s
         acc[p, 12] = max(acc[p, 12], abs(x[p, j, 2])) if not np.isnan(x[p, j, 2]) else np.inf
     if k < n_steps:
         acc[p, 9] += np.sqrt(tau_c[p, 0] ** 2 + tau_c[p, 1] ** 2 + tau_c[p, 2] ** 2) * ((k + 1) * dt - t)
-    if not after:
-        return
+
+
+@njit(cache=True, inline="always")
+def _accumulate_response(acc, last_out, prev, p, ta, n_after, q, axis, band, y0, r_fin):
+    # one sample (time ta after the step) of row p's step response sums, as metrics.summarize computes them
     span = r_fin - y0
-    ta = t - step_time
     y = euler_axis(q[p, 0], q[p, 1], q[p, 2], q[p, 3], axis)
     f = (y - y0) / (1.0 if span == 0.0 else span)
     first = n_after == 0

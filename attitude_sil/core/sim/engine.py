@@ -23,6 +23,7 @@ from attitude_sil.core.control import registry
 from attitude_sil.core.control.bank import ControllerBank
 from attitude_sil.core.plant.actuators import SpeedLoopWheels, TorqueActuator
 from attitude_sil.core.plant.disturbance import DisturbanceModel, lvlh_attitude, orbit_rate
+from attitude_sil.core.plant.kernels import WheelFailure
 from attitude_sil.core.plant.linear import LinearizedPlant
 from attitude_sil.core.plant.plants import FLEXIBLE_CASES, FlexibleAxisPlant, PitchNormalizedPlant
 from attitude_sil.core.plant.quaternion import euler_from_quat, quat_from_euler, quat_multiply
@@ -143,9 +144,9 @@ class Wheels:
     def names(self) -> list[str]:
         return [f"wheel_{i + 1}" for i in range(self.assembly.n_wheels)]
 
-    def failure_arrays(self) -> tuple | None:
-        """The kernel's failure arguments (with the held voltages, state), or None."""
-        return None if self.failure is None else (*self.failure, self.e_hold)
+    def failure_arrays(self) -> WheelFailure | None:
+        """The kernel's failure record (with the held voltages, state), or None."""
+        return None if self.failure is None else WheelFailure(*self.failure, self.e_hold)
 
     def advance(self, cmd_B: np.ndarray, torque_mode: bool = False) -> WheelStep:
         """Hold a body-axis command (P, 3) over one step; return the step's outputs.

@@ -6,7 +6,7 @@
   triangular sets each; rule table indexed ``rules[Δe, e]`` (paper 003
   Table 3 layout); product inference and weighted-average defuzzification;
   output scaled by ``u_scale`` (V).
-* PID part: the ``pid`` law's arithmetic (:func:`attitude_sil.core.control.laws.pid.pid_row`)
+* PID part: the ``pid`` law's arithmetic (:func:`attitude_sil.core.control.laws.pid.pid_axis`)
   with its own gains.
 * Mixing (paper 003): ``f(e) = e_n^2`` with ``e_n = clip(e / e_scale, -1, 1)``.
   The paper leaves "which response is faster" open; here, per axis and
@@ -35,7 +35,7 @@ from numba import njit
 from attitude_sil.core.control.fuzzy import FUZZY_PID_DEFAULT_RULES, UNIFORM_VERTICES
 from attitude_sil.core.control.kernels import error3_row, error_and_rate_row, infer_uniform_row, infer_vertices_row
 from attitude_sil.core.control.law import Law, lanes
-from attitude_sil.core.control.laws.pid import pid_bumpless_row, pid_record
+from attitude_sil.core.control.laws.pid import pid_axis, pid_bumpless_row, pid_record
 from attitude_sil.core.paramspec import ParamSpec, double_array
 
 __all__ = ["LAW", "Params", "mix"]
@@ -80,13 +80,7 @@ def step(q_BN, omega_BN_B, q_RN, omega_RN_R, p, par, st, dt, u):
         de = (e - st.e_prev[p, i]) / dt if has_prev else 0.0
         xe = e / par.e_scale[p, i]
         u_f = par.u_scale[p, i] * infer_uniform_row(de / par.de_scale[p, i], xe, par.rules, p)
-        # PID part, as the pid law's row
-        deriv = par.n[p, i] * (e - st.filt[p, i])
-        raw = par.kp[p, i] * e + par.ki[p, i] * st.integral[p, i] + par.kd[p, i] * deriv
-        u_p = min(max(raw, -par.u_max), par.u_max)
-        if not (u_p != raw and e * raw > 0.0):
-            st.integral[p, i] += e * dt
-        st.filt[p, i] = par.a[p, i] * st.filt[p, i] + (1.0 - par.a[p, i]) * e
+        u_p = pid_axis(e, i, p, par, st, dt)  # the PID part: the pid law's arithmetic
         # mixing block, f(e) = e_n^2
         en = min(max(xe, -1.0), 1.0)
         u[p, i] = mix(u_p, u_f, en * en)
@@ -119,8 +113,7 @@ def enter(q_BN, omega_BN_B, q_RN, omega_RN_R, p, par, st, dt, decay, u_last, off
             up = target
         u_pid[i] = up
         rest[i] = target - mix(up, u_f, f)
-    pid_bumpless_row(e, de, p, par.kp, par.ki, par.kd, par.n, st.integral, st.filt, par.u_max,
-                     (u_pid[0], u_pid[1], u_pid[2]))
+    pid_bumpless_row(e, de, p, par, st, (u_pid[0], u_pid[1], u_pid[2]))
     st.has_prev[p, 0] = True
     needed = decay > 0.0 and (abs(rest[0]) > 1e-12 or abs(rest[1]) > 1e-12 or abs(rest[2]) > 1e-12)
     for i in range(3):

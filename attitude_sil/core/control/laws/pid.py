@@ -36,7 +36,7 @@ from attitude_sil.core.control.kernels import error3_row, error_and_rate_row
 from attitude_sil.core.control.law import Law, lanes
 from attitude_sil.core.paramspec import double_array
 
-__all__ = ["LAW", "Params", "pid_row", "pid_bumpless_row", "pid_record"]
+__all__ = ["LAW", "Params", "pid_axis", "pid_bumpless_row", "pid_record"]
 
 
 class Params(NamedTuple):
@@ -52,42 +52,48 @@ class Params(NamedTuple):
 
 
 @njit(cache=True, inline="always")
-def pid_row(q_BN, q_RN, p, kp, ki, kd, n, a, integral, filt, dt, u_max, angle_mode, u):
-    """One PID step for episode ``p`` (row ``p`` of every array); updates ``integral`` and ``filt``."""
-    e = error3_row(q_BN, q_RN, p, angle_mode)
-    for i in range(3):
-        deriv = n[p, i] * (e[i] - filt[p, i])
-        raw = kp[p, i] * e[i] + ki[p, i] * integral[p, i] + kd[p, i] * deriv
-        out = min(max(raw, -u_max), u_max)
-        if not (out != raw and e[i] * raw > 0.0):
-            integral[p, i] += e[i] * dt
-        filt[p, i] = a[p, i] * filt[p, i] + (1.0 - a[p, i]) * e[i]
-        u[p, i] = out
+def pid_axis(e, i, p, par, st, dt):
+    """One PID step of axis ``i`` of row ``p`` on the error ``e``: the saturated output; updates the state.
+
+    ``par`` needs the fields ``kp``, ``ki``, ``kd``, ``n``, ``a`` (n, 3) and
+    ``u_max``; ``st`` the fields ``integral`` and ``filt`` (n, 3): the PID's
+    record and state, or any law's that carries a PID (the fuzzy PID).
+    """
+    deriv = par.n[p, i] * (e - st.filt[p, i])
+    raw = par.kp[p, i] * e + par.ki[p, i] * st.integral[p, i] + par.kd[p, i] * deriv
+    out = min(max(raw, -par.u_max), par.u_max)
+    if not (out != raw and e * raw > 0.0):
+        st.integral[p, i] += e * dt
+    st.filt[p, i] = par.a[p, i] * st.filt[p, i] + (1.0 - par.a[p, i]) * e
+    return out
 
 
 @njit(cache=True, inline="always")
-def pid_bumpless_row(e, de, p, kp, ki, kd, n, integral, filt, u_max, u_last):
-    """Set PID state row ``p`` so its next command is ``clip(u_last)`` (a 3-tuple; module docstring)."""
+def pid_bumpless_row(e, de, p, par, st, u_last):
+    """Set the PID state of row ``p`` so its next command is ``clip(u_last)`` (a 3-tuple; module docstring).
+
+    ``e``, ``de``: the error and its rate (3-tuples); ``par`` and ``st`` as for :func:`pid_axis`.
+    """
     for i in range(3):
-        target = min(max(u_last[i], -u_max), u_max)
-        filt[p, i] = e[i] - de[i] / n[p, i]
-        rest = target - kp[p, i] * e[i] - kd[p, i] * de[i]
-        integral[p, i] = rest / ki[p, i] if ki[p, i] > 0.0 else 0.0
+        target = min(max(u_last[i], -par.u_max), par.u_max)
+        st.filt[p, i] = e[i] - de[i] / par.n[p, i]
+        rest = target - par.kp[p, i] * e[i] - par.kd[p, i] * de[i]
+        st.integral[p, i] = rest / par.ki[p, i] if par.ki[p, i] > 0.0 else 0.0
 
 
 @njit(cache=True, inline="always")
 def step(q_BN, omega_BN_B, q_RN, omega_RN_R, p, par, st, dt, u):
     """The law's step (:mod:`attitude_sil.core.control.law`)."""
-    pid_row(q_BN, q_RN, p, par.kp, par.ki, par.kd, par.n, par.a, st.integral, st.filt, dt, par.u_max,
-            par.angle_mode, u)
+    e = error3_row(q_BN, q_RN, p, par.angle_mode)
+    for i in range(3):
+        u[p, i] = pid_axis(e[i], i, p, par, st, dt)
 
 
 @njit(cache=True, inline="always")
 def enter(q_BN, omega_BN_B, q_RN, omega_RN_R, p, par, st, dt, decay, u_last, offset):
     """Bumpless entry: the state that makes the first command ``u_last[p]`` (no offset left)."""
     e, de = error_and_rate_row(q_BN, omega_BN_B, q_RN, omega_RN_R, p, par.angle_mode)
-    pid_bumpless_row(e, de, p, par.kp, par.ki, par.kd, par.n, st.integral, st.filt, par.u_max,
-                     (u_last[p, 0], u_last[p, 1], u_last[p, 2]))
+    pid_bumpless_row(e, de, p, par, st, (u_last[p, 0], u_last[p, 1], u_last[p, 2]))
     return False
 
 
