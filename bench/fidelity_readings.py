@@ -123,7 +123,8 @@ def _table1(scn, duration=20.0, reading="eq9") -> np.ndarray:
     out = {}
     for model in ("rigid_body", "linearized"):
         s = scn.with_values("plant", model=model)
-        tr = simulate(s, 3 * n, duration=duration, controller="pid", schedule=[], setpoints_rpy_deg=sp,
+        tr = simulate(s, 3 * n, duration=duration, controller="pid", schedule=[],
+                      episode_values={"guidance.setpoint_rpy_deg": sp},
                       controller_params=params, threads=1)
         eq9 = model == "linearized" and reading == "eq9"
         out[model] = np.degrees(euler_eq9_unit_scalar(tr.q_BN) if eq9 else euler_from_quat(tr.q_BN))
@@ -168,7 +169,8 @@ def cmd_cubesat_fit() -> None:
         out = []
         for law in ("pid", "fuzzy_pid"):
             m = simulate_summary(scn, 1, controller_params={f"{law}.kp": [[kp] * 3], f"{law}.kd": [[kd] * 3]},
-                                 controller=law, schedule=[], setpoints_rpy_deg=[[step, 0.0, 0.0]], threads=1).metrics
+                                 controller=law, schedule=[], threads=1,
+                                 episode_values={"guidance.setpoint_rpy_deg": [[step, 0.0, 0.0]]}).metrics
             out.append(float(np.nan_to_num(m["settling_time_s"][0], nan=99.0)))
         return out
 

@@ -143,6 +143,24 @@ class GraphSession:
     With ``namespace`` the whole graph, its ``/clock`` included (remapped to
     ``/<ns>/clock``), lives under that namespace, so replicas on one ROS domain
     do not hear each other.
+
+    Parameters
+    ----------
+    scn : Scenario
+    duration : float, optional
+        Episode length, s (default ``plant.duration``).
+    controller : str, optional
+        ``controller_type`` to start with.
+    processes : bool
+        One process per node instead of one process for all.
+    real_time : bool
+        Pace the plant at real time (``real_time_factor`` 1.0).
+    namespace : str, optional
+        Run the whole graph (and its clock) under this namespace.
+    connect_timeout : float
+        Wall seconds to wait for discovery.
+    live : FoxgloveLive, optional
+        Serve every message live too.
     """
 
     def __init__(self, scn: Scenario, *, duration: float | None = None, controller: str | None = None,
@@ -300,40 +318,23 @@ class GraphSession:
 def run_graph(
     scn: Scenario,
     *,
-    duration: float | None = None,
-    controller: str | None = None,
     record_dir: str | Path | None = None,
-    processes: bool = False,
-    real_time: bool = False,
     progress: bool = True,
-    connect_timeout: float = 20.0,
-    namespace: str | None = None,
     controller_params: dict | None = None,
     before_start: Callable[[], None] | None = None,
     keep_trajectory: bool = False,
     live=None,
+    **options,
 ) -> RunResult:
     """Run one episode of ``scn`` through the ROS graph.
 
     Parameters
     ----------
     scn : Scenario
-    duration : float, optional
-        Episode length, s (default ``plant.duration``).
-    controller : str, optional
-        ``controller_type`` to start with.
     record_dir : path, optional
         Bag directory to record to; None records nothing.
-    processes : bool
-        One process per node instead of one process for all.
-    real_time : bool
-        Pace the plant at real time (``real_time_factor`` 1.0).
     progress : bool
         Print a progress line on stderr.
-    connect_timeout : float
-        Wall seconds to wait for discovery.
-    namespace : str, optional
-        Run the whole graph (and its clock) under this namespace.
     controller_params : dict, optional
         Controller parameters set through the parameter service before the episode.
     before_start : callable, optional
@@ -345,6 +346,10 @@ def run_graph(
         Serve every message of the run live too (``run --foxglove``); a callable
         is called after ``before_start`` for the sink (or None), so a server
         starts only once the input is validated.
+    **options
+        How the graph runs: the keywords of :class:`GraphSession` (``duration``,
+        ``controller``, ``processes``, ``real_time``, ``namespace``,
+        ``connect_timeout``).
 
     Returns
     -------
@@ -362,8 +367,7 @@ def run_graph(
             check_bag_dir(record_dir)  # before the graph starts, not after discovery
         except (ValueError, OSError) as exc:
             raise RunError(str(exc)) from None
-    session = GraphSession(scn, duration=duration, controller=controller, processes=processes, real_time=real_time,
-                           namespace=namespace, connect_timeout=connect_timeout)  # validates
+    session = GraphSession(scn, **options)  # validates
     if before_start is not None:
         before_start()
     session.live = live() if callable(live) else live

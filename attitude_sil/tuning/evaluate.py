@@ -145,8 +145,8 @@ def evaluate(spec: TuningSpec, x: np.ndarray, first: int = 0, threads: int | Non
                              for k, v in episode_values(scn, robust["dispersions"], robust["seed"],
                                                         np.arange(reps)).items()}
             run = simulate if name == "paper004_objective" else simulate_summary  # eq. 7 needs the series
-            result = run(scn, n, controller_params=params, controller=spec.controller, schedule=[], seeds=seeds,
-                         threads=threads, episode_values=dispersed)
+            result = run(scn, n, controller_params=params, controller=spec.controller, schedule=[], threads=threads,
+                         episode_values={"disturbance.noise.seed": seeds, **(dispersed or {})})
             score(spec, scn, result, final_time, F, terms, fail)
     for p, why in enumerate(reasons):
         if why:

@@ -90,7 +90,8 @@ def rmse_table(scn: Scenario, angles_deg=(3, 8, 15, 25, 35), gains=PAPER_000_COM
     base = scn.with_values("guidance", step_time=0.0).with_values("disturbance", models=[])
     for model in ("rigid_body", "linearized"):
         s = base.with_values("plant", model=model)
-        tr = simulate(s, 3 * n, duration=duration, controller="pid", schedule=[], setpoints_rpy_deg=setpoints,
+        tr = simulate(s, 3 * n, duration=duration, controller="pid", schedule=[],
+                      episode_values={"guidance.setpoint_rpy_deg": setpoints},
                       controller_params={k: np.repeat(v, 3 * n, axis=0) for k, v in params.items()})
         runs[model] = np.degrees(euler_eq9_unit_scalar(tr.q_BN) if model == "linearized"
                                  else euler_from_quat(tr.q_BN))

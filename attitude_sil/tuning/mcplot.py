@@ -33,7 +33,8 @@ def plot_campaign(spec: MonteCarloSpec, table: dict[str, np.ndarray], out: Path)
     if sample.size:
         values = episode_values(scn, spec.dispersions, spec.seed, sample)
         seeds = scn.param("disturbance", "noise.seed") + sample
-        tr = simulate(scn, sample.size, controller=spec.controller, seeds=seeds, episode_values=values,
+        tr = simulate(scn, sample.size, controller=spec.controller,
+                      episode_values={"disturbance.noise.seed": seeds, **values},
                       stride=spec.plot["stride"], keep=("q_BN", "q_RN"))
         fig = Figure(figsize=(9, 5), layout="constrained")
         ax = fig.add_subplot()

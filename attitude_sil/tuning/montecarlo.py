@@ -220,8 +220,8 @@ def run_chunk(spec: MonteCarloSpec, lo: int, hi: int, threads: int | None = None
     runs = np.arange(lo, hi)
     values = episode_values(spec.scenario, spec.dispersions, spec.seed, runs)
     seeds = spec.scenario.param("disturbance", "noise.seed") + runs
-    s = simulate_summary(spec.scenario, hi - lo, controller=spec.controller, seeds=seeds, episode_values=values,
-                         threads=threads)
+    s = simulate_summary(spec.scenario, hi - lo, controller=spec.controller, threads=threads,
+                         episode_values={"disturbance.noise.seed": seeds, **values})
     out: dict[str, np.ndarray] = {"run": runs}
     out.update(value_columns(values))
     out.update({k: np.asarray(v, dtype=float) for k, v in s.metrics.items()})

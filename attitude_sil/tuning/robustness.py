@@ -44,7 +44,8 @@ def robustness(scn: Scenario) -> list[dict]:
         return rows
     base = np.diagonal(inertia_matrix(scn.param("plant", "inertia")))
     inertias = base[None, :] * (1.0 + INERTIA_ERRORS[:, None])
-    tr = simulate(scn, len(INERTIA_ERRORS), inertia=inertias, schedule=[])
+    tr = simulate(scn, len(INERTIA_ERRORS), schedule=[],
+                  episode_values={"plant.inertia": inertias, "disturbance.inertia": inertias})
     m = scenario_metrics(tr.t, tr.q_BN, tr.q_RN, tr.tau_c_B, s, step_time=step_time)
     for i, d in enumerate(INERTIA_ERRORS):
         rows.append({"case": f"J {d * 100 + 0.0:+.1f} %", **{k: float(m[k][i]) for k in _KEYS if k in m}})

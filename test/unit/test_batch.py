@@ -49,7 +49,8 @@ def _per_episode():
 def test_compiled_equals_stepwise_for_each_law(hst, law):
     params = {k: v for k, v in _per_episode().items() if k.startswith(law.split("_")[0])}
     inertia = np.array([[31.046, 77.217, 78.754]]) * np.linspace(0.9, 1.1, P)[:, None]
-    kw = dict(duration=4.0, controller=law, controller_params=params, inertia=inertia)
+    kw = dict(duration=4.0, controller=law, controller_params=params,
+              episode_values={"plant.inertia": inertia, "disturbance.inertia": inertia})
     stepwise = simulate(hst, P, driver="stepwise", **kw)
     compiled = simulate(hst, P, driver="compiled", **kw)
     _assert_same(stepwise, compiled)
@@ -145,7 +146,7 @@ def test_a_controller_type_per_episode_gives_each_episode_its_own_laws_run(measu
 def test_disturbance_noise_is_the_stepwise_streams_in_any_grouping(hst):
     # noise is drawn per group of episodes (256 and more); 300 episodes span two groups, on two threads
     scn = hst.with_values("disturbance", models=["constant", "step", "noise"])
-    kw = dict(duration=0.3, seeds=np.arange(300) * 7 + 1)
+    kw = dict(duration=0.3, episode_values={"disturbance.noise.seed": np.arange(300) * 7 + 1})
     compiled = simulate(scn, 300, driver="compiled", threads=2, **kw)
     _assert_same(simulate(scn, 300, driver="stepwise", **kw), compiled)
     _assert_same(simulate(scn, 300, driver="compiled", threads=1, **kw), compiled)

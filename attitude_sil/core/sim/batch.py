@@ -160,16 +160,17 @@ def _kinds(ctrl, laws: np.ndarray, swaps: dict, kept_steps: np.ndarray) -> list[
     return kinds[np.searchsorted(np.array(at), kept_steps, side="right")].tolist()
 
 
-def run_compiled(plant, wheels, dist, guide, ctrl, n_steps: int, dt: float, stride: int = 1, threads: int | None = None,
+def run_compiled(models: tuple, n_steps: int, dt: float, stride: int = 1, threads: int | None = None,
                  chunk: int = 64, keep=TRAJECTORY_FIELDS, sums: tuple | None = None, swaps: dict | None = None,
                  laws=None) -> tuple[Trajectory | None, np.ndarray | None]:
     """Run built models (fresh, as the stepwise driver gets them) in the compiled loop.
 
     Parameters
     ----------
-    plant, wheels, dist, guide, ctrl
-        Fresh models from the ``build_*`` functions of :mod:`attitude_sil.core.sim.engine`
-        (``Plant``, ``Wheels``, ``DisturbanceModel``, ``Guidance``, ``ControllerBank``)
+    models : tuple
+        ``(plant, wheels, dist, guide, ctrl)``: fresh models from the
+        ``build_*`` functions of :mod:`attitude_sil.core.sim.engine` (``Plant``,
+        ``Wheels``, ``DisturbanceModel``, ``Guidance``, ``ControllerBank``)
         that :func:`attitude_sil.core.sim.engine.compiled_plan` accepted.
     n_steps : int
         K: states at k = 0..K.
@@ -205,6 +206,7 @@ def run_compiled(plant, wheels, dist, guide, ctrl, n_steps: int, dt: float, stri
     unknown = set(keep) - set(TRAJECTORY_FIELDS) - {"omega_RN_R"}
     if unknown:
         raise ValueError(f"keep: unknown trajectory fields {sorted(unknown)}")
+    plant, wheels, dist, _, ctrl = models
     P = plant.n_episodes
     swaps = dict(swaps or {})
     laws = np.asarray([ctrl.active] * P if laws is None else laws, dtype=object)
@@ -213,15 +215,30 @@ def run_compiled(plant, wheels, dist, guide, ctrl, n_steps: int, dt: float, stri
     kept = n_steps // stride + 1
     out = _outputs(P, kept, wheels.assembly.n_wheels, keep)
     spec = _sums_spec(sums, P)
-    n_threads = _POOL_SIZE if threads is None else max(1, min(int(threads), _POOL_SIZE))
-    size = max(1, min(int(chunk), -(-P // n_threads)))  # every thread gets work, chunks stay cache-sized
-    sim = _sim_arrays(plant, wheels, dist, guide, ctrl, n_steps, stride, dt, law0,
+    sim = _sim_arrays(models, n_steps, stride, dt, law0,
                       (np.array([k for k, _ in sw], dtype=np.int64),
                        np.array([ctrl.codes[law] for _, law in sw], dtype=np.int64)))
     run = _chunk_runner(ctrl, {str(x) for x in laws} | set(swaps.values()), sim,
                         Outputs(*(out[f] for f in TRAJECTORY_FIELDS)), spec)
-    # disturbance noise is drawn in numpy (the stepwise driver's streams) for a group of episodes at a time,
-    # so its memory is that of the group, not of the run
+    _run_chunks(run, dist, P, n_steps, threads, chunk)
+    trajectory = None
+    if keep:
+        got = {f: (a if f in keep else None) for f, a in out.items()}
+        steps = np.arange(0, n_steps + 1, stride)
+        omega_rn = np.ascontiguousarray(np.broadcast_to(sim.omega_ref[:, None, :], (P, kept, 3)))
+        trajectory = Trajectory(t=steps * dt, kind=_kinds(ctrl, laws, swaps, steps),
+                                omega_RN_R=omega_rn if "omega_RN_R" in keep else None, **got)
+    return trajectory, (None if sums is None else spec.out)
+
+
+def _run_chunks(run, dist, P: int, n_steps: int, threads: int | None, chunk: int) -> None:
+    """``run((lo, hi), noise, noise_lo)`` over chunks of the P episodes, on the pool's threads.
+
+    Disturbance noise is drawn in numpy (the stepwise driver's streams) for a
+    group of episodes at a time, so its memory is that of the group, not of the run.
+    """
+    n_threads = _POOL_SIZE if threads is None else max(1, min(int(threads), _POOL_SIZE))
+    size = max(1, min(int(chunk), -(-P // n_threads)))  # every thread gets work, chunks stay cache-sized
     noisy = "noise" in set(dist.models)
     group = max(size * n_threads, 256) if noisy else P
     bounds = np.unique(np.append(np.arange(0, P, size), P)).astype(np.int64)
@@ -236,14 +253,6 @@ def run_compiled(plant, wheels, dist, guide, ctrl, n_steps: int, dt: float, stri
         else:  # one thread: the chunks one after another, no thread hand-off
             for span in spans:
                 run(span, noise, g_lo)
-    trajectory = None
-    if keep:
-        got = {f: (a if f in keep else None) for f, a in out.items()}
-        steps = np.arange(0, n_steps + 1, stride)
-        omega_rn = np.ascontiguousarray(np.broadcast_to(sim.omega_ref[:, None, :], (P, kept, 3)))
-        trajectory = Trajectory(t=steps * dt, kind=_kinds(ctrl, laws, swaps, steps),
-                                omega_RN_R=omega_rn if "omega_RN_R" in keep else None, **got)
-    return trajectory, (None if sums is None else spec.out)
 
 
 def _outputs(P: int, kept: int, n_wheels: int, keep) -> dict[str, np.ndarray]:
@@ -287,9 +296,10 @@ def _rows(field, lo: int, hi: int, P: int):
     return field
 
 
-def _sim_arrays(plant, wheels, dist, guide, ctrl, n_steps: int, stride: int, dt: float, law0: np.ndarray,
+def _sim_arrays(models: tuple, n_steps: int, stride: int, dt: float, law0: np.ndarray,
                 swaps: tuple[np.ndarray, np.ndarray]) -> SimArrays:
     """The models' arrays for the compiled loop, each contiguous and writable (one numba signature)."""
+    plant, wheels, dist, guide, ctrl = models
     P = plant.n_episodes
     asm = wheels.assembly
     v = dist.v

@@ -134,8 +134,7 @@ def chunk(lo, hi, sim, pars, sts, noise, noise_lo, out, sums):
     o_q, o_w, o_qr, o_h, o_u, o_tc, o_te, o_ws, o_wa, o_we = out
     keep = (o_q.shape[0] > 0 or o_w.shape[0] > 0 or o_qr.shape[0] > 0 or o_h.shape[0] > 0 or o_u.shape[0] > 0
             or o_tc.shape[0] > 0 or o_te.shape[0] > 0 or o_ws.shape[0] > 0 or o_wa.shape[0] > 0 or o_we.shape[0] > 0)
-    y0, r_fin, sums_out = sums.y0, sums.r, sums.out
-    with_sums = sums.out.shape[0] > 0
+    y0, r_fin, sums_out, with_sums = sums.y0, sums.r, sums.out, sums.out.shape[0] > 0
     acc, last_out, prev = _sums_start(m)
     n_after = s_next = 0
     for k in range(sim.n_steps + 1):

@@ -441,11 +441,8 @@ def simulate(
     n_episodes: int = 1,
     duration: float | None = None,
     controller_params: dict | None = None,
-    inertia=None,
-    seeds=None,
     controller: str | None = None,
     schedule: list[tuple[int, str]] | None = None,
-    setpoints_rpy_deg=None,
     driver: str = "auto",
     stride: int = 1,
     threads: int | None = None,
@@ -463,10 +460,6 @@ def simulate(
         Overrides ``plant.duration``, s.
     controller_params : dict, optional
         Per-episode controller parameters ``{"pid.kp": (P, 3), ...}``.
-    inertia : array_like, optional
-        Per-episode inertia, (P, 3) principal values or (P, 3, 3).
-    seeds : sequence of int, optional
-        Per-episode noise seeds.
     controller : str or sequence of P str, optional
         ``controller_type`` to start with (default: the scenario's), or one
         per episode (one command kind; the compiled driver runs them, and
@@ -474,8 +467,6 @@ def simulate(
     schedule : list of (step, controller_type), optional
         Swaps applied before the command of that step (default: the
         scenario's ``schedule.*``).
-    setpoints_rpy_deg : array_like, optional
-        Per-episode step targets, (P, 3) deg.
     driver : str
         ``auto`` (default): whole episodes in compiled code
         (:mod:`attitude_sil.core.sim.batch`) where the run fits it, else the
@@ -497,6 +488,9 @@ def simulate(
         initial attitude and rate, setpoint, noise seed and power, motor
         constants, wheel failure). Episode p then runs what the graph runs
         with those values set in the scenario (the Monte Carlo's dispersions).
+        For example ``{"plant.inertia": (P, 3), "disturbance.inertia": (P, 3)}``
+        (principal values, or (P, 9) row-major), ``{"guidance.setpoint_rpy_deg":
+        (P, 3)}`` (deg), ``{"disturbance.noise.seed": (P,)}``.
 
     Returns
     -------
@@ -514,8 +508,7 @@ def simulate(
         raise ScenarioError("keep: name at least one trajectory array (simulate_summary keeps none)")
     if int(stride) < 1:
         raise ScenarioError(f"stride must be >= 1, got {stride!r}")
-    run = _Run(scn, n_episodes, duration, controller_params, inertia, seeds, controller, schedule, setpoints_rpy_deg,
-               driver, episode_values)
+    run = _Run(scn, n_episodes, duration, controller_params, controller, schedule, driver, episode_values)
     return run.trajectory(threads, int(stride), keep)
 
 
@@ -524,11 +517,8 @@ def simulate_summary(
     n_episodes: int = 1,
     duration: float | None = None,
     controller_params: dict | None = None,
-    inertia=None,
-    seeds=None,
     controller: str | None = None,
     schedule: list[tuple[int, str]] | None = None,
-    setpoints_rpy_deg=None,
     driver: str = "auto",
     threads: int | None = None,
     episode_values: dict | None = None,
@@ -541,8 +531,7 @@ def simulate_summary(
     runs keep their trajectories until they are summarised. The parameters
     are those of :func:`simulate`.
     """
-    run = _Run(scn, n_episodes, duration, controller_params, inertia, seeds, controller, schedule, setpoints_rpy_deg,
-               driver, episode_values)
+    run = _Run(scn, n_episodes, duration, controller_params, controller, schedule, driver, episode_values)
     values = scn.values["scenario"]
     if run.compiled and values["metrics.mode"] == "step":
         plant, _, _, guide, _ = run.models
@@ -553,7 +542,7 @@ def simulate_summary(
         y0 = np.broadcast_to(y0, (n_episodes,))
         end, _ = guide.setpoint(run.K * int(round(run.dt * 1e9)) * 1e-9)
         r = np.broadcast_to(euler_from_quat(end)[..., axis], (n_episodes,))
-        _, sums = run_compiled(*run.models, run.K, run.dt, threads=threads, keep=(), swaps=run.swaps, laws=run.laws,
+        _, sums = run_compiled(run.models, run.K, run.dt, threads=threads, keep=(), swaps=run.swaps, laws=run.laws,
                                sums=(axis, y0, r, values["metrics.settling_band"]))
         return step_summary(sums, values, r - y0)
     return summarize(run.trajectory(threads), values, step_time=scn.param("guidance", "step_time"))
@@ -600,22 +589,19 @@ def _episode_laws(controller, n_episodes: int, ctrl: ControllerBank) -> list[str
 class _Run:
     """The models of one :func:`simulate` call and the driver that will run them."""
 
-    def __init__(self, scn, P, duration, controller_params, inertia, seeds, controller, schedule,
-                 setpoints_rpy_deg, driver, episode_values=None) -> None:
+    def __init__(self, scn, P, duration, controller_params, controller, schedule, driver, episode_values) -> None:
         if driver not in DRIVERS:
             raise ScenarioError(f"driver must be one of {', '.join(DRIVERS)}, got {driver!r}")
         self.K = scn.steps(duration)
         self.dt = scn.dt
         ev = split_episode_values(episode_values)
         pv, dv, gv = ev["plant"], ev["disturbance"], ev["guidance"]
-        plant = build_plant(scn, P, inertia=pv.get("inertia", inertia), rpy0_deg=pv.get("initial_attitude_rpy_deg"),
+        plant = build_plant(scn, P, inertia=pv.get("inertia"), rpy0_deg=pv.get("initial_attitude_rpy_deg"),
                             omega0=pv.get("initial_body_rate"))
         wheels = build_wheels(scn, P, ev["wheels"])
-        if "noise.seed" in dv:
-            seeds = dv["noise.seed"]
-        dist = build_disturbance(scn, P, seeds=seeds, inertia=dv.get("inertia", inertia),
+        dist = build_disturbance(scn, P, seeds=dv.get("noise.seed"), inertia=dv.get("inertia"),
                                  noise_power=dv.get("noise.power"))
-        guide = build_guidance(scn, P, gv.get("setpoint_rpy_deg", setpoints_rpy_deg))
+        guide = build_guidance(scn, P, gv.get("setpoint_rpy_deg"))
         ctrl = build_controller(scn, P, params={**(controller_params or {}), **ev["controller"]} or None)
         self.laws = None  # per-episode controller types (compiled driver), or None: ctrl.active for all
         if controller is not None and not isinstance(controller, str):
@@ -641,7 +627,7 @@ class _Run:
     def trajectory(self, threads: int | None, stride: int = 1, keep=KEEPABLE) -> Trajectory:
         """Run the models in the chosen driver; the arrays not in ``keep`` are None."""
         if self.compiled:
-            tr, _ = run_compiled(*self.models, self.K, self.dt, stride=stride, threads=threads, keep=keep,
+            tr, _ = run_compiled(self.models, self.K, self.dt, stride=stride, threads=threads, keep=keep,
                                  swaps=self.swaps, laws=self.laws)
             return tr
         tr = _simulate_stepwise(*self.models, self.swaps, self.K, self.dt)
