@@ -54,6 +54,19 @@ def _absolute(topic: str) -> str:
     return topic if topic.startswith("/") else "/" + topic
 
 
+def _graph_stamps(scn: Scenario, tr: Trajectory) -> np.ndarray:
+    """The step stamps (ns, sim time) of a trajectory the graph would have recorded; RunError for any other."""
+    if scn.param("plant", "model") == "flexible_axis":
+        raise RunError("record_episode: the flexible plant's mode is not in the trajectory; record through the graph")
+    if tr.wheel_angle is None or tr.wheel_effort is None or tr.omega_RN_R is None:
+        raise RunError("record_episode: the trajectory lacks wheel angles, efforts or rate setpoints")
+    dt_ns = int(round(scn.dt * 1e9))
+    stamps = np.round(tr.t * 1e9).astype(np.int64)
+    if not np.array_equal(stamps, np.arange(stamps.size) * dt_ns):
+        raise RunError("record_episode: the trajectory must keep every step (stride 1)")
+    return stamps
+
+
 def record_episode(scn: Scenario, tr: Trajectory, run_dir: str | Path, *, episode: int = 0,
                    controller_params: dict[str, Any] | None = None, controller: str | None = None,
                    duration: float | None = None) -> Path:
@@ -89,14 +102,7 @@ def record_episode(scn: Scenario, tr: Trajectory, run_dir: str | Path, *, episod
         A trajectory the graph would not have produced this way (a flexible
         plant's mode, thinned steps), or a bag that cannot be created.
     """
-    if scn.param("plant", "model") == "flexible_axis":
-        raise RunError("record_episode: the flexible plant's mode is not in the trajectory; record through the graph")
-    if tr.wheel_angle is None or tr.wheel_effort is None or tr.omega_RN_R is None:
-        raise RunError("record_episode: the trajectory lacks wheel angles, efforts or rate setpoints")
-    dt_ns = int(round(scn.dt * 1e9))
-    stamps = np.round(tr.t * 1e9).astype(np.int64)
-    if not np.array_equal(stamps, np.arange(stamps.size) * dt_ns):
-        raise RunError("record_episode: the trajectory must keep every step (stride 1)")
+    stamps = _graph_stamps(scn, tr)
     params = dict(controller_params or {})
     extra = extra_parameters(scn, duration, controller, False)
     try:

@@ -266,6 +266,27 @@ def _chunk_records(chunk_body: bytes, where: str) -> list[Any]:
         raise BagError(f'{where}: {_first_line(exc)}') from None
 
 
+def _scan_chunk(info: _McapFile, body: bytes, pos: int, where: str) -> None:
+    """Add the schemas, channels and messages of the chunk record at byte offset ``pos`` to ``info``."""
+    ids: set[int] = set()
+    start = end = None
+    for record in _chunk_records(body, where):
+        if isinstance(record, Schema):
+            info.schemas[record.id] = record
+        elif isinstance(record, Channel):
+            info.channels[record.id] = record
+            info.counts.setdefault(record.id, 0)
+        elif isinstance(record, Message):
+            _check_channel(info, record, where)
+            ids.add(record.channel_id)
+            info.counts[record.channel_id] += 1
+            info.add_time(record.log_time)
+            start = record.log_time if start is None else min(start, record.log_time)
+            end = record.log_time if end is None else max(end, record.log_time)
+    if start is not None and end is not None:
+        info.chunks.append(_ChunkRef(pos, start, end, frozenset(ids)))
+
+
 def _scan_file(f: BinaryIO, info: _McapFile, closed: bool) -> None:
     """Index ``info`` by reading every record from the start.
 
@@ -294,23 +315,7 @@ def _scan_file(f: BinaryIO, info: _McapFile, closed: bool) -> None:
         where = f'{path}: corrupt {_opcode_name(opcode)} record at byte offset {pos}'
         try:
             if opcode == Opcode.CHUNK:
-                ids: set[int] = set()
-                start = end = None
-                for record in _chunk_records(body, where):
-                    if isinstance(record, Schema):
-                        info.schemas[record.id] = record
-                    elif isinstance(record, Channel):
-                        info.channels[record.id] = record
-                        info.counts.setdefault(record.id, 0)
-                    elif isinstance(record, Message):
-                        _check_channel(info, record, where)
-                        ids.add(record.channel_id)
-                        info.counts[record.channel_id] += 1
-                        info.add_time(record.log_time)
-                        start = record.log_time if start is None else min(start, record.log_time)
-                        end = record.log_time if end is None else max(end, record.log_time)
-                if start is not None and end is not None:
-                    info.chunks.append(_ChunkRef(pos, start, end, frozenset(ids)))
+                _scan_chunk(info, body, pos, where)
             elif opcode in (Opcode.SCHEMA, Opcode.CHANNEL, Opcode.MESSAGE, Opcode.METADATA):
                 stream = ReadDataStream(io.BytesIO(body))
                 if opcode == Opcode.SCHEMA:

@@ -232,6 +232,43 @@ class RecordResult:
     episode_done: bool = False
 
 
+def _record_topics(bag: str | Path, topics: list[str] | None, episode: bool) -> tuple[dict[str, str], list[str]]:
+    """``record``'s checks before ROS starts: the topics to record and the per-step ones among them."""
+    selected = check_topics(topics)
+    try:
+        check_bag_dir(bag)
+    except (ValueError, OSError) as exc:
+        raise AttitudeSilError(str(exc)) from None
+    per_step = [n for n in selected if n in STEP_TOPICS and n not in COMMAND_TOPICS]
+    if episode and not per_step:
+        raise AttitudeSilError("--episode needs a step topic among --topics (e.g. attitude) to see the episode end")
+    return selected, per_step
+
+
+class _EpisodeEnds:
+    """Watches ``record``'s per-step topics for the end of each episode and reports it once."""
+
+    def __init__(self, per_step: list[str]) -> None:
+        self.per_step = per_step
+        self.reported_end = False
+        self.counted = 0  # messages of per_step[0] in the episodes reported
+
+    def check(self, rec: Recorder, scn: Scenario, say: Callable[[str], None]) -> bool:
+        """Report an episode that has just ended (with how many of its steps were recorded); True if one has."""
+        # the plant's last step (t = duration) has reached every per-step topic: the plant stops there
+        end_ns = scn.steps() * round(scn.dt * 1e9)
+        ended = all(rec.last_stamp.get(n) == end_ns for n in self.per_step)
+        new_end = ended and not self.reported_end
+        if new_end:
+            steps = rec.counts.get(self.per_step[0], 0) - self.counted
+            self.counted += steps
+            say(f"episode recorded to t={end_ns * 1e-9:.3f} s: {steps} of {scn.steps() + 1} steps on "
+                f"{rec.resolved[self.per_step[0]]}" + ("" if steps == scn.steps() + 1 else
+                                                      " (started recording after the episode began)"))
+        self.reported_end = ended  # a new episode (stamps back at its start) is reported again at its end
+        return new_end
+
+
 def record_graph(bag: str | Path, topics: list[str] | None = None, namespace: str | None = None,
                  episode: bool = False, say: Callable[[str], None] = print) -> RecordResult:
     """Record a running graph to ``bag`` until a stop signal, or the end of the next episode with ``episode``.
@@ -260,14 +297,7 @@ def record_graph(bag: str | Path, topics: list[str] | None = None, namespace: st
         Bad input, a bag that cannot be created, a failed write.
     """
     ns = check_namespace(namespace)
-    selected = check_topics(topics)
-    try:
-        check_bag_dir(bag)
-    except (ValueError, OSError) as exc:
-        raise AttitudeSilError(str(exc)) from None
-    per_step = [n for n in selected if n in STEP_TOPICS and n not in COMMAND_TOPICS]
-    if episode and not per_step:
-        raise AttitudeSilError("--episode needs a step topic among --topics (e.g. attitude) to see the episode end")
+    selected, per_step = _record_topics(bag, topics, episode)
     where = f" under /{ns}" if ns else ""
     ros = _Ros(lambda **kw: Recorder(None, topics=selected, history=False, qos_from_graph=True, name="record",
                                      **kw, **namespace_kwargs(ns)))
@@ -284,7 +314,7 @@ def record_graph(bag: str | Path, topics: list[str] | None = None, namespace: st
         clients = {n: AsyncParameterClient(rec, _target(ns, n)) for n in GRAPH_NODES}
         scn = None
         ask_at, asked = 0.0, False  # when to ask the graph for its parameters (again)
-        reported_end, counted = False, 0  # counted: messages of per_step[0] in the episodes reported
+        ends = _EpisodeEnds(per_step)
         while True:
             try:  # a stop signal (Ctrl-C, SIGTERM, SIGHUP) ends the recording: the normal way to stop it
                 ros.spin(0.05)
@@ -306,20 +336,9 @@ def record_graph(bag: str | Path, topics: list[str] | None = None, namespace: st
                 break
             if rec.error:
                 raise RunError(f"{rec.error}; the bag is readable up to there")
-            if per_step and scn is not None and scn.duration > 0:
-                # the plant's last step (t = duration) has reached every per-step topic: the plant stops there
-                end_ns = scn.steps() * round(scn.dt * 1e9)
-                ended = all(rec.last_stamp.get(n) == end_ns for n in per_step)
-                if ended and not reported_end:
-                    steps = rec.counts.get(per_step[0], 0) - counted
-                    counted += steps
-                    say(f"episode recorded to t={end_ns * 1e-9:.3f} s: {steps} of {scn.steps() + 1} steps on "
-                        f"{rec.resolved[per_step[0]]}" + ("" if steps == scn.steps() + 1 else
-                                                         " (started recording after the episode began)"))
-                    if episode:
-                        result.episode_done = True
-                        break
-                reported_end = ended  # a new episode (stamps back at its start) is reported again at its end
+            if per_step and scn is not None and scn.duration > 0 and ends.check(rec, scn, say) and episode:
+                result.episode_done = True
+                break
         result.counts = {rec.resolved[n]: c for n, c in rec.counts.items()}
     finally:
         try:

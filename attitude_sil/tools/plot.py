@@ -236,7 +236,34 @@ def plot_bag(bag_path: str | Path, out_png: str | Path, title: str | None = None
     if t1 <= t0:
         t1 = t0 + 1.0
     wheels = {name: s for name, s in wheels.items() if np.any(np.asarray(s.v) != 0.0)}
+    panels = _panels(series, wheels)
 
+    fig = Figure(figsize=(_FIG_WIDTH_IN, _PANEL_HEIGHT_IN * len(panels)), dpi=_DPI)
+    axes = fig.subplots(len(panels), 1, sharex=True, squeeze=False)
+    axes = axes[:, 0]
+    try:
+        for ax, panel in zip(axes, panels, strict=True):
+            _draw_panel(ax, panel, t_att, q_att, series, wheels)
+
+        shown_swaps = [(t, name) for t, name in swaps if t0 <= t <= t1]
+        _mark_swaps(axes, shown_swaps)
+        axes[-1].set_xlim(t0, t1)
+        axes[-1].set_xlabel('sim time (s)')
+        if title is None:
+            controllers = ([initial] if initial else []) + [name for _, name in shown_swaps]
+            title = _bag_name(bag_path) + (f' — controller: {" → ".join(controllers)}' if controllers else '')
+        # The title of the top panel, raised over the swap labels (fig.suptitle would collide).
+        axes[0].set_title(title, pad=17 if shown_swaps else 6)
+        fig.tight_layout()
+        out_png.parent.mkdir(parents=True, exist_ok=True)
+        fig.savefig(out_png, dpi=_DPI)
+    finally:
+        fig.clear()
+    return out_png
+
+
+def _panels(series: dict[str, _Series], wheels: dict[str, _Series]) -> list[str]:
+    """The panels to draw, top to bottom: each quantity with messages (wheels: with a non-zero speed)."""
     panels: list[str] = [ATTITUDE]
     panels += [p for p in (ATTITUDE_ERROR, BODY_RATE) if p in series]
     if VOLTAGE_CMD in series or TORQUE_CMD in series:
@@ -244,89 +271,102 @@ def plot_bag(bag_path: str | Path, out_png: str | Path, title: str | None = None
     if wheels:
         panels.append('wheels')
     panels += [p for p in (DISTURBANCE_TORQUE, FLEXIBLE_MODE) if p in series]
+    return panels
 
-    fig = Figure(figsize=(_FIG_WIDTH_IN, _PANEL_HEIGHT_IN * len(panels)), dpi=_DPI)
-    axes = fig.subplots(len(panels), 1, sharex=True, squeeze=False)
-    axes = axes[:, 0]
-    try:
-        for ax, panel in zip(axes, panels, strict=True):
-            if panel == ATTITUDE:
-                rpy = _euler_deg(q_att)
-                for k, name in enumerate(('roll', 'pitch', 'yaw')):
-                    ax.plot(t_att, rpy[:, k], color=_AXIS_COLOURS[k], lw=1.3, label=name)
-                handles, labels = ax.get_legend_handles_labels()
-                if ATTITUDE_SETPOINT in series:
-                    t_sp, q_sp = series[ATTITUDE_SETPOINT].arrays()
-                    sp = _euler_deg(q_sp)
-                    for k in range(3):
-                        # Above the attitude lines, so a setpoint equal to another axis' angle shows.
-                        ax.plot(t_sp, sp[:, k], color=_AXIS_COLOURS[k], lw=1.1, ls='--', zorder=3)
-                    handles.append(Line2D([], [], color='0.3', lw=1.1, ls='--'))
-                    labels.append('setpoint')
-                ax.set_ylabel('attitude (deg)')
-                _legend(ax, handles, labels)
-            elif panel in (ATTITUDE_ERROR, BODY_RATE):
-                t, v = series[panel].arrays()
-                label, axis_names = ({ATTITUDE_ERROR: ('attitude error (deg)', ('roll', 'pitch', 'yaw')),
-                                      BODY_RATE: ('body rate (deg/s)',
-                                                    (r'$\omega_x$', r'$\omega_y$', r'$\omega_z$'))}[panel])
-                for k in range(3):
-                    ax.plot(t, np.degrees(v[:, k]), color=_AXIS_COLOURS[k], lw=1.2, label=axis_names[k])
-                ax.set_ylabel(label)
-                _legend(ax)
-            elif panel == 'command':
-                _plot_command(ax, series, Line2D)
-            elif panel == 'wheels':
-                # Wheels of a symmetric layout often turn alike: line styles keep them apart.
-                for k, (name, s) in enumerate(wheels.items()):
-                    t, v = s.arrays()
-                    ax.plot(t, v, color=f'C{k % 10}', lw=1.3, ls=_WHEEL_STYLES[k % len(_WHEEL_STYLES)],
-                            label=name)
-                ax.set_ylabel('wheel speed (rpm)')
-                _legend(ax)
-            elif panel == DISTURBANCE_TORQUE:
-                t, v = series[panel].arrays()
-                for k, name in enumerate(('x', 'y', 'z')):
-                    ax.plot(t, v[:, k], color=_AXIS_COLOURS[k], lw=1.2, label=rf'$\tau_{{d,{name}}}$')
-                ax.set_ylabel('disturbance (N m)')
-                if np.any(v != 0.0):
-                    _sci(ax)
-                else:
-                    ax.set_ylim(-1.0, 1.0)
-                    ax.text(0.5, 0.75, 'no disturbance torque (all zero)', transform=ax.transAxes,
-                            ha='center', va='center', color='0.35')
-                _legend(ax)
-            elif panel == FLEXIBLE_MODE:
-                t, v = series[panel].arrays()
-                ax.plot(t, np.degrees(v[:, 0]), color='C4', lw=1.2, label=r'$\alpha$')
-                ax.set_ylabel(r'flex mode $\alpha$ (deg)')
-                _legend(ax)
-            ax.grid(True, alpha=0.3)
-            ax.margins(x=0.0)
 
-        shown_swaps = [(t, name) for t, name in swaps if t0 <= t <= t1]
-        for ax in axes:
-            for t, _ in shown_swaps:
-                ax.axvline(t, color='0.25', ls='--', lw=1.0, zorder=0.5)
-        top = axes[0]
-        trans = blended_transform_factory(top.transData, top.transAxes)
-        for t, name in shown_swaps:
-            # Above the panel, clear of the data; tight_layout makes room under the title.
-            top.text(t, 1.02, f'→ {name} ({t:g} s)', transform=trans, ha='center', va='bottom', fontsize='small',
-                     color='0.15')
-        axes[-1].set_xlim(t0, t1)
-        axes[-1].set_xlabel('sim time (s)')
-        if title is None:
-            controllers = ([initial] if initial else []) + [name for _, name in shown_swaps]
-            title = _bag_name(bag_path) + (f' — controller: {" → ".join(controllers)}' if controllers else '')
-        # The title of the top panel, raised over the swap labels (fig.suptitle would collide).
-        top.set_title(title, pad=17 if shown_swaps else 6)
-        fig.tight_layout()
-        out_png.parent.mkdir(parents=True, exist_ok=True)
-        fig.savefig(out_png, dpi=_DPI)
-    finally:
-        fig.clear()
-    return out_png
+def _draw_panel(ax: Any, panel: str, t_att: np.ndarray, q_att: np.ndarray, series: dict[str, _Series],
+                wheels: dict[str, _Series]) -> None:
+    """Draw one panel of :func:`plot_bag` (a name from :func:`_panels`) on ``ax``, with its grid."""
+    if panel == ATTITUDE:
+        _plot_attitude(ax, t_att, q_att, series)
+    elif panel in (ATTITUDE_ERROR, BODY_RATE):
+        _plot_angular(ax, panel, series)
+    elif panel == 'command':
+        _plot_command(ax, series, Line2D)
+    elif panel == 'wheels':
+        _plot_wheels(ax, wheels)
+    elif panel == DISTURBANCE_TORQUE:
+        _plot_disturbance(ax, series)
+    elif panel == FLEXIBLE_MODE:
+        _plot_flexible_mode(ax, series)
+    ax.grid(True, alpha=0.3)
+    ax.margins(x=0.0)
+
+
+def _plot_attitude(ax: Any, t_att: np.ndarray, q_att: np.ndarray, series: dict[str, _Series]) -> None:
+    """Roll, pitch, yaw (deg, solid) with the setpoint (dashed, same colours) if recorded."""
+    rpy = _euler_deg(q_att)
+    for k, name in enumerate(('roll', 'pitch', 'yaw')):
+        ax.plot(t_att, rpy[:, k], color=_AXIS_COLOURS[k], lw=1.3, label=name)
+    handles, labels = ax.get_legend_handles_labels()
+    if ATTITUDE_SETPOINT in series:
+        t_sp, q_sp = series[ATTITUDE_SETPOINT].arrays()
+        sp = _euler_deg(q_sp)
+        for k in range(3):
+            # Above the attitude lines, so a setpoint equal to another axis' angle shows.
+            ax.plot(t_sp, sp[:, k], color=_AXIS_COLOURS[k], lw=1.1, ls='--', zorder=3)
+        handles.append(Line2D([], [], color='0.3', lw=1.1, ls='--'))
+        labels.append('setpoint')
+    ax.set_ylabel('attitude (deg)')
+    _legend(ax, handles, labels)
+
+
+def _plot_angular(ax: Any, panel: str, series: dict[str, _Series]) -> None:
+    """Attitude error (deg) or body rates (deg/s), one line per axis."""
+    t, v = series[panel].arrays()
+    label, axis_names = ({ATTITUDE_ERROR: ('attitude error (deg)', ('roll', 'pitch', 'yaw')),
+                          BODY_RATE: ('body rate (deg/s)',
+                                      (r'$\omega_x$', r'$\omega_y$', r'$\omega_z$'))}[panel])
+    for k in range(3):
+        ax.plot(t, np.degrees(v[:, k]), color=_AXIS_COLOURS[k], lw=1.2, label=axis_names[k])
+    ax.set_ylabel(label)
+    _legend(ax)
+
+
+def _plot_wheels(ax: Any, wheels: dict[str, _Series]) -> None:
+    """Wheel speeds (rpm), one line per joint."""
+    # Wheels of a symmetric layout often turn alike: line styles keep them apart.
+    for k, (name, s) in enumerate(wheels.items()):
+        t, v = s.arrays()
+        ax.plot(t, v, color=f'C{k % 10}', lw=1.3, ls=_WHEEL_STYLES[k % len(_WHEEL_STYLES)], label=name)
+    ax.set_ylabel('wheel speed (rpm)')
+    _legend(ax)
+
+
+def _plot_disturbance(ax: Any, series: dict[str, _Series]) -> None:
+    """Disturbance torque (N m) per axis; a note instead of a scale when it is all zero."""
+    t, v = series[DISTURBANCE_TORQUE].arrays()
+    for k, name in enumerate(('x', 'y', 'z')):
+        ax.plot(t, v[:, k], color=_AXIS_COLOURS[k], lw=1.2, label=rf'$\tau_{{d,{name}}}$')
+    ax.set_ylabel('disturbance (N m)')
+    if np.any(v != 0.0):
+        _sci(ax)
+    else:
+        ax.set_ylim(-1.0, 1.0)
+        ax.text(0.5, 0.75, 'no disturbance torque (all zero)', transform=ax.transAxes,
+                ha='center', va='center', color='0.35')
+    _legend(ax)
+
+
+def _plot_flexible_mode(ax: Any, series: dict[str, _Series]) -> None:
+    """The flexible mode alpha (deg)."""
+    t, v = series[FLEXIBLE_MODE].arrays()
+    ax.plot(t, np.degrees(v[:, 0]), color='C4', lw=1.2, label=r'$\alpha$')
+    ax.set_ylabel(r'flex mode $\alpha$ (deg)')
+    _legend(ax)
+
+
+def _mark_swaps(axes: Any, shown_swaps: list[tuple[float, str]]) -> None:
+    """Controller swaps as dashed vertical lines on every panel, labelled with the new type above the top one."""
+    for ax in axes:
+        for t, _ in shown_swaps:
+            ax.axvline(t, color='0.25', ls='--', lw=1.0, zorder=0.5)
+    top = axes[0]
+    trans = blended_transform_factory(top.transData, top.transAxes)
+    for t, name in shown_swaps:
+        # Above the panel, clear of the data; tight_layout makes room under the title.
+        top.text(t, 1.02, f'→ {name} ({t:g} s)', transform=trans, ha='center', va='bottom', fontsize='small',
+                 color='0.15')
 
 
 def _sci(ax: Any) -> None:

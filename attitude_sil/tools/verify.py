@@ -36,7 +36,7 @@ from attitude_sil.ros.convert import stamp_to_ns, vector_to_array
 from attitude_sil.ros.environment import localhost_environment
 from attitude_sil.ros.parameters import typed_parameter
 from attitude_sil.ros.qos import LOCKSTEP_QOS
-from attitude_sil.storage.reader import open_bag
+from attitude_sil.storage.reader import BagReader, open_bag
 from attitude_sil.storage.writer import PARAMETERS_KEY
 
 __all__ = ["VerifyResult", "verify_controller", "controller_parameters"]
@@ -130,6 +130,59 @@ def _param_changes(reader) -> list[tuple[int, dict]]:
     return out
 
 
+def _bag_topics(reader: BagReader) -> tuple[dict[str, str], list[str]]:
+    """The bag's controller input topics (short name -> full name) and command topics; BagError if missing."""
+    names = {}
+    for short in INPUTS:
+        full = reader.find_topic(short)
+        if full is None:
+            raise BagError(f"{reader.paths[0]}: no {short} topic: cannot feed a controller")
+        names[short] = full
+    cmd_topics = [t for t in (reader.find_topic(c) for c in COMMANDS) if t is not None]
+    if not cmd_topics:
+        raise BagError(f"{reader.paths[0]}: no voltage_cmd or torque_cmd topic to compare with")
+    return names, cmd_topics
+
+
+def _recorded_steps(reader: BagReader, names: dict[str, str], cmd_topics: list[str]
+                    ) -> tuple[dict[int, dict[str, bytes]], dict[int, tuple[str, np.ndarray]], list[int]]:
+    """The recorded inputs (raw) and commands by stamp, and the stamps of the steps that have all of them."""
+    inputs: dict[int, dict[str, bytes]] = {}
+    for msg in reader.iter_raw(topics=list(names.values())):
+        inputs.setdefault(msg.log_time_ns, {})[msg.topic.split("/")[-1]] = msg.data
+    recorded: dict[int, tuple[str, np.ndarray]] = {}
+    for raw, msg in reader.iter_decoded(topics=cmd_topics):
+        recorded[raw.log_time_ns] = (raw.topic.split("/")[-1], vector_to_array(msg))
+    stamps = sorted(t for t, v in inputs.items() if len(v) == len(INPUTS) and t in recorded)
+    if not stamps:
+        raise BagError(f"{reader.paths[0]}: no step has all controller inputs and a recorded command")
+    return inputs, recorded, stamps
+
+
+def _apply_changes(ctrl: ControllerNode, pending: list[tuple[int, dict]], t: int) -> int:
+    """Apply (and drop from ``pending``) the recorded parameter changes stamped before step ``t``; how many."""
+    applied = 0
+    while pending and pending[0][0] < t:
+        _, change = pending.pop(0)
+        results = ctrl.set_parameters([Parameter(k, value=v) for k, v in change.items()])
+        if not all(r.successful for r in results):
+            raise BagError(f"the recorded change {change} is refused now: "
+                           f"{'; '.join(r.reason for r in results if not r.successful)}")
+        applied += 1
+    return applied
+
+
+def _deviation(got: tuple[str, np.ndarray], recorded: tuple[str, np.ndarray]) -> tuple[float, int]:
+    """Largest |new - recorded| of one step's command and its axis; inf if the command kinds differ."""
+    kind, vec = got
+    rec_kind, rec_vec = recorded
+    if kind != rec_kind:
+        return math.inf, 0
+    d = np.abs(vec - rec_vec)
+    axis = int(np.argmax(d))
+    return float(d[axis]), axis
+
+
 def verify_controller(bag_path: str | Path, params_file: str | Path | None = None, tolerance: float = 1e-9,
                       timeout: float = 10.0) -> VerifyResult:
     """Feed the recorded plant topics to a fresh controller node and compare its commands.
@@ -146,26 +199,10 @@ def verify_controller(bag_path: str | Path, params_file: str | Path | None = Non
     if params_file is not None:
         controller_parameters(bag_path, params_file)  # a bad --params is refused before the bag is read
     reader = open_bag(bag_path)
-    names = {}
-    for short in INPUTS:
-        full = reader.find_topic(short)
-        if full is None:
-            raise BagError(f"{reader.paths[0]}: no {short} topic: cannot feed a controller")
-        names[short] = full
-    cmd_topics = [t for t in (reader.find_topic(c) for c in COMMANDS) if t is not None]
-    if not cmd_topics:
-        raise BagError(f"{reader.paths[0]}: no voltage_cmd or torque_cmd topic to compare with")
+    names, cmd_topics = _bag_topics(reader)
     values = controller_parameters(bag_path, params_file)
     changes = _param_changes(reader)
-    inputs: dict[int, dict[str, bytes]] = {}
-    for msg in reader.iter_raw(topics=list(names.values())):
-        inputs.setdefault(msg.log_time_ns, {})[msg.topic.split("/")[-1]] = msg.data
-    recorded: dict[int, tuple[str, np.ndarray]] = {}
-    for raw, msg in reader.iter_decoded(topics=cmd_topics):
-        recorded[raw.log_time_ns] = (raw.topic.split("/")[-1], vector_to_array(msg))
-    stamps = sorted(t for t, v in inputs.items() if len(v) == len(INPUTS) and t in recorded)
-    if not stamps:
-        raise BagError(f"{reader.paths[0]}: no step has all controller inputs and a recorded command")
+    inputs, recorded, stamps = _recorded_steps(reader, names, cmd_topics)
 
     localhost_environment()
     context = rclpy.Context()
@@ -195,13 +232,7 @@ def verify_controller(bag_path: str | Path, params_file: str | Path | None = Non
         applied = 0
         worst = (0.0, 0.0, 0)
         for t in stamps:
-            while pending and pending[0][0] < t:
-                _, change = pending.pop(0)
-                results = ctrl.set_parameters([Parameter(k, value=v) for k, v in change.items()])
-                if not all(r.successful for r in results):
-                    raise BagError(f"the recorded change {change} is refused now: "
-                                   f"{'; '.join(r.reason for r in results if not r.successful)}")
-                applied += 1
+            applied += _apply_changes(ctrl, pending, t)
             for n in INPUTS:
                 pubs[n].publish(inputs[t][n])
             deadline = time.monotonic() + timeout
@@ -209,14 +240,7 @@ def verify_controller(bag_path: str | Path, params_file: str | Path | None = Non
                 if time.monotonic() > deadline:
                     raise BagError(f"the controller gave no command for t={t * 1e-9:.6f} s")
                 executor.spin_once(timeout_sec=0.05)
-            kind, vec = got[t]
-            rec_kind, rec_vec = recorded[t]
-            if kind != rec_kind:
-                dev, axis = math.inf, 0
-            else:
-                d = np.abs(vec - rec_vec)
-                axis = int(np.argmax(d))
-                dev = float(d[axis])
+            dev, axis = _deviation(got[t], recorded[t])
             if dev > worst[0]:
                 worst = (dev, t * 1e-9, axis)
         return VerifyResult(len(stamps), worst[0], worst[1], worst[2], tolerance, applied)

@@ -51,6 +51,7 @@ from attitude_sil.errors import ScenarioError, SpecError
 
 from .dispersions import check_dispersions, episode_values, run_scenario, value_columns
 from .executor import Executor
+from .spec import output_path
 
 __all__ = ["MonteCarloSpec", "load_mc_spec", "run_chunk", "run_campaign", "CampaignResult", "METRIC_KEYS",
            "worst_runs", "summarize_campaign"]
@@ -119,6 +120,37 @@ def load_mc_spec(path: str | Path, runs: int | None = None) -> MonteCarloSpec:
         key = sorted(unknown)[0]
         close = difflib.get_close_matches(key, _TOP, n=1)
         raise _fail(p, f"unknown key {key!r}" + (f" (did you mean {close[0]!r}?)" if close else ""))
+    scn = _spec_scenario(p, data)
+    controller = data.get("controller")
+    if controller is not None and controller not in registry.names():
+        raise _fail(p, f"controller must be one of {', '.join(registry.names())}, got {controller!r}")
+    try:
+        check_episode(scn, controller)
+    except ScenarioError as exc:
+        raise _fail(p, f"scenario: {exc}") from None
+    n_runs = _int(p, "runs", data.get("runs", 100), 1, MAX_RUNS)
+    if runs is not None:
+        if isinstance(runs, bool) or not isinstance(runs, int) or not 1 <= runs <= MAX_RUNS:
+            raise SpecError(f"--runs must be an integer in 1..{MAX_RUNS}, got {runs!r}")
+        n_runs = runs
+    seed = _int(p, "seed", data.get("seed", 1), 0, 2**32 - 1)
+    chunk = _int(p, "chunk", data.get("chunk", 100), 1, 100_000)
+    dispersions = check_dispersions(str(p), data.get("dispersions"), scn)
+    requirements = _requirements(p, data.get("requirements"), scn)
+    worst = _worst(p, data.get("worst"), requirements)
+    plot = _plot(p, data.get("plot"))
+    name = data.get("name") or p.stem
+    description = data.get("description", "")
+    if not isinstance(name, str) or not isinstance(description, str):
+        raise _fail(p, f"name and description must be strings, got {name!r} and {description!r}")
+    out = output_path(str(p), data.get("output") or f"results/{name}")  # the tuning spec's check, same messages
+    return MonteCarloSpec(path=p, name=name, scenario=scn, controller=controller, runs=n_runs, seed=seed, chunk=chunk,
+                          dispersions=dispersions, requirements=requirements, worst=worst, plot=plot, output=out,
+                          description=description, text_hash=hashlib.sha256(text).hexdigest())
+
+
+def _spec_scenario(p: Path, data: dict) -> Scenario:
+    """The spec's ``scenario`` file, with its ``params`` file laid over it and its ``set`` values."""
     if "scenario" not in data:
         raise _fail(p, "missing key 'scenario'")
     f = data["scenario"]
@@ -144,23 +176,12 @@ def load_mc_spec(path: str | Path, runs: int | None = None) -> MonteCarloSpec:
             scn = scn.with_values(node, **{name: value})
         except ScenarioError as exc:
             raise _fail(p, f"set {key}: {exc}") from None
-    controller = data.get("controller")
-    if controller is not None and controller not in registry.names():
-        raise _fail(p, f"controller must be one of {', '.join(registry.names())}, got {controller!r}")
-    try:
-        check_episode(scn, controller)
-    except ScenarioError as exc:
-        raise _fail(p, f"scenario: {exc}") from None
-    n_runs = _int(p, "runs", data.get("runs", 100), 1, MAX_RUNS)
-    if runs is not None:
-        if isinstance(runs, bool) or not isinstance(runs, int) or not 1 <= runs <= MAX_RUNS:
-            raise SpecError(f"--runs must be an integer in 1..{MAX_RUNS}, got {runs!r}")
-        n_runs = runs
-    seed = _int(p, "seed", data.get("seed", 1), 0, 2**32 - 1)
-    chunk = _int(p, "chunk", data.get("chunk", 100), 1, 100_000)
-    dispersions = check_dispersions(str(p), data.get("dispersions"), scn)
-    requirements = _requirements(p, data.get("requirements"), scn)
-    worst = data.get("worst") or {}
+    return scn
+
+
+def _worst(p: Path, raw: Any, requirements: dict[str, dict[str, float]]) -> dict[str, Any]:
+    """The spec's ``worst`` section: how many worst runs to record, ranked by which metric."""
+    worst = raw or {}
     if not isinstance(worst, dict) or set(worst) - {"metric", "count"}:
         raise _fail(p, f"worst must be a mapping of metric, count, got {worst!r}")
     worst = {"count": _int(p, "worst.count", worst.get("count", 3), 0, 100),
@@ -169,25 +190,16 @@ def load_mc_spec(path: str | Path, runs: int | None = None) -> MonteCarloSpec:
         raise _fail(p, f"worst.metric must be one of {', '.join(METRIC_KEYS)}, got {worst['metric']!r}")
     if worst["metric"] is None and worst["count"]:
         raise _fail(p, "worst.metric is needed when there are no requirements")
-    plot = data.get("plot") or {}
+    return worst
+
+
+def _plot(p: Path, raw: Any) -> dict[str, int]:
+    """The spec's ``plot`` section: how many runs to draw and the step stride."""
+    plot = raw or {}
     if not isinstance(plot, dict) or set(plot) - {"runs", "stride"}:
         raise _fail(p, f"plot must be a mapping of runs, stride, got {plot!r}")
-    plot = {"runs": _int(p, "plot.runs", plot.get("runs", 100), 0, 1000),
+    return {"runs": _int(p, "plot.runs", plot.get("runs", 100), 0, 1000),
             "stride": _int(p, "plot.stride", plot.get("stride", 10), 1, 10_000)}
-    name = data.get("name") or p.stem
-    description = data.get("description", "")
-    if not isinstance(name, str) or not isinstance(description, str):
-        raise _fail(p, f"name and description must be strings, got {name!r} and {description!r}")
-    out = data.get("output") or f"results/{name}"
-    if not isinstance(out, str) or not out.strip():
-        raise _fail(p, f"output must be a folder name, got {out!r}")
-    out = Path(out)
-    existing = next((q for q in (out, *out.parents) if q.exists()), None)
-    if existing is not None and not existing.is_dir():
-        raise _fail(p, f"output {out}: {existing} is a file, not a folder")
-    return MonteCarloSpec(path=p, name=name, scenario=scn, controller=controller, runs=n_runs, seed=seed, chunk=chunk,
-                          dispersions=dispersions, requirements=requirements, worst=worst, plot=plot, output=out,
-                          description=description, text_hash=hashlib.sha256(text).hexdigest())
 
 
 def _requirements(p: Path, raw: Any, scn: Scenario) -> dict[str, dict[str, float]]:

@@ -35,6 +35,7 @@ import math
 import time
 from collections.abc import Callable
 from pathlib import Path
+from typing import TextIO
 
 import numpy as np
 from pymoo.algorithms.moo.nsga2 import NSGA2
@@ -230,12 +231,7 @@ def run_tuning(spec: TuningSpec, *, resume: bool = False, evaluator: Callable[[n
     """
     if spec.algorithm["name"] == "root_locus":
         return tune_root_locus(spec, progress=progress)
-    out = spec.output
-    out.mkdir(parents=True, exist_ok=True)
-    log = out / "evaluations.jsonl"
-    if not resume and log.exists():
-        log.unlink()
-    cache = _load_cache(log) if resume else {}
+    log, cache = _open_log(spec, resume)
     algo, problem, gens = build_algorithm(spec)
     algo.setup(problem, termination=("n_gen", gens), seed=spec.seed, verbose=False)
     own = evaluator is None
@@ -258,19 +254,7 @@ def run_tuning(spec: TuningSpec, *, resume: bool = False, evaluator: Callable[[n
                 x = _as_array(spec, pop.get("X"))
                 t0 = time.monotonic()
                 cached = cache.get(gen)
-                if cached is not None:
-                    xc = np.array([r["x"] for r in cached])
-                    if xc.shape != x.shape or not np.allclose(xc, x, rtol=0, atol=1e-12):
-                        raise SpecError(f"{spec.path}: cannot resume: generation {gen} on disk differs from what "
-                                        "the spec and seed ask now")
-                    F = np.array([r["cost"] for r in cached])
-                    rows = cached
-                else:
-                    ev = score(x)
-                    F = ev.F
-                    rows = _rows(spec, gen, x, ev)
-                    fh.write("".join(json.dumps(r) + "\n" for r in rows))
-                    fh.flush()
+                F, rows = _score_generation(spec, gen, x, cached, score, fh)
                 n_eval += len(rows)
                 all_rows.extend(rows)
                 pop.set("F", F)
@@ -292,6 +276,39 @@ def run_tuning(spec: TuningSpec, *, resume: bool = False, evaluator: Callable[[n
     finally:
         if own:
             ev_ctx.__exit__(None, None, None)
+    return _finish_run(spec, all_rows, history, best_x, best_f, n_eval, interrupted)
+
+
+def _open_log(spec: TuningSpec, resume: bool) -> tuple[Path, dict[int, list[dict]]]:
+    """Create the output folder; the evaluation log (removed unless resuming) and its generations on disk."""
+    out = spec.output
+    out.mkdir(parents=True, exist_ok=True)
+    log = out / "evaluations.jsonl"
+    if not resume and log.exists():
+        log.unlink()
+    cache = _load_cache(log) if resume else {}
+    return log, cache
+
+
+def _score_generation(spec: TuningSpec, gen: int, x: np.ndarray, cached: list[dict] | None,
+                      score: Callable[[np.ndarray], Evaluation], fh: TextIO) -> tuple[np.ndarray, list[dict]]:
+    """Costs and rows of a generation: from the log when resuming (it must match ``x``), else scored and logged."""
+    if cached is not None:
+        xc = np.array([r["x"] for r in cached])
+        if xc.shape != x.shape or not np.allclose(xc, x, rtol=0, atol=1e-12):
+            raise SpecError(f"{spec.path}: cannot resume: generation {gen} on disk differs from what "
+                            "the spec and seed ask now")
+        return np.array([r["cost"] for r in cached]), cached
+    ev = score(x)
+    rows = _rows(spec, gen, x, ev)
+    fh.write("".join(json.dumps(r) + "\n" for r in rows))
+    fh.flush()
+    return ev.F, rows
+
+
+def _finish_run(spec: TuningSpec, all_rows: list[dict], history: list[dict], best_x: np.ndarray | None,
+            best_f: np.ndarray, n_eval: int, interrupted: bool) -> TuningResult:
+    """Write the run's result files and return its result; SpecError if no generation was evaluated."""
     if best_x is None:
         raise SpecError(f"{spec.path}: no generation was evaluated")
     front = []

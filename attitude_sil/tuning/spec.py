@@ -42,7 +42,7 @@ from attitude_sil.errors import ScenarioError, SpecError
 from .dispersions import check_dispersions
 
 __all__ = ["SpecError", "SECTIONS", "Gene", "TuningSpec", "load_spec", "apply_overrides", "decode", "ALGORITHMS",
-           "COSTS"]
+           "COSTS", "output_path"]
 
 ALGORITHMS = ("ga", "binary_ga", "pso", "mixed_ga", "nsga2", "root_locus")
 COSTS = ("paper000_j", "paper001_fitness", "mse", "paper004_objective", "ts_ce")
@@ -123,7 +123,8 @@ def _check_combination(where: str, genome: list, cost: dict, algorithm: dict) ->
         raise SpecError(f"{where}: nsga2 needs the two-objective cost ts_ce")
 
 
-def _output(where: str, value: Any) -> Path:
+def output_path(where: str, value: Any) -> Path:
+    """A spec's ``output`` folder (tuning and Monte Carlo alike), refused in one line where it cannot be one."""
     if not isinstance(value, str) or not value.strip():
         raise SpecError(f"{where}: output must be a folder name, got {value!r}")
     out = Path(value)
@@ -318,7 +319,7 @@ def load_spec(path: str | Path) -> TuningSpec:
     description = data.get("description", "")
     if not isinstance(name, str) or not isinstance(description, str):
         raise _fail(p, f"name and description must be strings, got {name!r} and {description!r}")
-    out = _output(str(p), data.get("output") or f"results/{name}")
+    out = output_path(str(p), data.get("output") or f"results/{name}")
     robust = _robust(p, data.get("robust"), scenarios)
     if robust and evaluation["mode"] != "batch":
         raise _fail(p, "robust needs evaluation.mode batch")
@@ -400,7 +401,8 @@ def apply_overrides(spec: TuningSpec, overrides: dict[str, Any]) -> TuningSpec:
                 raise SpecError(f"{where}: seed {_SEED(value)}")
             spec.seed = value
         elif section == "output" and not name:
-            spec.output = _output(where, value if value is None or not isinstance(value, (int, float)) else str(value))
+            number = value is not None and isinstance(value, (int, float))
+            spec.output = output_path(where, str(value) if number else value)
         elif section in SECTIONS and name:
             setattr(spec, section, _section(where, section, {**getattr(spec, section), name: value}))
         else:
