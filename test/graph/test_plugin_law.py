@@ -117,7 +117,9 @@ def test_tune_spec_of_the_example_runs_and_its_genome_is_checked(tmp_path):
 
 def test_montecarlo_spec_of_the_example_runs(cli, tmp_path):
     spec = yaml.safe_load((EXAMPLE / "mc_hst_quat_pd.yaml").read_text())
-    spec.update(scenario=str(CONFIG / "hst_roll_step.yaml"), output=str(tmp_path / "mc"))
+    # the worst run re-run through the graph into a bag: one (each costs a graph episode)
+    spec.update(scenario=str(CONFIG / "hst_roll_step.yaml"), output=str(tmp_path / "mc"),
+                worst={"metric": "settling_time_s", "count": 1})
     path = tmp_path / "mc.yaml"
     path.write_text(yaml.safe_dump(spec))
     res = cli("montecarlo", path, "--runs", "12")
@@ -125,6 +127,8 @@ def test_montecarlo_spec_of_the_example_runs(cli, tmp_path):
     summary = json.loads((tmp_path / "mc" / "summary.json").read_text())
     assert summary["controller"] == LAW and summary["completed_runs"] == 12
     assert summary["metrics"]["time_constant_s"]["never"] == 0  # every dispersed run moved toward the step
+    bags = sorted((tmp_path / "mc" / "bags").iterdir())
+    assert len(bags) == 1 and (bags[0] / "metadata.yaml").is_file()
 
 
 def test_replay_verifies_a_recorded_run_of_it(tmp_path):
