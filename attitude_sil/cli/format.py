@@ -28,7 +28,10 @@ def format_table(metrics: dict) -> str:
     ]
     extra = [("MSE (paper 002 eq. 10)", "mse", "rad^2"), ("max |error|", "max_abs_error_rad", "rad"),
              ("fitness f (paper 001 eq. 8)", "fitness_f", ""),
-             ("final error angle", "final_error_rad", "rad")]
+             ("final error angle", "final_error_rad", "rad"),
+             ("controller latency mean", "controller_latency_mean_ms", "ms"),
+             ("controller latency p99", "controller_latency_p99_ms", "ms"),
+             ("controller latency max", "controller_latency_max_ms", "ms")]
     rows += [(label, metrics[key], unit) for label, key, unit in extra if key in metrics]
     lines = [f"scenario {metrics['scenario']}"]
     for label, value, unit in rows:

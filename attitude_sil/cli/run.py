@@ -9,6 +9,7 @@ from __future__ import annotations
 import argparse
 
 from attitude_sil.core.control import registry
+from attitude_sil.ros.contract import ROLE_OUTPUTS
 from attitude_sil.storage.foxglove import DEFAULT_HOST, DEFAULT_PORT
 
 
@@ -41,6 +42,12 @@ def add(sub: argparse._SubParsersAction) -> None:
     run.add_argument("--namespace", help="run the whole graph, its /clock included, under this namespace")
     run.add_argument("--swap", action="append", metavar="TIME:TYPE",
                      help=f"swap controller_type at a sim time (repeatable), e.g. --swap 2.0:fuzzy_pid; TYPE: {laws}")
+    run.add_argument("--external", action="append", metavar="NODE", choices=tuple(ROLE_OUTPUTS),
+                     help=f"do not start this graph node ({', '.join(ROLE_OUTPUTS)}; repeatable): wait for a node of "
+                     "yours that speaks its part of the topic contract, e.g. --external controller "
+                     "(docs/flight-software.md)")
+    run.add_argument("--external-timeout", type=float, default=60.0, metavar="S",
+                     help="wall seconds to wait for the external node(s) (default 60)")
     run.add_argument("--foxglove", nargs="?", const=DEFAULT_PORT, type=port_number, metavar="PORT",
                      help=f"serve every topic live to Foxglove over WebSocket (default port {DEFAULT_PORT}); "
                      "paces the run at real time")
@@ -86,6 +93,9 @@ def execute(args: argparse.Namespace) -> int:
                                                  "schedule.controller_types": [kinds[i] for i in order]})
         except AttitudeSilError as exc:
             raise AttitudeSilError(f"--swap: {exc}") from None
+    if not (math.isfinite(args.external_timeout) and args.external_timeout > 0):
+        raise AttitudeSilError(f"--external-timeout must be a finite number of seconds > 0, got "
+                               f"{args.external_timeout}")
     if args.foxglove is None and (args.foxglove_fast or args.foxglove_host is not None):
         raise AttitudeSilError("--foxglove-fast and --foxglove-host go with --foxglove [PORT]")
     host = DEFAULT_HOST if args.foxglove_host is None else args.foxglove_host
@@ -111,7 +121,7 @@ def execute(args: argparse.Namespace) -> int:
                            processes=args.processes, real_time=args.real_time or (
                                args.foxglove is not None and not args.foxglove_fast),
                            progress=not args.quiet, namespace=args.namespace, before_start=start,
-                           live=lambda: live)
+                           live=lambda: live, external=args.external or (), external_timeout=args.external_timeout)
     finally:
         if live is not None:
             live.close()

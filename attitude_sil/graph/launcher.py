@@ -36,11 +36,11 @@ from attitude_sil.nodes.guidance_node import GuidanceNode
 from attitude_sil.nodes.plant_node import PlantNode
 from attitude_sil.nodes.recorder_node import Recorder
 from attitude_sil.nodes.wheels_node import WheelsNode
-from attitude_sil.ros.contract import GRAPH_SUBSCRIBERS, STEP_TOPICS, clock_remap
+from attitude_sil.ros.contract import PRODUCERS, ROLE_OUTPUTS, STEP_TOPICS, clock_remap, graph_subscribers
 from attitude_sil.ros.parameters import typed_parameter
 
 __all__ = ["NODE_CLASSES", "namespace_kwargs", "node_overrides", "start_nodes", "start_processes", "stop_processes",
-           "wait_connected"]
+           "wait_connected", "wait_external"]
 
 #: the node class of each graph node name
 NODE_CLASSES = {"plant": PlantNode, "wheels": WheelsNode, "disturbance": DisturbanceNode,
@@ -62,8 +62,10 @@ def node_overrides(scn: Scenario, node: str, extra: dict[str, Any]) -> dict[str,
 
 
 def start_nodes(scn: Scenario, extra: dict[str, Any], context, executor, nodes: list[Node],
-                node_kwargs: dict | None = None) -> PlantNode:
-    """Create the five nodes in this process, add them to ``executor`` and ``nodes``; return the plant.
+                node_kwargs: dict | None = None, skip=()) -> PlantNode | None:
+    """Create the graph's nodes in this process, add them to ``executor`` and ``nodes``; return the plant.
+
+    The nodes named in ``skip`` are not created (``run --external``: a node of the user's plays each).
 
     Raises
     ------
@@ -71,7 +73,7 @@ def start_nodes(scn: Scenario, extra: dict[str, Any], context, executor, nodes: 
         A node refused its parameters.
     """
     plant = None
-    for name in GRAPH_NODES:
+    for name in (n for n in GRAPH_NODES if n not in skip):
         values = node_overrides(scn, name, extra)
         # an empty list cannot be typed through an override; every empty value is a default here
         overrides = [typed_parameter(spec_for(name, k), v) for k, v in values.items() if v != []]
@@ -88,10 +90,10 @@ def start_nodes(scn: Scenario, extra: dict[str, Any], context, executor, nodes: 
 
 
 def start_processes(scn: Scenario, extra: dict[str, Any], tmp: Path,
-                    namespace: str | None = None) -> list[subprocess.Popen]:
-    """Start one process per node, each with a parameter file written to ``tmp``."""
+                    namespace: str | None = None, skip=()) -> list[subprocess.Popen]:
+    """Start one process per node but those in ``skip``, each with a parameter file written to ``tmp``."""
     children = []
-    for name in GRAPH_NODES:
+    for name in (n for n in GRAPH_NODES if n not in skip):
         values = {k: v for k, v in node_overrides(scn, name, extra).items() if v != []}
         values["use_sim_time"] = True
         path = tmp / f"{name}.yaml"
@@ -131,8 +133,11 @@ def check_children(children: list[subprocess.Popen], when: str = "") -> None:
 
 
 def wait_connected(recorder: Recorder, spin: Callable[[float], None], nodes: list[Node],
-                   children: list[subprocess.Popen], timeout: float) -> None:
+                   children: list[subprocess.Popen], timeout: float, external=()) -> None:
     """Spin until every publisher has met every subscriber it should (matched, not merely seen).
+
+    ``external``: the graph nodes not started here, whose topics and
+    subscriptions are not waited for (:func:`wait_external` waits for them).
 
     Raises
     ------
@@ -161,9 +166,9 @@ def wait_connected(recorder: Recorder, spin: Callable[[float], None], nodes: lis
 
     def multi_process_ready() -> bool:
         for name, sub in recorder.subs.items():
-            if name in STEP_TOPICS and sub.get_publisher_count() < 1:
+            if name in STEP_TOPICS and PRODUCERS[name] not in external and sub.get_publisher_count() < 1:
                 return False
-        for name, n in GRAPH_SUBSCRIBERS.items():
+        for name, n in graph_subscribers(external).items():
             if recorder.count_subscribers(recorder.resolved[name]) < n + 1:
                 return False
         return True
@@ -174,3 +179,42 @@ def wait_connected(recorder: Recorder, spin: Callable[[float], None], nodes: lis
         if time.monotonic() > deadline:
             raise RunError(f"the graph did not connect within {timeout:g} s (DDS discovery)")
         spin(0.02)
+
+
+def wait_external(recorder: Recorder, spin: Callable[[float], None], nodes: list[Node],
+                  children: list[subprocess.Popen], external, timeout: float) -> None:
+    """Spin until a node outside the package publishes, matched, what each role in ``external`` owes the graph.
+
+    What a role owes is :data:`~attitude_sil.ros.contract.ROLE_OUTPUTS` (the
+    controller: ``voltage_cmd`` or ``torque_cmd``); the recorder's volatile
+    subscription on the topic matching it is the sign. In this process the
+    graph's own publishers must also have matched every subscriber discovered
+    on their topics (the outside node's among them), so its first step is not
+    written before it can be read.
+
+    Raises
+    ------
+    RunError
+        Nothing publishes a role's outputs within ``timeout`` s (the message
+        names the topics and how to start such a node), a publisher's QoS
+        cannot match, or a node process exited.
+    """
+    deadline = time.monotonic() + timeout
+
+    def missing() -> list[str]:
+        return [f"{role} ({' or '.join(alt)})" for role in external for alt in ROLE_OUTPUTS[role]
+                if not any(recorder.subs[t].get_publisher_count() > 0 for t in alt)]
+
+    def own_publishers_matched() -> bool:
+        return all(p.get_subscription_count() >= recorder.count_subscribers(p.topic_name)
+                   for node in nodes for p in node.publishers if p.topic_name in recorder.resolved.values())
+
+    while (gaps := missing()) or not own_publishers_matched():
+        if recorder.qos_problems:
+            raise RunError(recorder.qos_problems[0])
+        check_children(children, " while waiting for the external node(s)")
+        if time.monotonic() > deadline:
+            what = ", ".join(gaps) or "the graph's publishers to match the external node's subscriptions"
+            raise RunError(f"no external node within {timeout:g} s: waiting for {what}; start yours on this "
+                           "ROS domain (docs/flight-software.md)")
+        spin(0.05)

@@ -24,6 +24,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import rclpy
 from rclpy.experimental import EventsExecutor
 from rclpy.signals import SignalHandlerOptions
@@ -33,7 +34,7 @@ from attitude_sil.core.analysis.running_metrics import EpisodeAccumulator
 from attitude_sil.core.control import registry
 from attitude_sil.core.sim.engine import check_episode, schedule_from_scenario, simulate
 from attitude_sil.core.sim.params import spec_for
-from attitude_sil.core.sim.scenario import Scenario
+from attitude_sil.core.sim.scenario import GRAPH_NODES, Scenario
 from attitude_sil.core.trajectory import Trajectory
 from attitude_sil.errors import AttitudeSilError, BagWriteError, RunError
 from attitude_sil.graph.launcher import (
@@ -43,16 +44,18 @@ from attitude_sil.graph.launcher import (
     start_processes,
     stop_processes,
     wait_connected,
+    wait_external,
 )
 from attitude_sil.graph.trajectory import KEPT_TOPICS, StepAssembler, trajectory_from_messages
 from attitude_sil.nodes.recorder_node import Recorder
 from attitude_sil.ros.contract import (
     ATTITUDE,
     COMMAND_TOPICS,
+    EXTERNAL,
     PRODUCERS,
-    STEP_TOPICS,
     WHEEL_TORQUE,
     check_namespace,
+    episode_topics,
 )
 from attitude_sil.ros.environment import isolated_domain, localhost_environment
 from attitude_sil.ros.services import call_reset, set_remote_parameters
@@ -161,13 +164,21 @@ class GraphSession:
         Wall seconds to wait for discovery.
     live : FoxgloveLive, optional
         Serve every message live too.
+    external : sequence of str
+        Graph nodes (``controller``, ...) not started: a node outside the
+        package plays each (docs/flight-software.md), waited for up to
+        ``external_timeout`` s once the graph's own nodes are up.
+    external_timeout : float
+        Wall seconds to wait for the external nodes.
     """
 
     def __init__(self, scn: Scenario, *, duration: float | None = None, controller: str | None = None,
                  processes: bool = False, real_time: bool = False, namespace: str | None = None,
-                 connect_timeout: float = 20.0, live=None) -> None:
+                 connect_timeout: float = 20.0, live=None, external=(), external_timeout: float = 60.0) -> None:
         if controller is not None:
             spec_for("controller", "controller_type").validate(controller, "controller")
+        self.external = check_external(external, controller, scn)
+        self.external_timeout = external_timeout
         self.scn = scn
         self.extra = extra_parameters(scn, duration, controller, real_time)
         self.duration = scn.duration if duration is None else float(duration)
@@ -179,7 +190,8 @@ class GraphSession:
         self.processes = processes
         self.namespace = check_namespace(namespace)
         self.connect_timeout = connect_timeout
-        self.controller = controller or scn.param("controller", "controller_type")
+        self.controller = EXTERNAL if "controller" in self.external else (
+            controller or scn.param("controller", "controller_type"))
         self.live = live  # a FoxgloveLive that serves every message, or None
 
     def __enter__(self) -> GraphSession:
@@ -188,7 +200,8 @@ class GraphSession:
         # compile (or load from numba's cache) every law's kernels before the clock
         # starts, so no node compiles mid-episode and node processes find the cache
         first = self.scn.param("controller", "controller_type")
-        for law in registry.names():  # each law's step, and a swap (the bumpless entry) where it is not the first
+        for law in [] if "controller" in self.external else registry.names():
+            # each law's step, and a swap (the bumpless entry) where it is not the first
             try:
                 simulate(self.scn, 1, duration=2 * self.scn.dt, controller=first, driver="stepwise",
                          schedule=[] if law == first else [(1, law)])
@@ -204,17 +217,26 @@ class GraphSession:
         self.foreign = None
         try:
             kw = namespace_kwargs(self.namespace)
-            self.recorder = Recorder(None, keep=KEPT_TOPICS, live=self.live, context=self.context, **kw)
+            outside = [t for t, producer in PRODUCERS.items() if producer in self.external]
+            self.recorder = Recorder(None, keep=KEPT_TOPICS, live=self.live, context=self.context,
+                                     volatile_topics=outside, **kw)
+            self.recorder.latency = [] if "controller" in self.external else None
             self.executor = EventsExecutor(context=self.context)
             self.executor.add_node(self.recorder)
             self.plant = None
             if self.processes:
                 self.tmpdir = tempfile.TemporaryDirectory(prefix="attitude_sil_")
-                self.children = start_processes(self.scn, self.extra, Path(self.tmpdir.name), self.namespace)
+                self.children = start_processes(self.scn, self.extra, Path(self.tmpdir.name), self.namespace,
+                                                skip=self.external)
             else:
-                self.plant = start_nodes(self.scn, self.extra, self.context, self.executor, self.nodes, kw)
-            wait_connected(self.recorder, self.spin, self.nodes, self.children, self.connect_timeout)
-            self.foreign = ForeignPublishers(self.recorder, self.namespace)
+                self.plant = start_nodes(self.scn, self.extra, self.context, self.executor, self.nodes, kw,
+                                         skip=self.external)
+            wait_connected(self.recorder, self.spin, self.nodes, self.children, self.connect_timeout,
+                           external=self.external)
+            if self.external:
+                wait_external(self.recorder, self.spin, self.nodes, self.children, self.external,
+                              self.external_timeout)
+            self.foreign = ForeignPublishers(self.recorder, self.namespace, skip=self.external)
         except BaseException:
             self.__exit__(None, None, None)
             raise
@@ -243,12 +265,16 @@ class GraphSession:
             After Ctrl-C, once the bag is closed (nothing recorded is lost).
         """
         writer = None
+        if controller_params and "controller" in self.external:
+            raise RunError("the controller is external (--external controller): its parameters are its own, "
+                           "not set by attitude-sil")
         if record_dir is not None:
             extra = dict(self.extra)
             if controller_params:
                 extra.update(controller_params)
             try:
-                writer = BagWriter(record_dir, custom_data={PARAMETERS_KEY: self.scn.parameters_yaml(extra),
+                own = [n for n in GRAPH_NODES if n not in self.external]  # what it knows of the nodes it ran
+                writer = BagWriter(record_dir, custom_data={PARAMETERS_KEY: self.scn.parameters_yaml(extra, own),
                                                             SCENARIO_KEY: self.scn.scenario_yaml()})
             except (FileExistsError, ValueError, OSError) as exc:
                 raise RunError(str(exc)) from None
@@ -269,8 +295,11 @@ class GraphSession:
             call_reset(self.recorder, self.spin, self.connect_timeout)
             wall0 = time.monotonic()
             prog.t0 = wall0
+            if self.recorder.latency is not None:
+                self.recorder.latency.clear()
             spin_episode(self.recorder, self.spin, self.plant, self.children, self.scn.steps(self.duration),
-                         self.scn, prog, schedule, self.foreign)
+                         self.scn, prog, schedule, self.foreign, episode_topics(self.external),
+                         lambda: call_reset(self.recorder, self.spin, self.connect_timeout))
             wall = time.monotonic() - wall0
             prog.update(self.duration, force=True)
         finally:
@@ -291,6 +320,8 @@ class GraphSession:
         else:
             traj = None
             metrics = assembler.accumulator.report(self.scn.name, self.duration, wall)
+        if self.recorder.latency:
+            metrics.update(latency_summary(self.recorder.latency))
         bag = None if writer is None else writer.run_dir
         metrics["bag"] = None if bag is None else str(bag)
         return RunResult(metrics=metrics, bag=bag, counts=dict(self.recorder.counts), trajectory=traj)
@@ -376,6 +407,40 @@ def run_graph(
                                  keep_trajectory=keep_trajectory)
 
 
+def check_external(external, controller: str | None, scn: Scenario) -> tuple[str, ...]:
+    """``--external`` names: graph nodes, once each; an external controller takes no law, swap or gains of ours.
+
+    Raises
+    ------
+    RunError
+        A name that is not a graph node, or an external controller asked for a law or a swap.
+    """
+    names = tuple(dict.fromkeys(external or ()))
+    unknown = [n for n in names if n not in GRAPH_NODES]
+    if unknown:
+        raise RunError(f"--external: {unknown[0]!r} is not a node of the graph (one of: {', '.join(GRAPH_NODES)})")
+    if "controller" in names:
+        if controller is not None:
+            raise RunError("--external controller: the controller is not attitude-sil's, so --controller "
+                           f"{controller} has no law to start; leave it out")
+        if schedule_from_scenario(scn):
+            raise RunError("--external controller: the run schedules controller swaps (--swap or the scenario's "
+                           "schedule.*), which only attitude-sil's controller can make")
+    return names
+
+
+def latency_summary(latency_s: list[float]) -> dict[str, float]:
+    """The external controller's latency per step (attitude in -> command out, as the recorder sees them), ms."""
+    ms = np.asarray(latency_s) * 1e3
+    return {"controller_latency_mean_ms": float(ms.mean()), "controller_latency_p99_ms": float(np.percentile(ms, 99)),
+            "controller_latency_max_ms": float(ms.max())}
+
+
+#: how long the first step of an episode may take before the episode is started again (spin_episode), wall s
+RESTART_AFTER_S = 2.0
+#: how many times an episode whose first step does not complete is started again
+MAX_RESTARTS = 3
+
 #: the name rmw gives an endpoint whose node is not discovered yet (a node of another process, just started)
 UNKNOWN_NODE = "_NODE_NAME_UNKNOWN_"
 
@@ -392,13 +457,15 @@ class ForeignPublishers:
     as soon as it appears.
     """
 
-    def __init__(self, node, namespace: str | None, period_s: float = 1.0) -> None:
+    def __init__(self, node, namespace: str | None, period_s: float = 1.0, skip=()) -> None:
         self.node = node
         self.own = f"/{namespace}" if namespace else "/"
         self.period_s = period_s
         self.next_check = 0.0
         self.warned: set[tuple[str, str]] = set()
-        self.topics = {node.resolve_topic_name(t): producer for t, producer in PRODUCERS.items()}
+        # a topic of a node played from outside (``skip``: run --external) has a publisher of somebody else's
+        self.topics = {node.resolve_topic_name(t): producer for t, producer in PRODUCERS.items()
+                       if producer not in skip}
 
     def check(self, now: float) -> list[str]:
         """Look at the graph if a period has passed; returns (and logs) the new warnings."""
@@ -425,10 +492,21 @@ class ForeignPublishers:
 
 
 def spin_episode(recorder: Recorder, spin, plant, children, k_steps: int, scn: Scenario, prog: Progress,
-                 schedule: list[tuple[float, int, str]], foreign: ForeignPublishers | None = None) -> None:
+                 schedule: list[tuple[float, int, str]], foreign: ForeignPublishers | None = None,
+                 topics: list[str] | None = None, restart: Callable[[], None] | None = None) -> None:
     """Spin until every step topic has all K+1 messages; apply scheduled swaps at their holds.
 
-    ``foreign``, if given, names publishers that are not the graph's own as they appear.
+    ``foreign``, if given, names publishers that are not the graph's own as they appear; ``topics`` are the
+    step topics to wait for (default :func:`~attitude_sil.ros.contract.episode_topics`: all but the commands,
+    of which one carries each step). A publisher the recorder cannot match stops the episode with its reason.
+
+    ``restart`` (the plant's reset) starts the episode again when its first
+    step has not completed within :data:`RESTART_AFTER_S` (up to
+    :data:`MAX_RESTARTS` times): the nodes read volatile, and across
+    processes a node's first message can be written before DDS has matched
+    it with a reader, which then never gets it (:mod:`attitude_sil.ros.qos`).
+    Step 0 is a pure function of the parameters, so a restart changes no
+    number; the recorder drops the repeats.
 
     Raises
     ------
@@ -441,7 +519,8 @@ def spin_episode(recorder: Recorder, spin, plant, children, k_steps: int, scn: S
     dt = scn.dt
     timeout = scn.param("plant", "input_timeout") + 2.0
     last_count, last_change = -1, time.monotonic()
-    step_topics = [t for t in STEP_TOPICS if t not in COMMAND_TOPICS]
+    restarts = 0
+    step_topics = episode_topics() if topics is None else topics
     pending = list(schedule)
 
     def commands() -> int:
@@ -462,12 +541,20 @@ def spin_episode(recorder: Recorder, spin, plant, children, k_steps: int, scn: S
             raise RunError(plant.error)
         if recorder.error:
             raise RunError(f"{recorder.error}; the bag is readable up to there")
+        if recorder.qos_problems:
+            raise RunError(recorder.qos_problems[0])
         now = time.monotonic()
         if foreign is not None:
             foreign.check(now)
         if n != last_count:
             last_count, last_change = n, now
             prog.update(max(n - 1, 0) * dt)
+        elif n == 0 and restart is not None and restarts < MAX_RESTARTS and now - last_change > RESTART_AFTER_S:
+            restarts += 1
+            recorder.get_logger().warning(f"step 0 did not complete within {RESTART_AFTER_S:g} s (a first message "
+                                          "written before DDS matched its reader); episode restarted")
+            restart()
+            last_change = time.monotonic()
         elif now - last_change > timeout:
             missing = [t for t in step_topics if counts[t] < needed]
             raise RunError(f"episode stalled at t={max(n - 1, 0) * dt:.3f} s: no progress on {', '.join(missing)}")

@@ -22,6 +22,7 @@ message too, and the active ``controller_type`` from ``/parameter_events``.
 
 from __future__ import annotations
 
+import time
 from collections import defaultdict
 from collections.abc import Callable
 
@@ -32,8 +33,15 @@ from rclpy.serialization import deserialize_message
 
 from attitude_sil.core.plant.quaternion import unit_or_none
 from attitude_sil.errors import BagWriteError
-from attitude_sil.ros.contract import CLOCK, PARAMETER_EVENTS, RECORDED_TOPICS, message_class
-from attitude_sil.ros.qos import LOCKSTEP_QOS, PARAMETER_EVENTS_QOS, offered_qos_yaml, publishers_qos_yaml, volatile
+from attitude_sil.ros.contract import ATTITUDE, CLOCK, COMMAND_TOPICS, PARAMETER_EVENTS, RECORDED_TOPICS, message_class
+from attitude_sil.ros.qos import (
+    INPUT_QOS,
+    LOCKSTEP_QOS,
+    PARAMETER_EVENTS_QOS,
+    offered_qos_yaml,
+    publishers_qos_yaml,
+    qos_event_callbacks,
+)
 from attitude_sil.storage.cdr import stamp_from_cdr, stamped_values
 from attitude_sil.storage.writer import BagWriter
 
@@ -61,6 +69,9 @@ class Recorder(Node):
     history : bool
         Take the transient-local history of the lockstep publishers when matching
         (the runner's own graph); False for a tool that joins a running graph.
+    volatile_topics : collection of str
+        Topics read without history even with ``history``: those of a node
+        outside the package (``run --external``), which may publish volatile.
     qos_from_graph : bool
         Register a topic in the bag when its first publisher appears, with the
         QoS its publishers offer (:meth:`register_discovered`), instead of the
@@ -70,7 +81,8 @@ class Recorder(Node):
     """
 
     def __init__(self, writer: BagWriter | None, keep=(), topics: dict[str, str] | None = None, *, live=None,
-                 history: bool = True, qos_from_graph: bool = False, name: str = "recorder", **kwargs) -> None:
+                 history: bool = True, qos_from_graph: bool = False, name: str = "recorder", volatile_topics=(),
+                 **kwargs) -> None:
         super().__init__(name, **kwargs)
         self.live = live
         self.history = history
@@ -79,6 +91,10 @@ class Recorder(Node):
         self._registered: set[str] = set()
         self.writer = writer
         self.error = ""  # why recording stopped, if it did
+        self.qos_problems: list[str] = []  # publishers whose QoS this recorder cannot match
+        # a list to time the controller into: wall s from each step's attitude to its command, as they arrive
+        self.latency: list[float] | None = None
+        self._attitude_at: dict[int, float] = {}
         self.counts: dict[str, int] = defaultdict(int)
         self.last_stamp: dict[str, int] = {}  # the latest stamp taken per topic, ns
         self.refused: dict[str, int] = defaultdict(int)  # stray messages not recorded, per topic
@@ -91,9 +107,10 @@ class Recorder(Node):
         self.subs = {}
         for name, type_name in (topics or RECORDED_TOPICS).items():
             qos = PARAMETER_EVENTS_QOS if name == PARAMETER_EVENTS else (
-                LOCKSTEP_QOS if history else volatile(LOCKSTEP_QOS))
+                LOCKSTEP_QOS if history and name not in volatile_topics else INPUT_QOS)
             sub = self.create_subscription(
-                message_class(type_name), name, lambda data, n=name: self._on_message(n, data), qos, raw=True
+                message_class(type_name), name, lambda data, n=name: self._on_message(n, data), qos, raw=True,
+                event_callbacks=qos_event_callbacks(self, name, qos, self.qos_problems),
             )
             self.subs[name] = sub
         self.resolved = {name: sub.topic_name for name, sub in self.subs.items()}
@@ -158,6 +175,12 @@ class Recorder(Node):
 
     def _on_message(self, name: str, data: bytes) -> None:
         t = stamp_from_cdr(data)
+        if t is not None and name != PARAMETER_EVENTS and t == self.last_stamp.get(name):
+            # a repeat of the step taken last (an episode restarted at its first step): taken once, and the
+            # controller timed from the repeat
+            if self.latency is not None and name == ATTITUDE:
+                self._attitude_at[t] = time.monotonic()
+            return
         if name == PARAMETER_EVENTS:
             # events carry the node's clock: wall time until use_sim_time is on. Log
             # them at the sim time of the lockstep instead, so a bag spans sim time only.
@@ -187,6 +210,8 @@ class Recorder(Node):
             self.sim_now = max(self.sim_now, t)
         self.counts[name] += 1
         self.last_stamp[name] = t
+        if self.latency is not None:
+            self._time_controller(name, t)
         self.newest_ns = max(self.newest_ns, t)
         if self.writer is not None:
             try:
@@ -204,6 +229,14 @@ class Recorder(Node):
                 kept.append((t, data))
             if self.sink is not None:
                 self.sink(name, t, data)
+
+    def _time_controller(self, name: str, t: int) -> None:
+        if name == ATTITUDE:
+            self._attitude_at[t] = time.monotonic()
+        elif name in COMMAND_TOPICS:
+            sent = self._attitude_at.pop(t, None)
+            if sent is not None:
+                self.latency.append(time.monotonic() - sent)
 
     def _to_live(self, name: str, data: bytes, t: int) -> None:
         self.live.write(self.resolved[name], data, t)

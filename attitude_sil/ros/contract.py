@@ -18,8 +18,8 @@ __all__ = ["CLOCK", "ATTITUDE", "BODY_RATE", "ATTITUDE_SETPOINT", "RATE_SETPOINT
            "WHEEL_TORQUE", "WHEEL_MOMENTUM", "WHEEL_STATE", "DISTURBANCE_TORQUE", "ATTITUDE_ERROR", "FLEXIBLE_MODE",
            "PLANT_INPUTS", "clock_remap",
            "STEP_TOPICS", "COMMAND_TOPICS", "COMMAND_TOPIC", "CONTROLLER_INPUTS", "MODEL_TOPICS", "RECORDED_TOPICS",
-           "GRAPH_SUBSCRIBERS", "PRODUCERS", "PARAMETER_EVENTS", "message_class", "check_namespace", "check_node_name",
-           "check_parameter_name"]
+           "graph_subscribers", "PRODUCERS", "PARAMETER_EVENTS", "message_class", "check_namespace", "check_node_name",
+           "check_parameter_name", "ROLE_OUTPUTS", "OPTIONAL_TOPICS", "ROLE_INPUTS", "episode_topics", "EXTERNAL"]
 
 # -- name rules (ROS 2: a token is a letter or _ then letters, digits, _) -----------------
 _TOKEN = re.compile(r"[A-Za-z_][A-Za-z0-9_]*")
@@ -100,11 +100,6 @@ PLANT_INPUTS = (WHEEL_TORQUE, WHEEL_MOMENTUM, DISTURBANCE_TORQUE)
 #: what the controller needs, all stamped t_k, before it computes step k's command
 CONTROLLER_INPUTS = (ATTITUDE, BODY_RATE, ATTITUDE_SETPOINT, RATE_SETPOINT)
 
-#: how many graph nodes subscribe to each topic (the recorder comes on top)
-GRAPH_SUBSCRIBERS = {
-    ATTITUDE: 2, BODY_RATE: 1, ATTITUDE_SETPOINT: 1, RATE_SETPOINT: 1, VOLTAGE_CMD: 1, TORQUE_CMD: 1,
-    WHEEL_TORQUE: 1, WHEEL_MOMENTUM: 1, DISTURBANCE_TORQUE: 1, CLOCK: 1,
-}
 
 #: the one node of the graph that publishes each step topic (docs/architecture.md, "ROS contract")
 PRODUCERS = {
@@ -112,6 +107,49 @@ PRODUCERS = {
     VOLTAGE_CMD: "controller", TORQUE_CMD: "controller", WHEEL_TORQUE: "wheels", WHEEL_MOMENTUM: "wheels",
     WHEEL_STATE: "wheels", DISTURBANCE_TORQUE: "disturbance", ATTITUDE_ERROR: "controller",
 }
+
+#: what each node of the graph must publish for the others, every step: a tuple of alternatives each (the
+#: controller publishes one command topic, of its law's kind); what a node started in place of a built-in one
+#: (``run --external NODE``) must provide (docs/flight-software.md)
+ROLE_OUTPUTS: dict[str, tuple[tuple[str, ...], ...]] = {
+    "plant": ((CLOCK,), (ATTITUDE,), (BODY_RATE,)),
+    "wheels": ((WHEEL_TORQUE,), (WHEEL_MOMENTUM,)),
+    "disturbance": ((DISTURBANCE_TORQUE,),),
+    "guidance": ((ATTITUDE_SETPOINT,), (RATE_SETPOINT,)),
+    "controller": (COMMAND_TOPICS,),
+}
+
+#: what each node may read, all stamped t_k, for step k
+ROLE_INPUTS: dict[str, tuple[str, ...]] = {
+    "plant": PLANT_INPUTS, "wheels": COMMAND_TOPICS, "disturbance": (ATTITUDE,), "guidance": (CLOCK,),
+    "controller": CONTROLLER_INPUTS,
+}
+
+def graph_subscribers(external=()) -> dict[str, int]:
+    """How many of the package's graph nodes subscribe to each topic (the recorder comes on top), the nodes
+    named in ``external`` (played from outside) left out."""
+    out: dict[str, int] = {}
+    for role, inputs in ROLE_INPUTS.items():
+        if role not in external:
+            for topic in inputs:
+                out[topic] = out.get(topic, 0) + 1
+    return out
+
+
+#: what a report names as the controller_type of a controller outside the package
+EXTERNAL = "external"
+
+#: step topics no other node reads: the built-in nodes publish them for the record (the controller's error,
+#: the wheels' joint state); a node in their place may leave them out, and the tools then do without them
+OPTIONAL_TOPICS = (ATTITUDE_ERROR, WHEEL_STATE)
+
+
+def episode_topics(external=()) -> list[str]:
+    """The step topics an episode fills, one message per step each (commands aside: one of them carries each
+    step), when the nodes named in ``external`` are not the package's own (their optional topics left out)."""
+    return [t for t in STEP_TOPICS if t not in COMMAND_TOPICS
+            and not (t in OPTIONAL_TOPICS and PRODUCERS[t] in external)]
+
 
 #: published only by some plant models (paper 002's flexible mode: x = alpha rad, y = d alpha/dt rad/s)
 MODEL_TOPICS: dict[str, str] = {FLEXIBLE_MODE: "geometry_msgs/msg/Vector3Stamped"}

@@ -33,7 +33,7 @@ from attitude_sil.ros.contract import RECORDED_TOPICS as TOPIC_TYPES
 from attitude_sil.ros.contract import message_class
 from attitude_sil.ros.environment import discovery_profile
 from attitude_sil.ros.parameters import PARAMETER_TYPES, descriptor
-from attitude_sil.ros.qos import LOCKSTEP_QOS
+from attitude_sil.ros.qos import INPUT_QOS, LOCKSTEP_QOS, qos_event_callbacks
 from attitude_sil.ros.signals import StopSignals
 
 __all__ = ["SchemaNode", "params_file_warning", "run_node", "sim_time_given", "steady_clock"]
@@ -57,6 +57,7 @@ class SchemaNode(Node):
 
     def __init__(self, **kwargs: Any) -> None:
         super().__init__(self.schema_name, **kwargs)
+        self.qos_problems: list[str] = []  # subscriptions a publisher cannot match (qos_event_callbacks)
         self._specs = {s.name: s for s in NODE_PARAMS[self.schema_name]}
         for spec in self._specs.values():
             empty = isinstance(spec.default, list) and not spec.default
@@ -125,12 +126,16 @@ class SchemaNode(Node):
 
     # -- topics of the contract -----------------------------------------------------
     def step_publisher(self, topic: str):
-        """A publisher on a contract topic, with its message type and the lockstep QoS."""
-        return self.create_publisher(message_class(TOPIC_TYPES[topic]), topic, LOCKSTEP_QOS)
+        """A publisher on a contract topic, with its message type and the lockstep QoS (transient-local)."""
+        return self.create_publisher(message_class(TOPIC_TYPES[topic]), topic, LOCKSTEP_QOS,
+                                     event_callbacks=qos_event_callbacks(self, topic, LOCKSTEP_QOS, reader=False))
 
     def step_subscription(self, topic: str, callback: Callable[[Any], None]):
-        """A subscription to a contract topic, with its message type and the lockstep QoS."""
-        return self.create_subscription(message_class(TOPIC_TYPES[topic]), topic, callback, LOCKSTEP_QOS)
+        """A subscription to a contract topic, with its message type and the input QoS (volatile: any
+        reliable publisher matches, a default-QoS one included; :mod:`attitude_sil.ros.qos`)."""
+        return self.create_subscription(message_class(TOPIC_TYPES[topic]), topic, callback, INPUT_QOS,
+                                        event_callbacks=qos_event_callbacks(self, topic, INPUT_QOS,
+                                                                            self.qos_problems))
 
     # -- helpers ---------------------------------------------------------------
     @staticmethod

@@ -2,18 +2,42 @@
 
 One home for every profile a publisher, subscriber, recorder or replay uses,
 so a recorded bag states the QoS the graph really offered.
+
+The rule that lets any ROS node into the lockstep (docs/flight-software.md):
+the nodes *publish* reliable and transient-local (:data:`LOCKSTEP_QOS`: a
+late transient-local reader, a recorder, gets the history) and *read*
+reliable and volatile (:data:`INPUT_QOS`). DDS matches a volatile reader with
+a transient-local writer and with a volatile one alike, so a node publishing
+with rclpy's or rclcpp's default QoS (reliable, volatile, depth 10) is heard,
+and the default subscriber, ``ros2 topic echo`` and rosbag2 hear the nodes.
+What a volatile reader gives up is the samples written before it matched:
+the runner starts an episode only once every publisher of its graph has
+matched every subscriber (:func:`attitude_sil.graph.launcher.wait_connected`),
+and its own recorder reads its own nodes' topics with the history, so a
+step 0 written before a match across processes still reaches the bag.
+An endpoint that cannot match (a best-effort publisher, a reader asking for
+more than a node offers) is named in one line by :func:`qos_event_callbacks`.
 """
 
 from __future__ import annotations
 
 import yaml
-from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy, qos_profile_parameter_events
+from rclpy.event_handler import PublisherEventCallbacks, SubscriptionEventCallbacks
+from rclpy.qos import (
+    DurabilityPolicy,
+    HistoryPolicy,
+    QoSCompatibility,
+    QoSProfile,
+    ReliabilityPolicy,
+    qos_check_compatible,
+    qos_profile_parameter_events,
+)
 
 from attitude_sil.ros.contract import PARAMETER_EVENTS
 from attitude_sil.storage.writer import parse_qos_profiles, qos_profiles_yaml
 
-__all__ = ["LOCKSTEP_QOS", "PARAMETER_EVENTS_QOS", "offered_qos_yaml", "publishers_qos_yaml", "recorded_qos",
-           "volatile"]
+__all__ = ["LOCKSTEP_QOS", "INPUT_QOS", "PARAMETER_EVENTS_QOS", "offered_qos_yaml", "publishers_qos_yaml",
+           "recorded_qos", "volatile", "incompatible_peers", "qos_event_callbacks"]
 
 #: Lockstep topics: reliable, deep enough that a slow recorder never loses a
 #: step, and transient-local so a reader whose match completes after the first
@@ -39,6 +63,62 @@ def volatile(profile: QoSProfile) -> QoSProfile:
     """
     return QoSProfile(reliability=profile.reliability, durability=DurabilityPolicy.VOLATILE,
                       history=profile.history, depth=profile.depth)
+
+
+#: what the nodes read with: the lockstep profile, volatile (module docstring)
+INPUT_QOS = volatile(LOCKSTEP_QOS)
+
+
+def incompatible_peers(node, topic: str, qos: QoSProfile, readers: bool) -> list[str]:
+    """``/ns/node (reason)`` of each endpoint on ``topic`` that cannot match an endpoint of ours with ``qos``.
+
+    Parameters
+    ----------
+    node : rclpy.node.Node
+    topic : str
+        The resolved topic name.
+    qos : QoSProfile
+        Our endpoint's profile.
+    readers : bool
+        True: ours is a subscription, the peers are the topic's publishers; False: the other way round.
+    """
+    infos = node.get_publishers_info_by_topic(topic) if readers else node.get_subscriptions_info_by_topic(topic)
+    out = []
+    for info in infos:
+        pub, sub = (info.qos_profile, qos) if readers else (qos, info.qos_profile)
+        compatibility, reason = qos_check_compatible(pub, sub)
+        if compatibility == QoSCompatibility.ERROR:
+            out.append(f"{(info.node_namespace or '/').rstrip('/')}/{info.node_name} ({reason.strip().rstrip('.')})")
+    return out
+
+
+def qos_event_callbacks(node, topic: str, qos: QoSProfile, problems: list[str] | None = None,
+                        reader: bool = True):
+    """Event callbacks that name, in one logged line, a peer whose QoS cannot match our endpoint on ``topic``.
+
+    rclpy's default says only "incompatible QoS, last policy X"; this names
+    the topic, each peer node and the reason. For a subscription (``reader``)
+    the line is also appended to ``problems``: the runner stops the episode
+    with it, since the step waits for a message that will never come.
+
+    Returns
+    -------
+    SubscriptionEventCallbacks or PublisherEventCallbacks
+    """
+    def on_incompatible(info) -> None:
+        resolved = node.resolve_topic_name(topic)
+        policy = getattr(info.last_policy_kind, "name", str(info.last_policy_kind)).replace("RMW_QOS_POLICY_", "")
+        peers = incompatible_peers(node, resolved, qos, reader) or ["a node not discovered yet"]
+        side = "publisher" if reader else "subscriber"
+        text = (f"{resolved}: {side} {', '.join(peers)} has QoS incompatible with {node.get_name()}'s "
+                f"{'subscription' if reader else 'publisher'} (policy {policy}); no message passes between them")
+        node.get_logger().error(text)
+        if problems is not None and reader:
+            problems.append(text)
+
+    if reader:
+        return SubscriptionEventCallbacks(incompatible_qos=on_incompatible)
+    return PublisherEventCallbacks(incompatible_qos=on_incompatible)
 
 
 _INFINITE_NS = 9223372036854775807

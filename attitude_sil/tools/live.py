@@ -42,7 +42,17 @@ from attitude_sil.graph.launcher import namespace_kwargs
 from attitude_sil.graph.session import Progress, spin_episode
 from attitude_sil.graph.trajectory import KEPT_TOPICS, trajectory_from_messages
 from attitude_sil.nodes.recorder_node import Recorder
-from attitude_sil.ros.contract import CLOCK, COMMAND_TOPICS, RECORDED_TOPICS, STEP_TOPICS, check_namespace
+from attitude_sil.ros.contract import (
+    CLOCK,
+    COMMAND_TOPICS,
+    EXTERNAL,
+    OPTIONAL_TOPICS,
+    RECORDED_TOPICS,
+    ROLE_OUTPUTS,
+    STEP_TOPICS,
+    check_namespace,
+    episode_topics,
+)
 from attitude_sil.ros.environment import localhost_environment
 from attitude_sil.ros.services import call_reset, get_remote_parameters
 from attitude_sil.ros.signals import StopSignals
@@ -103,11 +113,32 @@ def graph_scenario(values: dict[str, dict], settings: dict | None, source: str) 
     return scenario_from_dict(data, source=source)
 
 
+def _own_nodes(node, namespace: str | None, spin, timeout: float) -> list[str]:
+    """The graph nodes of the package running under ``namespace``: each answers for a parameter of its schema.
+
+    A node of the graph that is not in the ROS graph, or that holds none of
+    the schema's parameters (flight software of the user's in its place,
+    docs/flight-software.md), is not one: its parameters are not read.
+    """
+    present = {(ns.rstrip("/") or "/", n) for n, ns in node.get_node_names_and_namespaces()}
+    own = []
+    for name in GRAPH_NODES:
+        if ((f"/{namespace}" if namespace else "/"), name) not in present:
+            continue
+        # a parameter of this node's own (control_period is everyone's), declared with a value
+        mark = next(sp.name for sp in NODE_PARAMS[name] if sp.name != "control_period" and sp.default != [])
+        if get_remote_parameters(node, spin, _target(namespace, name), [mark], timeout):
+            own.append(name)
+    return own
+
+
 def _ask_graph(node, spin, namespace: str | None, timeout: float,
                say: Callable[[str], None]) -> dict[str, dict]:
-    """Every graph node's schema parameters, through their parameter services; warns of a node off sim time."""
+    """Every graph node's schema parameters, through their parameter services; warns of a node off sim time.
+
+    A node played by software outside the package (:func:`_own_nodes`) is left out of the result."""
     out = {}
-    for name in GRAPH_NODES:
+    for name in _own_nodes(node, namespace, spin, timeout):
         # one batch for what always has a value; an empty array is declared without one, and rclpy
         # answers nothing to a batch holding such a name, so those are asked apart
         empty = [s.name for s in NODE_PARAMS[name] if isinstance(s.default, list) and not s.default]
@@ -154,12 +185,24 @@ class _Ros:
         self.stop.__exit__()
 
 
-def _wait_publishers(recorder: Recorder, spin, names, deadline: float, what: str) -> None:
-    while not all(recorder.subs[n].get_publisher_count() > 0 for n in names):
+def _wait_publishers(recorder: Recorder, spin, deadline: float, what: str) -> None:
+    """Spin until every node of the graph publishes what the others read (ROLE_OUTPUTS), whoever plays it."""
+    def missing() -> list[str]:
+        return [" or ".join(alt) for outputs in ROLE_OUTPUTS.values() for alt in outputs
+                if not any(recorder.subs[t].get_publisher_count() > 0 for t in alt)]
+
+    while gaps := missing():
+        if recorder.qos_problems:
+            raise RunError(recorder.qos_problems[0])
         if time.monotonic() > deadline:
-            missing = [n for n in names if recorder.subs[n].get_publisher_count() == 0]
-            raise RunError(f"no publisher of {', '.join(missing)} within the timeout: is the graph running{what}?")
+            raise RunError(f"no publisher of {', '.join(gaps)} within the timeout: is the graph running{what}?")
         spin(0.02)
+
+
+def _live_topics(recorder: Recorder, external: list[str]) -> list[str]:
+    """The step topics an episode of a live graph fills: an optional one only where somebody publishes it."""
+    return [t for t in episode_topics(external)
+            if t not in OPTIONAL_TOPICS or recorder.subs[t].get_publisher_count() > 0]
 
 
 def play_episode(namespace: str | None = None, scenario: str | Path | None = None, timeout: float = 20.0,
@@ -200,9 +243,12 @@ def play_episode(namespace: str | None = None, scenario: str | Path | None = Non
     try:
         rec = ros.node
         deadline = time.monotonic() + timeout
-        _wait_publishers(rec, ros.spin, [n for n in STEP_TOPICS if n in rec.subs], deadline, where)
-        scn = graph_scenario(_ask_graph(rec, ros.spin, ns, max(deadline - time.monotonic(), 0.1), say), settings,
-                             f"the graph{where}")
+        _wait_publishers(rec, ros.spin, deadline, where)
+        values = _ask_graph(rec, ros.spin, ns, max(deadline - time.monotonic(), 0.1), say)
+        external = [n for n in GRAPH_NODES if n not in values]  # played by software outside the package
+        for name in external:
+            say(f"note: {_target(ns, name)} is not attitude_sil's: its settings are the defaults or --scenario's")
+        scn = graph_scenario(values, settings, f"the graph{where}")
         if scn.duration <= 0.0:
             raise RunError(f"plant.duration is 0 on the graph{where} (run until stopped): the episode would not end; "
                            f"set it, e.g. attitude-sil param set {_target(ns, 'plant')} duration 20.0")
@@ -211,13 +257,15 @@ def play_episode(namespace: str | None = None, scenario: str | Path | None = Non
         wall0 = time.monotonic()
         prog = Progress(progress, scn.duration)
         prog.t0 = wall0
-        spin_episode(rec, ros.spin, None, [], scn.steps(), scn, prog, [])
+        spin_episode(rec, ros.spin, None, [], scn.steps(), scn, prog, [], topics=_live_topics(rec, external),
+                     restart=lambda: call_reset(rec, ros.spin, timeout, service=_target(ns, "plant") + "/reset"))
         wall = time.monotonic() - wall0
         prog.update(scn.duration, force=True)
         traj = trajectory_from_messages(rec.kept)
     finally:
         ros.close()
-    metrics = episode_report(scn, traj, scn.param("controller", "controller_type"), scn.duration, wall)
+    law = EXTERNAL if "controller" in external else scn.param("controller", "controller_type")
+    metrics = episode_report(scn, traj, law, scn.duration, wall)
     metrics["bag"] = None
     return metrics
 
@@ -257,7 +305,9 @@ class _EpisodeEnds:
         """Report an episode that has just ended (with how many of its steps were recorded); True if one has."""
         # the plant's last step (t = duration) has reached every per-step topic: the plant stops there
         end_ns = scn.steps() * round(scn.dt * 1e9)
-        ended = all(rec.last_stamp.get(n) == end_ns for n in self.per_step)
+        # an optional topic (OPTIONAL_TOPICS) counts once somebody publishes it
+        ended = all(rec.last_stamp.get(n) == end_ns for n in self.per_step
+                    if n not in OPTIONAL_TOPICS or n in rec.last_stamp)
         new_end = ended and not self.reported_end
         if new_end:
             steps = rec.counts.get(self.per_step[0], 0) - self.counted
@@ -387,9 +437,12 @@ def bag_metrics(bag: str | Path, scenario: str | Path | None = None) -> tuple[di
                        "nodes did not answer); give --scenario FILE")
     if settings is None and custom.get(SCENARIO_KEY):
         settings = _scenario_section(custom[SCENARIO_KEY], str(bag))
+    law = None
     try:
         if snapshot:
-            scn = graph_scenario(_snapshot_values(snapshot, str(bag)), settings, f"{bag} (parameter snapshot)")
+            values = _snapshot_values(snapshot, str(bag))
+            scn = graph_scenario(values, settings, f"{bag} (parameter snapshot)")
+            law = None if "controller" in values else EXTERNAL  # a controller of the user's flew (run --external)
         else:
             scn = load_scenario(scenario)
             notes.append(f"no parameter snapshot in {bag}: node parameters from {scenario}")
@@ -413,7 +466,7 @@ def bag_metrics(bag: str | Path, scenario: str | Path | None = None) -> tuple[di
     duration = float(traj.t[-1] - traj.t[0])
     if duration + 0.5 * scn.dt < scn.duration:
         notes.append(f"{bag} holds {duration:g} s of a {scn.duration:g} s episode; metrics over what it holds")
-    metrics = episode_report(scn, traj, scn.param("controller", "controller_type"), duration, 0.0)
+    metrics = episode_report(scn, traj, law or scn.param("controller", "controller_type"), duration, 0.0)
     metrics["wall_time_s"] = None
     metrics["real_time_factor"] = None
     metrics["bag"] = str(bag)

@@ -108,7 +108,9 @@ def controller_parameters(bag_path: str | Path, params_file: str | Path | None =
     sections = dict(sections_for(data, "/controller")) if isinstance(data, dict) else {}
     sections.pop(GLOBAL_NODE, None)
     if not sections:
-        raise BagError(f"{meta}: the parameter snapshot has no controller section; give --params FILE")
+        raise BagError(f"{meta}: the parameter snapshot has no controller section (a controller outside "
+                       "attitude_sil flew this bag, run --external controller, or another tool recorded it); "
+                       "give --params FILE to check one of the package's laws against it")
     try:
         return scenario_from_dict(sections, source=f"{meta}", check=False).values["controller"]
     except ScenarioError as exc:

@@ -153,6 +153,8 @@ class PlantLockstep:
             self.refusal = f"plant: {name} at t={t_ns * 1e-9:.6f} s is not finite: {np.ravel(value).tolist()}; refused"
             return Action.REFUSED
         if name in self.inputs:
+            if np.array_equal(self.inputs[name], value):
+                return Action.NONE  # a repeat (an episode restarted at its first step): the same input
             self.refusal = f"plant: a second {name} for step t={t_ns * 1e-9:.6f} s; refused (the first is kept)"
             return Action.REFUSED
         self.inputs[name] = value

@@ -120,16 +120,17 @@ class Scenario:
         _check_consistency(new)
         return new
 
-    def parameters_yaml(self, extra: dict[str, Any] | None = None) -> str:
-        """Every graph node's full parameter set as a ROS 2 parameter YAML string.
+    def parameters_yaml(self, extra: dict[str, Any] | None = None, nodes=GRAPH_NODES) -> str:
+        """The full parameter set of the graph's ``nodes`` (default: all) as a ROS 2 parameter YAML string.
 
         ``extra`` values override the nodes that declare them. Runs store this
         in their bag (``metadata.yaml`` custom data) so ``replay
-        --verify-controller`` can configure a fresh controller as recorded.
+        --verify-controller`` can configure a fresh controller as recorded; a
+        node played from outside the package (``run --external``) is left out.
         """
         extra = extra or {}
         out = {}
-        for node in GRAPH_NODES:
+        for node in nodes:
             values = dict(self.values[node])
             values.update({k: v for k, v in extra.items() if k in values})
             out[node_key(node)] = {"ros__parameters": values}

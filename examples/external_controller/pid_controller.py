@@ -1,0 +1,133 @@
+"""A controller node that knows nothing of attitude_sil but its topics: flight software in the loop.
+
+It imports rclpy and the ROS message packages only, and uses the QoS every
+ROS tutorial uses (``10``: reliable, volatile, depth 10). Run it in place of
+the simulator's own controller:
+
+    attitude-sil run config/hst_roll_step.yaml --external controller &
+    python examples/external_controller/pid_controller.py
+
+The per-step contract it follows (docs/flight-software.md):
+
+* it waits, for each step t_k, for ``attitude`` (geometry_msgs/QuaternionStamped,
+  q_BN, x y z w) and ``attitude_setpoint`` (q_RN) both stamped t_k; the
+  simulator publishes them (and ``body_rate``, ``rate_setpoint``) once per
+  step and then waits for the command;
+* it publishes one ``voltage_cmd`` (geometry_msgs/Vector3Stamped, body axes,
+  V) stamped t_k, the stamp of the inputs it answers;
+* a step stamped 0 starts an episode: the controller state is reset. A step
+  it has answered already (the same stamp again) is answered with the same
+  command, not computed twice.
+
+The law is paper 000's PID, the arithmetic of attitude_sil's ``pid`` law
+(``e = -vec(q_RN* q_BN)`` with a non-negative scalar part, a first-order
+derivative filter ``N/(s + N)`` discretised exactly for a held error,
+forward-Euler integral with conditional integration at the output limit), so
+a run with this node gives the built-in law's numbers. ``compute_delay``
+(s) makes each step take that long, as slow flight software would.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+
+import rclpy
+from geometry_msgs.msg import QuaternionStamped, Vector3Stamped
+from rclpy.executors import ExternalShutdownException
+from rclpy.node import Node
+
+HST_GA_GAINS = {"kp": 48.894, "ki": 0.071, "kd": 106.046, "n": 1.427}  # paper 000, the GA design
+
+
+def stamp_ns(stamp) -> int:
+    return stamp.sec * 1_000_000_000 + stamp.nanosec
+
+
+class PidController(Node):
+    """Per-axis PID on the quaternion error, one command per step of the simulator's lockstep."""
+
+    def __init__(self) -> None:
+        super().__init__("controller")
+        for name, value in HST_GA_GAINS.items():
+            self.declare_parameter(name, [value] * 3)
+        self.declare_parameter("output_limit", 10.928)  # V
+        self.declare_parameter("control_period", 0.01)  # s
+        self.declare_parameter("compute_delay", 0.0)  # s, simulated computation time per step
+        self.pub = self.create_publisher(Vector3Stamped, "voltage_cmd", 10)
+        self.create_subscription(QuaternionStamped, "attitude", lambda m: self.on_input("q", m), 10)
+        self.create_subscription(QuaternionStamped, "attitude_setpoint", lambda m: self.on_input("r", m), 10)
+        self.pending: dict[int, dict[str, tuple]] = {}
+        self.answered: dict[int, tuple[float, float, float]] = {}
+        self.reset()
+
+    def reset(self) -> None:
+        self.integral = [0.0, 0.0, 0.0]
+        self.filt = [0.0, 0.0, 0.0]
+        self.answered.clear()
+
+    def on_input(self, key: str, msg: QuaternionStamped) -> None:
+        t = stamp_ns(msg.header.stamp)
+        q = msg.quaternion
+        slot = self.pending.setdefault(t, {})
+        slot.setdefault(key, (q.x, q.y, q.z, q.w))
+        if len(slot) < 2:
+            return
+        del self.pending[t]
+        for old in [s for s in self.pending if s < t]:
+            del self.pending[old]
+        if t in self.answered and t != 0:
+            u = self.answered[t]  # a repeat of a step answered already: the same command
+        else:
+            if t == 0:
+                self.reset()
+            u = self.step(slot["q"], slot["r"])
+            self.answered[t] = u
+        delay = self.get_parameter("compute_delay").value
+        if delay > 0.0:
+            time.sleep(delay)  # stands for the flight software's own computation
+        out = Vector3Stamped()
+        out.header.stamp.sec, out.header.stamp.nanosec = divmod(t, 1_000_000_000)
+        out.header.frame_id = "body"
+        out.vector.x, out.vector.y, out.vector.z = u
+        self.pub.publish(out)
+
+    def step(self, q_BN: tuple, q_RN: tuple) -> tuple[float, float, float]:
+        bx, by, bz, bw = q_BN
+        rx, ry, rz, rw = -q_RN[0], -q_RN[1], -q_RN[2], q_RN[3]
+        e = [rw * bx + bw * rx + ry * bz - rz * by,
+             rw * by + bw * ry + rz * bx - rx * bz,
+             rw * bz + bw * rz + rx * by - ry * bx]
+        ew = rw * bw - rx * bx - ry * by - rz * bz
+        e = [x if ew < 0.0 else -x for x in e]  # -vec(q_BR), the short way round
+        p = {name: self.get_parameter(name).value for name in HST_GA_GAINS}
+        u_max = self.get_parameter("output_limit").value
+        dt = self.get_parameter("control_period").value
+        u = []
+        for i in range(3):
+            deriv = p["n"][i] * (e[i] - self.filt[i])
+            raw = p["kp"][i] * e[i] + p["ki"][i] * self.integral[i] + p["kd"][i] * deriv
+            out = min(max(raw, -u_max), u_max)
+            if not (out != raw and e[i] * raw > 0.0):  # no integration into the limit
+                self.integral[i] += e[i] * dt
+            a = math.exp(-p["n"][i] * dt)
+            self.filt[i] = a * self.filt[i] + (1.0 - a) * e[i]
+            u.append(out)
+        return u[0], u[1], u[2]
+
+
+def main() -> int:
+    rclpy.init()
+    node = PidController()
+    try:
+        rclpy.spin(node)
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    finally:
+        node.destroy_node()
+        rclpy.try_shutdown()
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
