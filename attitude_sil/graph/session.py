@@ -53,6 +53,7 @@ from attitude_sil.ros.contract import (
     COMMAND_TOPICS,
     EXTERNAL,
     PRODUCERS,
+    UNKNOWN_NODE,
     WHEEL_TORQUE,
     check_namespace,
     episode_topics,
@@ -441,8 +442,6 @@ RESTART_AFTER_S = 2.0
 #: how many times an episode whose first step does not complete is started again
 MAX_RESTARTS = 3
 
-#: the name rmw gives an endpoint whose node is not discovered yet (a node of another process, just started)
-UNKNOWN_NODE = "_NODE_NAME_UNKNOWN_"
 
 
 class ForeignPublishers:

@@ -87,6 +87,7 @@ class Recorder(Node):
         self.live = live
         self.history = history
         self.qos_from_graph = qos_from_graph
+        self.volatile_topics = set(volatile_topics)
         self._clock_known = history  # joining a running graph: the first /clock is taken as it comes
         self._registered: set[str] = set()
         self.writer = writer
@@ -147,7 +148,10 @@ class Recorder(Node):
         self._registered = set()
         if writer is not None and not self.qos_from_graph:
             for name, sub in self.subs.items():
-                writer.add_topic(sub.topic_name, self.types[name], offered_qos_yaml(name))
+                # a node outside the package offers its own QoS: the bag states what its publishers offer
+                offered = publishers_qos_yaml(self.get_publishers_info_by_topic(sub.topic_name)) \
+                    if name in self.volatile_topics else ""
+                writer.add_topic(sub.topic_name, self.types[name], offered or offered_qos_yaml(name))
             self._registered = set(self.subs)
         if self.live is not None:
             for name, sub in self.subs.items():

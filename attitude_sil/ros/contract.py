@@ -19,7 +19,8 @@ __all__ = ["CLOCK", "ATTITUDE", "BODY_RATE", "ATTITUDE_SETPOINT", "RATE_SETPOINT
            "PLANT_INPUTS", "clock_remap",
            "STEP_TOPICS", "COMMAND_TOPICS", "COMMAND_TOPIC", "CONTROLLER_INPUTS", "MODEL_TOPICS", "RECORDED_TOPICS",
            "graph_subscribers", "PRODUCERS", "PARAMETER_EVENTS", "message_class", "check_namespace", "check_node_name",
-           "check_parameter_name", "ROLE_OUTPUTS", "OPTIONAL_TOPICS", "ROLE_INPUTS", "episode_topics", "EXTERNAL"]
+           "check_parameter_name", "ROLE_OUTPUTS", "OPTIONAL_TOPICS", "ROLE_INPUTS", "episode_topics", "EXTERNAL",
+           "UNKNOWN_NODE"]
 
 # -- name rules (ROS 2: a token is a letter or _ then letters, digits, _) -----------------
 _TOKEN = re.compile(r"[A-Za-z_][A-Za-z0-9_]*")
@@ -135,6 +136,9 @@ def graph_subscribers(external=()) -> dict[str, int]:
                 out[topic] = out.get(topic, 0) + 1
     return out
 
+
+#: the names rmw gives an endpoint whose node is not discovered yet (a node of another process, just started)
+UNKNOWN_NODE = "_NODE_NAME_UNKNOWN_"
 
 #: what a report names as the controller_type of a controller outside the package
 EXTERNAL = "external"

@@ -21,7 +21,10 @@ more than a node offers) is named in one line by :func:`qos_event_callbacks`.
 
 from __future__ import annotations
 
+import time
+
 import yaml
+from rclpy.clock import Clock, ClockType
 from rclpy.event_handler import PublisherEventCallbacks, SubscriptionEventCallbacks
 from rclpy.qos import (
     DurabilityPolicy,
@@ -33,7 +36,7 @@ from rclpy.qos import (
     qos_profile_parameter_events,
 )
 
-from attitude_sil.ros.contract import PARAMETER_EVENTS
+from attitude_sil.ros.contract import PARAMETER_EVENTS, UNKNOWN_NODE
 from attitude_sil.storage.writer import parse_qos_profiles, qos_profiles_yaml
 
 __all__ = ["LOCKSTEP_QOS", "INPUT_QOS", "PARAMETER_EVENTS_QOS", "offered_qos_yaml", "publishers_qos_yaml",
@@ -88,7 +91,8 @@ def incompatible_peers(node, topic: str, qos: QoSProfile, readers: bool) -> list
         pub, sub = (info.qos_profile, qos) if readers else (qos, info.qos_profile)
         compatibility, reason = qos_check_compatible(pub, sub)
         if compatibility == QoSCompatibility.ERROR:
-            out.append(f"{(info.node_namespace or '/').rstrip('/')}/{info.node_name} ({reason.strip().rstrip('.')})")
+            why = reason.strip().removeprefix("ERROR:").strip().rstrip(";. ")
+            out.append(f"{(info.node_namespace or '/').rstrip('/')}/{info.node_name} ({why})")
     return out
 
 
@@ -97,24 +101,39 @@ def qos_event_callbacks(node, topic: str, qos: QoSProfile, problems: list[str] |
     """Event callbacks that name, in one logged line, a peer whose QoS cannot match our endpoint on ``topic``.
 
     rclpy's default says only "incompatible QoS, last policy X"; this names
-    the topic, each peer node and the reason. For a subscription (``reader``)
-    the line is also appended to ``problems``: the runner stops the episode
-    with it, since the step waits for a message that will never come.
+    the topic, each peer node and the reason. The event can come before the
+    peer's node name is discovered: the line waits for it (a steady-clock
+    timer, up to 2 s). For a subscription (``reader``) the line is also
+    appended to ``problems``: the runner stops the episode with it, since the
+    step waits for a message that will never come.
 
     Returns
     -------
     SubscriptionEventCallbacks or PublisherEventCallbacks
     """
     def on_incompatible(info) -> None:
-        resolved = node.resolve_topic_name(topic)
         policy = getattr(info.last_policy_kind, "name", str(info.last_policy_kind)).replace("RMW_QOS_POLICY_", "")
-        peers = incompatible_peers(node, resolved, qos, reader) or ["a node not discovered yet"]
-        side = "publisher" if reader else "subscriber"
-        text = (f"{resolved}: {side} {', '.join(peers)} has QoS incompatible with {node.get_name()}'s "
-                f"{'subscription' if reader else 'publisher'} (policy {policy}); no message passes between them")
-        node.get_logger().error(text)
-        if problems is not None and reader:
-            problems.append(text)
+        give_up = time.monotonic() + 2.0
+        timer = []
+
+        def report() -> bool:
+            resolved = node.resolve_topic_name(topic)
+            peers = incompatible_peers(node, resolved, qos, reader)
+            if (not peers or any(UNKNOWN_NODE in p for p in peers)) and time.monotonic() < give_up:
+                return False  # the peer's name is not discovered yet: ask again at the next tick
+            for t in timer:
+                node.destroy_timer(t)
+            side = "publisher" if reader else "subscriber"
+            text = (f"{resolved}: {side} {', '.join(peers) or 'of another node'} has QoS incompatible with "
+                    f"{node.get_name()}'s {'subscription' if reader else 'publisher'} (policy {policy}); "
+                    "no message passes between them")
+            node.get_logger().error(text)
+            if problems is not None and reader:
+                problems.append(text)
+            return True
+
+        if not report():
+            timer.append(node.create_timer(0.05, report, clock=Clock(clock_type=ClockType.STEADY_TIME)))
 
     if reader:
         return SubscriptionEventCallbacks(incompatible_qos=on_incompatible)

@@ -50,6 +50,7 @@ from attitude_sil.ros.contract import (
     RECORDED_TOPICS,
     ROLE_OUTPUTS,
     STEP_TOPICS,
+    UNKNOWN_NODE,
     check_namespace,
     episode_topics,
 )
@@ -114,20 +115,29 @@ def graph_scenario(values: dict[str, dict], settings: dict | None, source: str) 
 
 
 def _own_nodes(node, namespace: str | None, spin, timeout: float) -> list[str]:
-    """The graph nodes of the package running under ``namespace``: each answers for a parameter of its schema.
+    """The graph nodes of the package running under ``namespace``.
 
-    A node of the graph that is not in the ROS graph, or that holds none of
-    the schema's parameters (flight software of the user's in its place,
-    docs/flight-software.md), is not one: its parameters are not read.
+    A graph node is the package's when the node publishing its outputs
+    (:data:`~attitude_sil.ros.contract.ROLE_OUTPUTS`) has the node's name and
+    answers for a parameter of the node's schema. Flight software of the
+    user's in its place (docs/flight-software.md) does not: its parameters
+    are not read. Publishers whose node is not discovered yet are waited for.
     """
-    present = {(ns.rstrip("/") or "/", n) for n, ns in node.get_node_names_and_namespaces()}
+    own_ns = f"/{namespace}" if namespace else "/"
+    deadline = time.monotonic() + timeout
     own = []
     for name in GRAPH_NODES:
-        if ((f"/{namespace}" if namespace else "/"), name) not in present:
+        topics = [node.resolve_topic_name(t) for t in ROLE_OUTPUTS[name][0]]
+        while True:
+            infos = [i for t in topics for i in node.get_publishers_info_by_topic(t)]
+            if infos and all(i.node_name != UNKNOWN_NODE for i in infos) or time.monotonic() > deadline:
+                break
+            spin(0.02)
+        if not any(i.node_name == name and (i.node_namespace.rstrip("/") or "/") == own_ns for i in infos):
             continue
         # a parameter of this node's own (control_period is everyone's), declared with a value
         mark = next(sp.name for sp in NODE_PARAMS[name] if sp.name != "control_period" and sp.default != [])
-        if get_remote_parameters(node, spin, _target(namespace, name), [mark], timeout):
+        if get_remote_parameters(node, spin, _target(namespace, name), [mark], max(deadline - time.monotonic(), 0.1)):
             own.append(name)
     return own
 
@@ -197,6 +207,17 @@ def _wait_publishers(recorder: Recorder, spin, deadline: float, what: str) -> No
         if time.monotonic() > deadline:
             raise RunError(f"no publisher of {', '.join(gaps)} within the timeout: is the graph running{what}?")
         spin(0.02)
+
+
+def _graph_ready(recorder: Recorder, namespace: str | None, clients: dict) -> bool:
+    """The whole graph is up, whoever plays each node: every role's outputs published, and the parameter
+    service of each graph node that runs under its name ready."""
+    if any(not any(recorder.subs[t].get_publisher_count() > 0 for t in alt)
+           for outputs in ROLE_OUTPUTS.values() for alt in outputs if all(t in recorder.subs for t in alt)):
+        return False
+    present = {n for n, ns in recorder.get_node_names_and_namespaces()
+               if (ns.rstrip("/") or "/") == (f"/{namespace}" if namespace else "/")}
+    return all(c.services_are_ready() for n, c in clients.items() if n in present)
 
 
 def _live_topics(recorder: Recorder, external: list[str]) -> list[str]:
@@ -370,7 +391,7 @@ def record_graph(bag: str | Path, topics: list[str] | None = None, namespace: st
                 ros.spin(0.05)
                 for name in rec.register_discovered():
                     say(f"subscribed to {rec.resolved[name]}")
-                if scn is None and time.monotonic() >= ask_at and all(c.services_are_ready() for c in clients.values()):
+                if scn is None and time.monotonic() >= ask_at and _graph_ready(rec, ns, clients):
                     try:
                         values = _ask_graph(rec, ros.spin, ns, 5.0, say)
                     except RunError as exc:  # a node just started answers once it spins: ask again, keep recording
@@ -379,9 +400,9 @@ def record_graph(bag: str | Path, topics: list[str] | None = None, namespace: st
                         asked, ask_at = True, time.monotonic() + 1.0
                         continue
                     scn = graph_scenario(values, None, f"the graph{where}")
-                    writer.set_custom_data(PARAMETERS_KEY, scn.parameters_yaml())
+                    writer.set_custom_data(PARAMETERS_KEY, scn.parameters_yaml(nodes=list(values)))
                     result.snapshot = True
-                    say(f"parameter snapshot of {', '.join(_target(ns, n) for n in GRAPH_NODES)}")
+                    say(f"parameter snapshot of {', '.join(_target(ns, n) for n in values)}")
             except KeyboardInterrupt:
                 break
             if rec.error:

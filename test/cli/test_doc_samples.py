@@ -2,7 +2,8 @@
 
 Two kinds of fenced block are checked:
 
-* ``console`` blocks are transcripts: a line ``$ attitude-sil ...`` is a
+* ``console`` blocks are transcripts: a line ``$ attitude-sil ...`` (or
+  ``$ python ...``, a program of the examples, with the venv's interpreter) is a
   command, the lines after it (to the next ``$``) what it prints on stdout (on
   stderr where it fails: the one-line error). The test runs each command as a
   user would, from a fresh folder holding the repository's ``config/`` and
@@ -51,6 +52,7 @@ VOLATILE = (
     (re.compile(r"ROS_DOMAIN_ID=\d+"), "ROS_DOMAIN_ID=<domain>"),
     (re.compile(r"(Bag size:\s+)\S+ \S+"), r"\1<size>"),
     (re.compile(r"\(\d+ worker\(s\)\)"), "(<n> worker(s))"),
+    (re.compile(r"(controller latency \w+\s+)\d[\d.e+-]* ms"), r"\1<latency> ms"),
 )
 
 
@@ -116,9 +118,10 @@ def _workdir(tmp_path: Path) -> Path:
 
 
 def _argv(command: str) -> list[str]:
+    # attitude-sil, or python (the venv's) for a program of the examples
     argv = shlex.split(command)
-    assert argv[0] == "attitude-sil", f"a transcript runs attitude-sil commands, got {command!r}"
-    return [str(BIN / "attitude-sil"), *argv[1:]]
+    assert argv[0] in ("attitude-sil", "python"), f"a transcript runs attitude-sil or python, got {command!r}"
+    return [str(BIN / "attitude-sil") if argv[0] == "attitude-sil" else sys.executable, *argv[1:]]
 
 
 @pytest.mark.parametrize("block", _transcripts(), ids=lambda b: b.id)
