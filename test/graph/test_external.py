@@ -100,10 +100,12 @@ def test_default_qos_controller_flies_the_builtin_law(builtin, tmp_path, capfd):
 
 
 def test_a_slow_controller_is_waited_for(builtin):
-    # 30 ms per step against a 10 ms control period: the plant waits, the numbers do not change
+    # 30 ms per step against a 10 ms control period, paced at real time: the plant waits, the numbers do not
+    # change, and the summary shows what the flight software took
     ctrl = _start([str(EXAMPLE), "--ros-args", "-p", "compute_delay:=0.03"])
     try:
-        result = run_graph(load_scenario(SCENARIO), duration=0.5, external=("controller",), progress=False)
+        result = run_graph(load_scenario(SCENARIO), duration=0.5, external=("controller",), real_time=True,
+                           progress=False)
     finally:
         _stop([ctrl])
     _same_metrics(result.metrics, builtin[0.5])
