@@ -51,3 +51,29 @@ def cli(capfd, monkeypatch):
         return subprocess.CompletedProcess(list(args), code, out, err)
 
     return call
+
+
+LAUNCH_FILE = ROOT / "launch" / "sim.launch.py"
+
+
+class _Recorded:
+    def __init__(self, *args, **kwargs):
+        self.args, self.kwargs = args, kwargs
+
+
+def launch_actions(monkeypatch) -> list:
+    """The actions of ``launch/sim.launch.py``'s description, built with stand-ins of ``launch`` and
+    ``launch_ros`` (not on PyPI) that record their arguments: ``type(a).__name__``, ``a.args``, ``a.kwargs``."""
+    import runpy
+    import types
+
+    names = {"launch": ["LaunchDescription"], "launch.actions": ["DeclareLaunchArgument"],
+             "launch.conditions": ["IfCondition", "UnlessCondition"],
+             "launch.substitutions": ["LaunchConfiguration", "PathJoinSubstitution", "PythonExpression"],
+             "launch_ros": [], "launch_ros.actions": ["Node"], "launch_ros.substitutions": ["FindPackageShare"]}
+    for module, classes in names.items():
+        mod = types.ModuleType(module)
+        for cls in classes:
+            setattr(mod, cls, type(cls, (_Recorded,), {}))
+        monkeypatch.setitem(sys.modules, module, mod)
+    return runpy.run_path(str(LAUNCH_FILE))["generate_launch_description"]().args[0]

@@ -18,6 +18,7 @@ import rclpy
 import yaml
 from rcl_interfaces.msg import SetParametersResult
 from rclpy.clock import Clock, ClockType
+from rclpy.exceptions import ParameterException
 from rclpy.executors import ExternalShutdownException
 from rclpy.experimental import EventsExecutor
 from rclpy.node import Node
@@ -230,7 +231,8 @@ def run_node(factory: Callable[[], Node], args: list[str] | None = None) -> int:
     Returns
     -------
     int
-        0, 2 for bad parameters, or 128 + the signal that stopped it (130 for Ctrl-C).
+        0, also after a stop signal (SIGINT, SIGTERM, SIGHUP: a requested shutdown, as ``ros2 launch``
+        sends on Ctrl-C, which reports any other code as a died process), 2 for bad parameters.
     """
     discovery_profile()  # before the first participant: found by, and finding, the graph in < 1 s
     rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
@@ -256,6 +258,9 @@ def run_node(factory: Callable[[], Node], args: list[str] | None = None) -> int:
     except (AttitudeSilError, ValueError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
+    except ParameterException as exc:  # a value outside its descriptor's range or of another type, given at start
+        print(f"error: invalid parameter: {' '.join(str(exc).split())}", file=sys.stderr)
+        return 2
     finally:
         if executor is not None:
             executor.shutdown()
@@ -263,4 +268,4 @@ def run_node(factory: Callable[[], Node], args: list[str] | None = None) -> int:
             node.destroy_node()
         rclpy.try_shutdown()
         stop.__exit__()
-    return stop.exit_code
+    return 0

@@ -14,14 +14,13 @@ import re
 import runpy
 import subprocess
 import sys
-import types
 import xml.etree.ElementTree as ET
 
 import pytest
 import setuptools
 
 from attitude_sil.core.sim.scenario import GRAPH_NODES
-from conftest import ROOT
+from conftest import LAUNCH_FILE, ROOT, launch_actions
 
 #: import name -> (package.xml key, or None where only a comment can say it is pip-only;
 #: pip requirement, or None for a ROS package, which a ROS 2 install or the Makefile's wheels provide)
@@ -47,7 +46,6 @@ DEPENDENCIES = {
         "rosgraph_msgs", "diagnostic_msgs", "ament_index_python", "launch", "launch_ros")},
 }
 TUNER_ONLY = ("pymoo", "control", "matplotlib")
-LAUNCH_FILE = ROOT / "launch" / "sim.launch.py"
 
 
 def _third_party(paths) -> dict[str, str]:
@@ -177,32 +175,10 @@ def test_node_executables_import_without_the_tuner_dependencies():
     assert cli.stderr.count("\n") == 1 and "pip install 'attitude_sil[tune]'" in cli.stderr
 
 
-class _Recorded:
-    def __init__(self, *args, **kwargs):
-        self.args, self.kwargs = args, kwargs
-
-
-def _stand_ins() -> dict[str, types.ModuleType]:
-    names = {"launch": ["LaunchDescription"], "launch.actions": ["DeclareLaunchArgument"],
-             "launch.conditions": ["IfCondition", "UnlessCondition"],
-             "launch.substitutions": ["LaunchConfiguration", "PathJoinSubstitution", "PythonExpression"],
-             "launch_ros": [], "launch_ros.actions": ["Node"], "launch_ros.substitutions": ["FindPackageShare"]}
-    modules = {}
-    for module, classes in names.items():
-        mod = types.ModuleType(module)
-        for cls in classes:
-            setattr(mod, cls, type(cls, (_Recorded,), {}))
-        modules[module] = mod
-    return modules
-
-
 def test_launch_file_starts_the_runner_graph_on_sim_time(setup_kwargs, monkeypatch):
     tree = ast.parse(LAUNCH_FILE.read_text())
     assert "generate_launch_description" in {f.name for f in tree.body if isinstance(f, ast.FunctionDef)}
-    for name, module in _stand_ins().items():
-        monkeypatch.setitem(sys.modules, name, module)
-    description = runpy.run_path(str(LAUNCH_FILE))["generate_launch_description"]()
-    actions = description.args[0]
+    actions = launch_actions(monkeypatch)
     arguments = {a.args[0]: a.kwargs["default_value"] for a in actions if type(a).__name__ == "DeclareLaunchArgument"}
     assert set(arguments) == {"namespace", "params_file", "controller_type"}
     nodes = [a for a in actions if type(a).__name__ == "Node"]
