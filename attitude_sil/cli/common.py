@@ -11,7 +11,7 @@ from attitude_sil.errors import AttitudeSilError
 from attitude_sil.ros.environment import isolated_domain
 from attitude_sil.tuning.executor import check_scheduler_address
 
-__all__ = ["announce_domain", "load_with_params", "scheduler_address"]
+__all__ = ["announce_domain", "load_with_params", "scheduler_address", "set_overrides"]
 
 
 def announce_domain() -> None:
@@ -39,3 +39,27 @@ def scheduler_address(args: argparse.Namespace) -> str | None:
         except AttitudeSilError as exc:
             raise AttitudeSilError(f"DASK_SCHEDULER_ADDRESS: {exc}") from None
     return address
+
+
+def set_overrides(items: list[str] | None) -> dict:
+    """``--set KEY=VALUE`` items as ``{key: value}``, each value read as YAML (``5``, ``[1, 2]``, ``text``).
+
+    Raises
+    ------
+    AttitudeSilError
+        An item without ``=``, or a value that is not YAML.
+    """
+    import yaml
+
+    from attitude_sil.core import yaml12
+
+    overrides = {}
+    for item in items or []:
+        key, sep, value = item.partition("=")
+        if not sep or not key:
+            raise AttitudeSilError(f"--set takes KEY=VALUE, got {item!r}")
+        try:
+            overrides[key] = yaml12.load(value)
+        except yaml.YAMLError:
+            raise AttitudeSilError(f"--set {key}: {value!r} is not a YAML value") from None
+    return overrides

@@ -17,6 +17,10 @@ def add(sub: argparse._SubParsersAction) -> None:
     mc.add_argument("spec", help="campaign spec YAML (config/mc_*.yaml)")
     mc.add_argument("--runs", type=int, help="number of runs (default: the spec's runs)")
     mc.add_argument("--resume", action="store_true", help="run only what the output folder does not hold yet")
+    mc.add_argument("--output", metavar="DIR", help="the results folder (default: the spec's output)")
+    mc.add_argument("--set", action="append", metavar="KEY=VALUE",
+                    help="override a spec entry, e.g. --set seed=7 --set requirements.settling_time_s.max=15 "
+                    "--set set.disturbance.noise.power=[1e-7,1e-7,1e-7]")
     where = mc.add_mutually_exclusive_group()
     where.add_argument("--scheduler", metavar="ADDRESS",
                        help="run the chunks on a Dask cluster, tcp://HOST:PORT or tls://HOST:PORT "
@@ -34,7 +38,7 @@ def execute(args: argparse.Namespace) -> int:
     import json
     import os
 
-    from attitude_sil.cli.common import announce_domain, scheduler_address
+    from attitude_sil.cli.common import announce_domain, scheduler_address, set_overrides
     from attitude_sil.cli.format import format_campaign
     from attitude_sil.errors import AttitudeSilError
     from attitude_sil.graph.session import run_graph
@@ -47,7 +51,10 @@ def execute(args: argparse.Namespace) -> int:
         raise AttitudeSilError(f"--workers must be >= 1, got {args.workers}")
     if args.runs is not None and args.runs < 1:
         raise AttitudeSilError(f"--runs must be >= 1, got {args.runs}")
-    spec = load_mc_spec(args.spec, runs=args.runs)  # bad input is refused before anything runs
+    overrides = set_overrides(args.set)
+    if args.output is not None:
+        overrides["output"] = args.output
+    spec = load_mc_spec(args.spec, runs=args.runs, overrides=overrides)  # bad input is refused before anything runs
     check_campaign_output(spec, args.resume)
     address = scheduler_address(args)
     workers = args.workers if args.workers is not None else (os.cpu_count() or 1)

@@ -32,12 +32,10 @@ def execute(args: argparse.Namespace) -> int:
     import json
 
     import rclpy
-    import yaml
     from rclpy.signals import SignalHandlerOptions
 
-    from attitude_sil.cli.common import announce_domain, scheduler_address
+    from attitude_sil.cli.common import announce_domain, scheduler_address, set_overrides
     from attitude_sil.cli.format import format_bar
-    from attitude_sil.core import yaml12
     from attitude_sil.errors import AttitudeSilError
     from attitude_sil.graph.tuner_node import TunerNode, tune
     from attitude_sil.ros.environment import localhost_environment
@@ -45,15 +43,7 @@ def execute(args: argparse.Namespace) -> int:
     from attitude_sil.tuning.optimize import check_output
     from attitude_sil.tuning.spec import apply_overrides, load_spec
 
-    overrides = {}
-    for item in args.set or []:
-        key, sep, value = item.partition("=")
-        if not sep:
-            raise AttitudeSilError(f"--set takes KEY=VALUE, got {item!r}")
-        try:
-            overrides[key] = yaml12.load(value)
-        except yaml.YAMLError:
-            raise AttitudeSilError(f"--set {key}: {value!r} is not a YAML value") from None
+    overrides = set_overrides(args.set)
     spec = apply_overrides(load_spec(args.spec), overrides)  # bad input is refused before ROS starts
     check_output(spec, args.resume)
     address = scheduler_address(args)

@@ -877,5 +877,9 @@ class BagWriter:
     def _write_metadata_file(self) -> None:
         text = self._dump_yaml({'rosbag2_bagfile_information': self._bag_info()})
         tmp = self.metadata_path.with_name('metadata.yaml.tmp')
-        tmp.write_text(text, encoding='utf-8')
-        os.replace(tmp, self.metadata_path)
+        try:
+            tmp.write_text(text, encoding='utf-8')
+            os.replace(tmp, self.metadata_path)
+        except OSError:
+            tmp.unlink(missing_ok=True)  # a full disk: no half-written .tmp left beside the bag
+            raise

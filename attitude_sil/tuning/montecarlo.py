@@ -102,8 +102,15 @@ def _int(p: Path, key: str, value: Any, low: int, high: int) -> int:
     return value
 
 
-def load_mc_spec(path: str | Path, runs: int | None = None) -> MonteCarloSpec:
+def load_mc_spec(path: str | Path, runs: int | None = None, overrides: dict | None = None) -> MonteCarloSpec:
     """Read and validate a Monte Carlo spec; ``runs`` overrides its ``runs``.
+
+    ``overrides`` (``--set KEY=VALUE``, ``--output``) replace spec entries
+    before the spec is checked: ``KEY`` is a top-level key (``output``,
+    ``seed``, ``controller``, ...), a dotted path into one
+    (``requirements.settling_time_s.max``, ``dispersions.inertia_pct.scale``),
+    or ``set.`` and a scenario key (``set.disturbance.noise.power``). They
+    count in the spec's identity, which ``--resume`` checks.
 
     Raises
     ------
@@ -112,9 +119,11 @@ def load_mc_spec(path: str | Path, runs: int | None = None) -> MonteCarloSpec:
     """
     p = Path(path)
     data = yaml12.read(p, "Monte Carlo spec", SpecError)
-    text = p.read_bytes()
+    text = p.read_bytes() + json.dumps(sorted((overrides or {}).items()), default=str).encode()
     if not isinstance(data, dict):
         raise _fail(p, "expected a mapping of name, scenario, runs, seed, dispersions, requirements, ...")
+    for key, value in (overrides or {}).items():
+        _override(data, key, value)
     unknown = set(map(str, data)) - _TOP
     if unknown:
         key = sorted(unknown)[0]
@@ -268,6 +277,30 @@ def _header(spec: MonteCarloSpec) -> dict:
     return {"spec_sha256": spec.text_hash, "runs": spec.runs, "seed": spec.seed, "chunk": spec.chunk}
 
 
+def _override(data: dict, key: str, value) -> None:
+    """One ``--set KEY=VALUE`` into the spec's mapping (:func:`load_mc_spec`)."""
+    top, _, rest = key.partition(".")
+    if top not in _TOP:
+        close = difflib.get_close_matches(top, _TOP, n=1)
+        raise SpecError(f"--set {key}: unknown key {top!r}" + (f" (did you mean {close[0]!r}?)" if close else ""))
+    if not rest:
+        data[top] = value
+        return
+    if top == "set":  # scenario keys hold dots themselves: node.param
+        path = ["set", rest]
+    else:
+        path = [top, *rest.split(".")]
+    node = data
+    for part in path[:-1]:
+        child = node.get(part)
+        if child is None:
+            child = node[part] = {}
+        if not isinstance(child, dict):
+            raise SpecError(f"--set {key}: {part!r} is not a mapping in the spec")
+        node = child
+    node[path[-1]] = value
+
+
 def check_campaign_output(spec: MonteCarloSpec, resume: bool) -> None:
     """Refuse an output folder the campaign cannot use, before anything runs.
 
@@ -289,7 +322,8 @@ def check_campaign_output(spec: MonteCarloSpec, resume: bool) -> None:
             raise SpecError(f"{log}: written by a different spec, run count, seed or chunk size; run without "
                             "--resume into another output")
     elif log.exists():
-        raise SpecError(f"{spec.output}: results of an earlier campaign are there; use --resume or another output")
+        raise SpecError(f"{spec.output}: results of an earlier campaign are there; --resume continues them, "
+                        "--output DIR writes elsewhere")
 
 
 def _load_chunks(log: Path) -> dict[int, dict[str, np.ndarray]]:

@@ -22,7 +22,7 @@ from attitude_sil.tuning.evaluate import evaluate
 from attitude_sil.tuning.executor import InProcess, LocalProcesses
 from attitude_sil.tuning.montecarlo import load_mc_spec, run_campaign, worst_runs
 from attitude_sil.tuning.spec import load_spec
-from conftest import CONFIG
+from conftest import CONFIG, ROOT
 
 ALL = {"inertia_pct": {"dist": "normal", "scale": [5, 5, 5]}, "initial_attitude_deg": {"scale": 0.05},
        "initial_rate_deg_s": {"dist": "uniform", "scale": 0.002}, "setpoint_deg": {"scale": [0.1, 0, 0]},
@@ -141,3 +141,23 @@ def test_robust_cost_is_the_mean_or_worst_of_the_candidates_dispersed_runs(tmp_p
     np.testing.assert_array_equal(whole.F[:, 0], np.mean(np.stack(singles, axis=1), axis=1))
     worst = spec.__class__(**{**spec.__dict__, "robust": {**spec.robust, "statistic": "max"}})
     np.testing.assert_array_equal(evaluate(worst, x).F[:, 0], np.max(np.stack(singles, axis=1), axis=1))
+
+
+def test_set_and_output_override_the_spec_and_count_in_its_identity(cli, tmp_path):
+    spec = CONFIG / "mc_hst_roll_step.yaml"
+    out = tmp_path / "camp"
+    base = ["montecarlo", str(spec), "--runs", "4", "--in-process", "--no-bags", "--quiet", "--output", str(out),
+            "--set", "set.plant.duration=1.0"]
+    first = cli(*base, "--set", "seed=5", "--set", "requirements.settling_time_s.max=0.5")
+    assert first.returncode == 0, first.stderr
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["seed"] == 5 and summary["completed_runs"] == 4
+    assert (out / "runs.csv").is_file() and not (ROOT / "results" / "camp").exists()
+    # the same output again: refused, and --resume with another --set is another campaign: refused too
+    again = cli(*base, "--set", "seed=5")
+    assert again.returncode == 2 and "--output DIR writes elsewhere" in again.stderr
+    other = cli(*base, "--set", "seed=6", "--resume")
+    assert other.returncode == 2 and "written by a different spec" in other.stderr
+    for bad, needle in (("bogus=1", "unknown key 'bogus'"), ("seed", "KEY=VALUE"), ("runs.x=1", "not a mapping")):
+        res = cli("montecarlo", str(spec), "--set", bad)
+        assert res.returncode == 2 and res.stderr.count("\n") == 1 and needle in res.stderr, res.stderr

@@ -563,3 +563,21 @@ def test_errors(tmp_path: Path) -> None:
     with pytest.raises(ValueError, match="unknown compression 'gzip'"):
         BagWriter(tmp_path / 'other', compression='gzip')
     assert not (tmp_path / 'other').exists()
+
+
+def test_a_failed_metadata_write_leaves_no_tmp_file(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    # the disk fills while metadata.yaml is replaced: the close reports it, and no metadata.yaml.tmp is left
+    from attitude_sil.storage import writer as writer_module
+
+    run_dir = tmp_path / 'full'
+    writer = BagWriter(run_dir)
+    writer.add_topic('/clock', 'rosgraph_msgs/msg/Clock')
+
+    def no_space(src, dst):
+        raise OSError(28, 'No space left on device')
+
+    monkeypatch.setattr(writer_module.os, 'replace', no_space)
+    with pytest.raises(Exception, match='No space left on device'):
+        writer.close()
+    assert (run_dir / 'metadata.yaml.tmp').exists() is False
+    assert (run_dir / 'full_0.mcap').is_file()
