@@ -37,7 +37,8 @@ def add(sub: argparse._SubParsersAction) -> None:
     run.add_argument("--json", action="store_true", help="print the metrics as one JSON object, last line")
     run.add_argument("--processes", action="store_true", help="one process per node (over DDS)")
     run.add_argument("--real-time", action="store_true", help="pace the plant at real time")
-    run.add_argument("--quiet", action="store_true", help="no progress line")
+    run.add_argument("--quiet", action="store_true", help="no progress line, and the nodes log warnings and errors "
+                     "only")
     run.add_argument("--params", help="parameter file laid over the scenario (e.g. a tuner's best.yaml)")
     run.add_argument("--namespace", help="run the whole graph, its /clock included, under this namespace")
     run.add_argument("--swap", action="append", metavar="TIME:TYPE",
@@ -121,7 +122,8 @@ def execute(args: argparse.Namespace) -> int:
                            processes=args.processes, real_time=args.real_time or (
                                args.foxglove is not None and not args.foxglove_fast),
                            progress=not args.quiet, namespace=args.namespace, before_start=start,
-                           live=lambda: live, external=args.external or (), external_timeout=args.external_timeout)
+                           live=lambda: live, external=args.external or (), external_timeout=args.external_timeout,
+                           quiet=args.quiet)
     finally:
         if live is not None:
             live.close()

@@ -23,6 +23,7 @@ from pathlib import Path
 from typing import Any
 
 import yaml
+from rclpy.logging import LoggingSeverity
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 
@@ -62,10 +63,11 @@ def node_overrides(scn: Scenario, node: str, extra: dict[str, Any]) -> dict[str,
 
 
 def start_nodes(scn: Scenario, extra: dict[str, Any], context, executor, nodes: list[Node],
-                node_kwargs: dict | None = None, skip=()) -> PlantNode | None:
+                node_kwargs: dict | None = None, skip=(), quiet: bool = False) -> PlantNode | None:
     """Create the graph's nodes in this process, add them to ``executor`` and ``nodes``; return the plant.
 
-    The nodes named in ``skip`` are not created (``run --external``: a node of the user's plays each).
+    The nodes named in ``skip`` are not created (``run --external``: a node of the user's plays each);
+    ``quiet`` nodes log warnings and errors only (``run --quiet``).
 
     Raises
     ------
@@ -82,6 +84,8 @@ def start_nodes(scn: Scenario, extra: dict[str, Any], context, executor, nodes: 
             node = NODE_CLASSES[name](context=context, parameter_overrides=overrides, **(node_kwargs or {}))
         except ValueError as exc:
             raise RunError(str(exc)) from None
+        if quiet:
+            node.get_logger().set_level(LoggingSeverity.WARN)
         nodes.append(node)
         executor.add_node(node)
         if name == "plant":
@@ -90,8 +94,9 @@ def start_nodes(scn: Scenario, extra: dict[str, Any], context, executor, nodes: 
 
 
 def start_processes(scn: Scenario, extra: dict[str, Any], tmp: Path,
-                    namespace: str | None = None, skip=()) -> list[subprocess.Popen]:
-    """Start one process per node but those in ``skip``, each with a parameter file written to ``tmp``."""
+                    namespace: str | None = None, skip=(), quiet: bool = False) -> list[subprocess.Popen]:
+    """Start one process per node but those in ``skip``, each with a parameter file written to ``tmp``;
+    ``quiet`` processes log warnings and errors only."""
     children = []
     for name in (n for n in GRAPH_NODES if n not in skip):
         values = {k: v for k, v in node_overrides(scn, name, extra).items() if v != []}
@@ -102,6 +107,8 @@ def start_processes(scn: Scenario, extra: dict[str, Any], tmp: Path,
         cmd = [sys.executable, "-m", f"attitude_sil.nodes.{name}_node", "--ros-args", "--params-file", str(path)]
         if namespace:
             cmd += ["-r", f"__ns:=/{namespace}", *clock_remap(namespace)]
+        if quiet:
+            cmd += ["--log-level", "warn"]
         children.append(subprocess.Popen(cmd, stdin=subprocess.DEVNULL))
     return children
 

@@ -171,15 +171,19 @@ class GraphSession:
         ``external_timeout`` s once the graph's own nodes are up.
     external_timeout : float
         Wall seconds to wait for the external nodes.
+    quiet : bool
+        The graph's nodes log warnings and errors only (``run --quiet``).
     """
 
     def __init__(self, scn: Scenario, *, duration: float | None = None, controller: str | None = None,
                  processes: bool = False, real_time: bool = False, namespace: str | None = None,
-                 connect_timeout: float = 20.0, live=None, external=(), external_timeout: float = 60.0) -> None:
+                 connect_timeout: float = 20.0, live=None, external=(), external_timeout: float = 60.0,
+                 quiet: bool = False) -> None:
         if controller is not None:
             spec_for("controller", "controller_type").validate(controller, "controller")
         self.external = check_external(external, controller, scn)
         self.external_timeout = external_timeout
+        self.quiet = quiet
         self.scn = scn
         self.extra = extra_parameters(scn, duration, controller, real_time)
         self.duration = scn.duration if duration is None else float(duration)
@@ -228,10 +232,10 @@ class GraphSession:
             if self.processes:
                 self.tmpdir = tempfile.TemporaryDirectory(prefix="attitude_sil_")
                 self.children = start_processes(self.scn, self.extra, Path(self.tmpdir.name), self.namespace,
-                                                skip=self.external)
+                                                skip=self.external, quiet=self.quiet)
             else:
                 self.plant = start_nodes(self.scn, self.extra, self.context, self.executor, self.nodes, kw,
-                                         skip=self.external)
+                                         skip=self.external, quiet=self.quiet)
             wait_connected(self.recorder, self.spin, self.nodes, self.children, self.connect_timeout,
                            external=self.external)
             if self.external:

@@ -167,3 +167,12 @@ def test_a_full_disk_stops_the_run_with_one_line_and_a_readable_bag(tmp_path):
 def test_an_unwritable_bag_directory_is_found_at_start(tmp_path, cli):
     assert_one_line_error(cli("run", "config/hst_roll_step.yaml", "--record", "config/hst_roll_step.yaml/bag",
                                   "--quiet"), "hst_roll_step.yaml")
+
+
+@pytest.mark.parametrize("processes", [False, True], ids=["one-process", "processes"])
+def test_quiet_runs_print_no_ros_info_lines(processes):
+    proc = run_cli("run", "config/hst_roll_step.yaml", "--duration", "0.5", "--no-record", "--quiet",
+                   *(["--processes"] if processes else []), timeout=120)
+    assert proc.returncode == 0, proc.stderr
+    assert "[INFO]" not in proc.stderr and "episode complete" not in proc.stderr, proc.stderr
+    assert "scenario hst_roll_step" in proc.stdout
