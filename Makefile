@@ -8,13 +8,15 @@ STAMP := $(VENV)/.installed
 
 .PHONY: run test test-unit lint bench soak docs clean
 
-$(STAMP): setup.py package.xml examples/custom_law/pyproject.toml
+$(STAMP): setup.py package.xml examples/custom_law/pyproject.toml test/js/package-lock.json
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/pip install --quiet --upgrade pip
 	$(BIN)/pip install --quiet 'ros-jazzy-rclpy[fastrtps]' ros-jazzy-common-interfaces ros-jazzy-std-srvs ros-jazzy-rosgraph-msgs
 	$(BIN)/pip install --quiet -e '.[test]'
 	# the example law package, installed as a user installs theirs: the suite proves the plugin path with it
 	$(BIN)/pip install --quiet -e ./examples/custom_law
+	# the official Foxglove protocol client (Node, pinned in test/js/package-lock.json) the live-view tests run
+	cd test/js && npm ci --no-audit --no-fund --silent
 	$(BIN)/python -m attitude_sil.tools.warm
 	touch $(STAMP)
 

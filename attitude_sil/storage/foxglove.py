@@ -14,6 +14,11 @@ so a client that connects at any moment sees the active law within 0.1 s of
 sim time (``/parameter_events`` only shows a swap when it happens). It is a
 Foxglove channel only, not a ROS topic: the graph and the bags are unchanged.
 
+Clients connect through :class:`~attitude_sil.storage.subprotocol.SubprotocolRelay`:
+``foxglove-sdk`` accepts only the subprotocol name ``foxglove.sdk.v1``, and
+the open-source clients (``@foxglove/ws-protocol``, Lichtblick) ask for
+``foxglove.websocket.v1``, the same protocol under its older name.
+
 Nothing here imports rclpy.
 """
 
@@ -28,6 +33,7 @@ import foxglove
 from attitude_sil.errors import AttitudeSilError
 
 from .msgdefs import message_definition, normalize_type_name
+from .subprotocol import SubprotocolRelay
 
 __all__ = ["DEFAULT_PORT", "DEFAULT_HOST", "STATUS_TOPIC", "FoxgloveLive", "check_port"]
 
@@ -35,6 +41,8 @@ __all__ = ["DEFAULT_PORT", "DEFAULT_HOST", "STATUS_TOPIC", "FoxgloveLive", "chec
 DEFAULT_PORT = 8765
 #: the run is served on this machine only unless the user asks for another address
 DEFAULT_HOST = "127.0.0.1"
+#: subprotocol names clients ask for -> the one ``foxglove-sdk`` speaks: the same protocol (storage/subprotocol.py)
+SUBPROTOCOL_RENAMES = {"foxglove.websocket.v1": "foxglove.sdk.v1"}
 #: the status channel (JSON), a Foxglove channel only
 STATUS_TOPIC = "/attitude_sil/status"
 #: sim time between two status messages, ns
@@ -99,10 +107,16 @@ class FoxgloveLive:
     def __init__(self, port: int = DEFAULT_PORT, host: str = DEFAULT_HOST, name: str = "attitude_sil") -> None:
         check_port(port, host)
         self._context = foxglove.Context()
-        try:
-            self._server = foxglove.start_server(name=name, host=host, port=port, context=self._context)
+        try:  # the SDK's server on this machine only, behind the relay that clients reach
+            self._server = foxglove.start_server(name=name, host="127.0.0.1", port=0, context=self._context)
         except RuntimeError as exc:
             raise AttitudeSilError(f"--foxglove {port}: {str(exc).splitlines()[0]}") from None
+        try:
+            self._relay = SubprotocolRelay(host, port, self._server.port, SUBPROTOCOL_RENAMES)
+        except OSError as exc:
+            self._server.stop()
+            raise AttitudeSilError(f"--foxglove {port}: cannot listen on {host}:{port}: {exc.strerror or exc}"
+                                   ) from None
         self.host = host
         self._channels: dict[str, foxglove.Channel] = {}
         self._status = foxglove.Channel(STATUS_TOPIC, schema=_STATUS_SCHEMA, message_encoding="json",
@@ -112,8 +126,8 @@ class FoxgloveLive:
 
     @property
     def port(self) -> int:
-        """The port the server listens on."""
-        return self._server.port
+        """The port clients connect to."""
+        return self._relay.port
 
     @property
     def url(self) -> str:
@@ -162,5 +176,6 @@ class FoxgloveLive:
     def close(self) -> None:
         """Stop the server (idempotent); clients see the connection close."""
         if self._server is not None:
+            self._relay.close()
             self._server.stop()
             self._server = None

@@ -1,8 +1,12 @@
-"""``run --foxglove``: a real Foxglove WebSocket client watches a run live; the shipped layout; bad ports.
+"""``run --foxglove``: Foxglove WebSocket clients watch a run live; the shipped layout; bad ports.
 
-The client speaks the protocol itself (``websockets``; it offers the
-subprotocols ``foxglove.websocket.v1`` and ``foxglove.sdk.v1``, the name
-foxglove-sdk 0.30's server accepts, with the same frames): it waits for the
+Two clients, one per subprotocol name the server must accept. The official
+open-source one, ``@foxglove/ws-protocol`` (``test/js/client.mjs``, pinned
+in ``test/js/package-lock.json``), asks for ``foxglove.websocket.v1``, as
+Lichtblick and older Foxglove releases do; it subscribes to every channel
+and decodes the attitude quaternion with ``@foxglove/cdr``. A Python one
+(``websockets``) asks for ``foxglove.sdk.v1``, the name of foxglove-sdk's
+server and of current Foxglove, and speaks the protocol itself: it waits for the
 ``advertise`` of ``/attitude``
 (message encoding ``cdr``, schema encoding ``ros2msg`` with the bag's message
 definition), subscribes, and decodes the binary message-data frames (opcode
@@ -44,8 +48,7 @@ def _free_port() -> int:
 def _connect(port: int, proc: subprocess.Popen, deadline: float):
     while True:
         try:
-            return connect(f"ws://127.0.0.1:{port}", subprotocols=["foxglove.websocket.v1", "foxglove.sdk.v1"],
-                           open_timeout=2)
+            return connect(f"ws://127.0.0.1:{port}", subprotocols=["foxglove.sdk.v1"], open_timeout=2)
         except OSError:
             assert proc.poll() is None, proc.communicate()[1]
             assert time.monotonic() < deadline, "the Foxglove server did not come up"
@@ -62,7 +65,7 @@ def test_a_foxglove_client_watches_attitude_live():
     try:
         subs: dict[int, str] = {}
         with _connect(port, proc, deadline) as ws:
-            assert ws.subprotocol in ("foxglove.websocket.v1", "foxglove.sdk.v1")
+            assert ws.subprotocol == "foxglove.sdk.v1"
             try:
                 while time.monotonic() < deadline:
                     frame = ws.recv(timeout=max(deadline - time.monotonic(), 0.1))
@@ -104,6 +107,41 @@ def test_a_foxglove_client_watches_attitude_live():
     assert np.all(np.diff(stamps) > 0) and stamps[-1] == 3_000_000_000
     assert np.allclose(norms, 1.0, atol=1e-12)
     assert status and {s["controller_type"] for s in status} == {"pid"}
+
+
+NODE_CLIENT = ROOT / "test" / "js" / "client.mjs"
+
+
+def _official_client(port: int, *args: str, duration: float = 3.0) -> tuple[dict, str]:
+    """``run --foxglove PORT`` for ``duration`` s and the official client against it: (its JSON, run's stderr)."""
+    run = subprocess.Popen([sys.executable, "-m", "attitude_sil.cli", "run", SCENARIO, "--duration", str(duration),
+                            "--no-record", "--quiet", "--foxglove", str(port)], cwd=ROOT, stdin=subprocess.DEVNULL,
+                           stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        client = subprocess.run(["node", str(NODE_CLIENT), f"ws://127.0.0.1:{port}", *args, "--timeout", "90"],
+                                cwd=NODE_CLIENT.parent, capture_output=True, text=True, timeout=120)
+        _, err = run.communicate(timeout=120)
+    finally:
+        if run.poll() is None:
+            run.kill()
+            run.wait()
+    assert run.returncode == 0, err
+    assert client.returncode == 0, client.stdout + client.stderr
+    return json.loads(client.stdout), err
+
+
+def test_the_official_open_source_client_watches_every_channel():
+    got, _ = _official_client(_free_port(), "--attitude", "50")
+    assert got["subprotocol"] == "foxglove.websocket.v1"  # the name Lichtblick and ws-protocol ask for
+    topics = {c["topic"] for c in got["channels"]}
+    assert {n if n.startswith("/") else "/" + n for n in RECORDED_TOPICS} | {STATUS_TOPIC} <= topics
+    assert all(c["encoding"] == "cdr" and c["schemaEncoding"] == "ros2msg" for c in got["channels"]
+               if c["topic"] != STATUS_TOPIC)
+    att = np.array(got["attitude"])  # sec, nanosec, x, y, z, w decoded by @foxglove/cdr
+    stamps = att[:, 0] * 1e9 + att[:, 1]
+    assert len(att) == 50 and np.all(np.diff(stamps) == 10_000_000)  # one per 10 ms step, in order
+    assert np.allclose(np.linalg.norm(att[:, 2:], axis=1), 1.0, atol=1e-12)
+    assert got["counts"]["/clock"] > 0 and got["counts"]["/body_rate"] > 0
 
 
 def test_port_in_use_is_one_line(capfd):
