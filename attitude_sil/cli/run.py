@@ -69,9 +69,11 @@ def execute(args: argparse.Namespace) -> int:
 
     from attitude_sil.cli.common import announce_domain, load_with_params
     from attitude_sil.cli.format import format_segments, format_table
+    from attitude_sil.core.sim.scenario import GRAPH_NODES
     from attitude_sil.errors import AttitudeSilError
     from attitude_sil.graph.session import run_graph
     from attitude_sil.storage.foxglove import FoxgloveLive, check_port
+    from attitude_sil.tools.paramclient import GraphParameters
 
     scn = load_with_params(args.scenario, args.params)
     if args.duration is not None and not (math.isfinite(args.duration) and args.duration > 0):
@@ -113,6 +115,9 @@ def execute(args: argparse.Namespace) -> int:
         announce_domain()
         if args.foxglove is not None:
             live = FoxgloveLive(args.foxglove, host)
+            # the Parameters panel: the package's nodes of the graph, through their parameter services
+            own = [n for n in GRAPH_NODES if n not in (args.external or ())]
+            live.parameters = GraphParameters(args.namespace, own)
             pace = "as fast as it runs" if args.foxglove_fast else "at real time"
             print(f"Foxglove: open connection {live.url} (layout config/foxglove/attitude.json); the run is "
                   f"paced {pace}", file=sys.stderr, flush=True)

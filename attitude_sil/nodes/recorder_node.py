@@ -29,6 +29,7 @@ from collections.abc import Callable
 import numpy as np
 from rcl_interfaces.msg import ParameterEvent
 from rclpy.node import Node
+from rclpy.parameter import parameter_value_to_python
 from rclpy.serialization import deserialize_message
 
 from attitude_sil.core.plant.quaternion import unit_or_none
@@ -248,10 +249,13 @@ class Recorder(Node):
             self.live.tick(t)
         elif name == PARAMETER_EVENTS:
             event = deserialize_message(data, ParameterEvent)
-            if event.node == self.get_namespace().rstrip("/") + "/controller":
-                for p in (*event.new_parameters, *event.changed_parameters):
-                    if p.name == "controller_type":
-                        self.live.set_controller(p.value.string_value, t)
+            values = {}
+            for p in (*event.new_parameters, *event.changed_parameters):
+                v = parameter_value_to_python(p.value)
+                values[p.name] = v if isinstance(v, (str, bytes, bool, int, float)) or v is None else list(v)
+            self.live.parameters_changed(event.node, values)  # a Foxglove client's Parameters panel follows
+            if event.node == self.get_namespace().rstrip("/") + "/controller" and "controller_type" in values:
+                self.live.set_controller(values["controller_type"], t)
 
     def _refuse(self, name: str, t: int, why: str) -> None:
         self.refused[name] += 1

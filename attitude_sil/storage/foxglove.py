@@ -29,6 +29,8 @@ import json
 import socket
 
 import foxglove
+import foxglove.websocket
+from foxglove.websocket import Capability, ParameterType, ServerListener, StatusLevel
 
 from attitude_sil.errors import AttitudeSilError
 
@@ -107,8 +109,12 @@ class FoxgloveLive:
     def __init__(self, port: int = DEFAULT_PORT, host: str = DEFAULT_HOST, name: str = "attitude_sil") -> None:
         check_port(port, host)
         self._context = foxglove.Context()
+        self.parameters = None  # the graph's parameters (get, set), once the graph is up: see _Parameters
+        self._subscribed: set[str] = set()
         try:  # the SDK's server on this machine only, behind the relay that clients reach
-            self._server = foxglove.start_server(name=name, host="127.0.0.1", port=0, context=self._context)
+            self._server = foxglove.start_server(name=name, host="127.0.0.1", port=0, context=self._context,
+                                                 capabilities=[Capability.Parameters],
+                                                 server_listener=_Parameters(self))
         except RuntimeError as exc:
             raise AttitudeSilError(f"--foxglove {port}: {str(exc).splitlines()[0]}") from None
         try:
@@ -173,9 +179,69 @@ class FoxgloveLive:
             self._status.log(json.dumps({"controller_type": self.controller_type, "sim_time_s": t_ns * 1e-9}),
                              log_time=int(t_ns))
 
+    def parameters_changed(self, node: str, values: dict) -> None:
+        """Parameters of ``node`` (fully qualified) changed (its ``/parameter_events``): tell the clients that
+        subscribed to them, under foxglove_bridge's names ``/node.param``."""
+        changed = {f"{node}.{k}": v for k, v in values.items() if f"{node}.{k}" in self._subscribed}
+        if changed and self._server is not None:
+            self._server.publish_parameter_values([_parameter(k, v) for k, v in changed.items()])
+
+    def status(self, text: str, error: bool = True) -> None:
+        """A one-line status message to every client (Foxglove shows it in its problems list)."""
+        if self._server is not None:
+            self._server.publish_status(text, StatusLevel.Error if error else StatusLevel.Info)
+
     def close(self) -> None:
         """Stop the server (idempotent); clients see the connection close."""
         if self._server is not None:
             self._relay.close()
             self._server.stop()
             self._server = None
+        if self.parameters is not None:
+            self.parameters.close()
+            self.parameters = None
+
+
+def _parameter(name: str, value) -> foxglove.websocket.Parameter:
+    """A Foxglove parameter of a plain value; floats typed Float64 (a whole 1.0 is not an integer)."""
+    if isinstance(value, float):
+        return foxglove.websocket.Parameter(name, value=value, type=ParameterType.Float64)
+    if isinstance(value, list) and value and all(isinstance(v, float) for v in value):
+        return foxglove.websocket.Parameter(name, value=value, type=ParameterType.Float64Array)
+    return foxglove.websocket.Parameter(name, value=value)
+
+
+class _Parameters(ServerListener):
+    """The Parameters capability: get, set and subscribe, through ``live.parameters`` (``get(names) -> dict``,
+    ``set(values) -> (dict, errors)``: :class:`attitude_sil.tools.paramclient.GraphParameters`)."""
+
+    def __init__(self, live: FoxgloveLive) -> None:
+        self.live = live
+
+    def on_get_parameters(self, client, param_names, request_id=None):
+        source = self.live.parameters
+        if source is None:
+            return []
+        try:
+            return [_parameter(k, v) for k, v in source.get(list(param_names)).items()]
+        except AttitudeSilError as exc:
+            self.live.status(f"parameters: {exc}")
+            return []
+
+    def on_set_parameters(self, client, parameters, request_id=None):
+        source = self.live.parameters
+        if source is None:
+            return parameters
+        try:
+            values, errors = source.set({p.name: p.get_value() for p in parameters})
+        except AttitudeSilError as exc:
+            values, errors = {}, [f"parameters: {exc}"]
+        for line in errors:  # a refused value: the node's own reason, as param set prints it
+            self.live.status(line)
+        return [_parameter(k, v) for k, v in values.items()]
+
+    def on_parameters_subscribe(self, param_names) -> None:
+        self.live._subscribed.update(param_names)
+
+    def on_parameters_unsubscribe(self, param_names) -> None:
+        self.live._subscribed.difference_update(param_names)

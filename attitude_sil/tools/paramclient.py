@@ -16,6 +16,7 @@ non-zero.
 from __future__ import annotations
 
 import math
+import threading
 import time
 from collections.abc import Iterator
 from contextlib import contextmanager
@@ -36,8 +37,8 @@ from attitude_sil.errors import ParamClientError
 from attitude_sil.ros.contract import check_node_name, check_parameter_name
 from attitude_sil.ros.environment import localhost_environment
 
-__all__ = ["LoadReport", "ParamClientError", "file_values", "format_dump", "param_command", "param_dump",
-           "param_load"]
+__all__ = ["GraphParameters", "LoadReport", "ParamClientError", "file_values", "format_dump", "param_command",
+           "param_dump", "param_load"]
 
 #: ``ros2 param get``'s label of each value type
 _LABELS = {
@@ -360,3 +361,97 @@ def param_load(node_name: str, path: str | Path, timeout: float = 10.0) -> LoadR
                                        + (f": {result.reason}" if result.reason else ""), result.successful)
     report.lines = [v for v in verdict.values() if v is not None]
     return report
+
+
+class GraphParameters:
+    """The parameters of a running graph's nodes, under foxglove_bridge's names ``/ns/node.param``.
+
+    What the live view's Parameters capability reads and sets
+    (:class:`attitude_sil.storage.foxglove.FoxgloveLive`): a set goes
+    through the node's parameter service as ``param set`` does (the value
+    converted to the declared type; a refusal comes back with the node's
+    reason), so a ``controller_type`` set from Foxglove swaps the law as
+    ``param set`` does and shows in ``/parameter_events``. One private rclpy
+    context per node (:class:`_Session`), opened on first use; calls from
+    several threads (the server's) take turns.
+
+    Parameters
+    ----------
+    namespace : str, optional
+        The graph's namespace.
+    nodes : sequence of str
+        The graph's node names.
+    timeout : float
+        Seconds to wait for a node and for each answer.
+    """
+
+    def __init__(self, namespace: str | None = None, nodes=(), timeout: float = 5.0) -> None:
+        localhost_environment()
+        self.fqns = {_fqn(f"{namespace}/{n}" if namespace else n) for n in nodes}
+        self.timeout = timeout
+        self._sessions: dict[str, _Session] = {}
+        self._lock = threading.Lock()
+
+    def _session(self, fqn: str) -> _Session:
+        session = self._sessions.get(fqn)
+        if session is None:
+            session = _Session(fqn, self.timeout)
+            session.connect()
+            self._sessions[fqn] = session
+        return session
+
+    def _by_node(self, names) -> dict[str, list[str]]:
+        out: dict[str, list[str]] = {}
+        for full in names:
+            fqn, _, name = full.partition(".")
+            out.setdefault(fqn, []).append(name)
+        return out
+
+    def get(self, names: list[str]) -> dict[str, Any]:
+        """``{"/node.param": value}`` of ``names``, or of every parameter of every node when empty.
+
+        A name of another node, or one a node does not hold, is left out.
+        """
+        with self._lock:
+            wanted = self._by_node(names) if names else {fqn: [] for fqn in sorted(self.fqns)}
+            out: dict[str, Any] = {}
+            for fqn, params in wanted.items():
+                if fqn not in self.fqns:
+                    continue
+                session = self._session(fqn)
+                params = params or sorted(session.wait(session.client.list_parameters()).result.names)
+                for name, pvalue in session.values(params).items():
+                    if pvalue is not None and pvalue.type != T.PARAMETER_NOT_SET:
+                        out[f"{fqn}.{name}"] = _plain(parameter_value_to_python(pvalue))
+            return out
+
+    def set(self, values: dict[str, Any]) -> tuple[dict[str, Any], list[str]]:
+        """Set ``{"/node.param": value}``; returns the values after it and one line per refusal."""
+        errors: list[str] = []
+        with self._lock:
+            for fqn, names in self._by_node(values).items():
+                if fqn not in self.fqns:
+                    errors.append(f"{fqn}: not a node of this graph ({', '.join(sorted(self.fqns))})")
+                    continue
+                session = self._session(fqn)
+                descriptors = session.descriptors(names)
+                typed = []
+                for name in names:
+                    desc = descriptors.get(name)
+                    if desc is None or desc.type == T.PARAMETER_NOT_SET:
+                        errors.append(f"node {fqn} has no parameter {name!r}")
+                        continue
+                    try:
+                        typed.append(Parameter(name, value=_coerce(values[f"{fqn}.{name}"], desc.type)))
+                    except ParamClientError as exc:
+                        errors.append(f"{fqn}.{name}: {exc}")
+                results = session.wait(session.client.set_parameters(typed)).results if typed else []
+                errors += [f"Setting parameter failed: {r.reason}" for r in results if not r.successful]
+        return self.get(list(values)), errors
+
+    def close(self) -> None:
+        """Close every session (idempotent)."""
+        with self._lock:
+            for session in self._sessions.values():
+                session.close()
+            self._sessions.clear()

@@ -28,7 +28,7 @@ const deadline = Date.now() + 1000 * Number(opt("--timeout", "60"));
 
 const out = { subprotocol: null, capabilities: [], channels: [], counts: {}, attitude: [], parameters: null,
               setResult: null, updates: [] };
-const channels = new Map();
+const subscriptions = new Map(); // subscription id -> channel
 let client;
 let setDone = !setArg;
 let getDone = getNames.length === 0;
@@ -85,21 +85,21 @@ function connect() {
         out.updates.push(...parameters);
       }
     });
+    client.on("unadvertise", (ids) => { out.log = (out.log ?? []).concat([`unadv ${ids}`]); });
     client.on("advertise", (advertised) => {
       for (const ch of advertised) {
-        channels.set(ch.id, ch);
         out.channels.push({ topic: ch.topic, encoding: ch.encoding, schemaName: ch.schemaName,
                             schemaEncoding: ch.schemaEncoding });
-        client.subscribe(ch.id);
+        const id = client.subscribe(ch.id); // subscribe returns the subscription's id
+        subscriptions.set(id, ch);
+        out.log = (out.log ?? []).concat([`adv ${ch.id} ${ch.topic} sub ${id}`]);
       }
     });
     client.on("message", ({ subscriptionId, data }) => {
-      const ch = channels.get(subscriptionIdToChannel.get(subscriptionId));
-      if (!ch) {
-        return;
-      }
-      out.counts[ch.topic] = (out.counts[ch.topic] ?? 0) + 1;
-      if (ch.topic === "/attitude" && out.attitude.length < wantAttitude) {
+      const ch = subscriptions.get(subscriptionId);
+      const topic = ch ? ch.topic : `?${subscriptionId}`;
+      out.counts[topic] = (out.counts[topic] ?? 0) + 1;
+      if (topic === "/attitude" && out.attitude.length < wantAttitude) {
         out.attitude.push(decodeAttitude(data));
       }
       if (done()) {
@@ -109,15 +109,6 @@ function connect() {
     client.on("close", () => finish(done() ? 0 : 1));
   });
 }
-
-// FoxgloveClient.subscribe returns the subscription id: remember which channel each is for
-const subscriptionIdToChannel = new Map();
-const subscribe = FoxgloveClient.prototype.subscribe;
-FoxgloveClient.prototype.subscribe = function (channelId) {
-  const id = subscribe.call(this, channelId);
-  subscriptionIdToChannel.set(id, channelId);
-  return id;
-};
 
 setTimeout(() => finish(1), Math.max(deadline - Date.now(), 0));
 connect();
