@@ -6,6 +6,9 @@ import argparse
 import os
 import sys
 
+import yaml
+
+from attitude_sil.core import yaml12
 from attitude_sil.core.sim.scenario import Scenario, load_scenario, with_parameter_file
 from attitude_sil.errors import AttitudeSilError
 from attitude_sil.ros.environment import isolated_domain
@@ -49,10 +52,6 @@ def set_overrides(items: list[str] | None) -> dict:
     AttitudeSilError
         An item without ``=``, or a value that is not YAML.
     """
-    import yaml
-
-    from attitude_sil.core import yaml12
-
     overrides = {}
     for item in items or []:
         key, sep, value = item.partition("=")

@@ -290,6 +290,16 @@ class GraphSession:
         accumulator = EpisodeAccumulator(self.scn.values["scenario"], self.scn.param("guidance", "step_time"),
                                          self.controller, schedule or None)
         assembler = StepAssembler(accumulator)
+        dt_ns = int(round(self.scn.dt * 1e9))
+        scheduled = {k for _, k, _ in schedule}
+
+        def live_swap(kind: str, last_ns: int) -> None:
+            # a controller_type set while the run goes (param set, a Foxglove client): the law from the next step
+            k = last_ns // dt_ns + 1 if last_ns >= 0 else 0
+            if not scheduled & {k - 1, k, k + 1}:  # the runner's own scheduled swaps are in the schedule already
+                accumulator.swap(k, kind)
+
+        self.recorder.on_controller = live_swap
         self.recorder.start_episode(writer, keeping=keep_trajectory,
                                     sink=None if keep_trajectory else assembler.add)
         try:
@@ -316,6 +326,7 @@ class GraphSession:
                     if not self.recorder.error:  # else the error is on its way up already
                         raise
         self.recorder.sink = None
+        self.recorder.on_controller = None
         if keep_trajectory:
             traj = trajectory_from_messages(self.recorder.kept)
             metrics = episode_report(self.scn, traj, self.controller, self.duration, wall,

@@ -96,6 +96,8 @@ class Recorder(Node):
         self.qos_problems: list[str] = []  # publishers whose QoS this recorder cannot match
         # a list to time the controller into: wall s from each step's attitude to its command, as they arrive
         self.latency: list[float] | None = None
+        # called as the graph's controller changes law: (controller_type, stamp of the last command taken or -1)
+        self.on_controller: Callable[[str, int], None] | None = None
         self._attitude_at: dict[int, float] = {}
         self.counts: dict[str, int] = defaultdict(int)
         self.last_stamp: dict[str, int] = {}  # the latest stamp taken per topic, ns
@@ -120,6 +122,7 @@ class Recorder(Node):
         if live is not None:  # advertised at once, so a client can subscribe before the first episode
             for name, sub in self.subs.items():
                 live.add_topic(sub.topic_name, self.types[name])
+            live.serve()
         # topics whose values are checked before recording: float64 count per message
         self._widths = {name: 4 if t.endswith("QuaternionStamped") else 3 for name, t in self.types.items()
                         if t.endswith(("QuaternionStamped", "Vector3Stamped"))}
@@ -159,16 +162,19 @@ class Recorder(Node):
                 self.live.add_topic(sub.topic_name, self.types[name])
 
     def register_discovered(self) -> list[str]:
-        """Register in the bag each topic that has publishers now, with their offered QoS; returns the new ones.
+        """Register in the bag each topic whose publishers this recorder has matched now, with the QoS they offer;
+        returns the new ones.
 
         Only with ``qos_from_graph``; a topic whose first message comes before
-        this is called is registered then.
+        this is called is registered then. Matched, not merely discovered: a
+        tool that says it is subscribed to a topic gets that topic's messages.
         """
         new = []
         if self.writer is None or not self.qos_from_graph:
             return new
-        for name in self.subs:
-            if name not in self._registered and self.get_publishers_info_by_topic(self.resolved[name]):
+        for name, sub in self.subs.items():
+            if name not in self._registered and sub.get_publisher_count() > 0 \
+                    and self.get_publishers_info_by_topic(self.resolved[name]):
                 self._register(name)
                 new.append(name)
         return new
@@ -226,6 +232,8 @@ class Recorder(Node):
             except BagWriteError as exc:  # disk full, file too large: stop recording, keep what is written
                 self.error = f"recording stopped at t={t * 1e-9:.3f} s: {exc}"
                 self.writer = None
+        if name == PARAMETER_EVENTS and (self.live is not None or self.on_controller is not None):
+            self._on_parameter_event(data, t)
         if self.live is not None:
             self._to_live(name, data, t)
         kept = self.kept.get(name)
@@ -243,19 +251,27 @@ class Recorder(Node):
             if sent is not None:
                 self.latency.append(time.monotonic() - sent)
 
+    def _on_parameter_event(self, data: bytes, t: int) -> None:
+        # a live view's Parameters panel follows every change; a swap of our controller's law goes to the live
+        # view's status and to on_controller(law, stamp of the last command taken)
+        event = deserialize_message(data, ParameterEvent)
+        values = {}
+        for p in (*event.new_parameters, *event.changed_parameters):
+            v = parameter_value_to_python(p.value)
+            values[p.name] = v if isinstance(v, (str, bytes, bool, int, float)) or v is None else list(v)
+        if self.live is not None:
+            self.live.parameters_changed(event.node, values)
+        if event.node == self.get_namespace().rstrip("/") + "/controller" and "controller_type" in values:
+            if self.live is not None:
+                self.live.set_controller(values["controller_type"], t)
+            if self.on_controller is not None and event.changed_parameters:
+                last = max((self.last_stamp.get(c, -1) for c in COMMAND_TOPICS), default=-1)
+                self.on_controller(values["controller_type"], last)
+
     def _to_live(self, name: str, data: bytes, t: int) -> None:
         self.live.write(self.resolved[name], data, t)
         if name == CLOCK:
             self.live.tick(t)
-        elif name == PARAMETER_EVENTS:
-            event = deserialize_message(data, ParameterEvent)
-            values = {}
-            for p in (*event.new_parameters, *event.changed_parameters):
-                v = parameter_value_to_python(p.value)
-                values[p.name] = v if isinstance(v, (str, bytes, bool, int, float)) or v is None else list(v)
-            self.live.parameters_changed(event.node, values)  # a Foxglove client's Parameters panel follows
-            if event.node == self.get_namespace().rstrip("/") + "/controller" and "controller_type" in values:
-                self.live.set_controller(values["controller_type"], t)
 
     def _refuse(self, name: str, t: int, why: str) -> None:
         self.refused[name] += 1

@@ -117,12 +117,8 @@ class FoxgloveLive:
                                                  server_listener=_Parameters(self))
         except RuntimeError as exc:
             raise AttitudeSilError(f"--foxglove {port}: {str(exc).splitlines()[0]}") from None
-        try:
-            self._relay = SubprotocolRelay(host, port, self._server.port, SUBPROTOCOL_RENAMES)
-        except OSError as exc:
-            self._server.stop()
-            raise AttitudeSilError(f"--foxglove {port}: cannot listen on {host}:{port}: {exc.strerror or exc}"
-                                   ) from None
+        self._relay = None
+        self._requested_port = port
         self.host = host
         self._channels: dict[str, foxglove.Channel] = {}
         self._status = foxglove.Channel(STATUS_TOPIC, schema=_STATUS_SCHEMA, message_encoding="json",
@@ -130,10 +126,30 @@ class FoxgloveLive:
         self.controller_type = ""
         self._last_status_ns: int | None = None
 
+    def serve(self) -> None:
+        """Let clients in (idempotent): once the topics are added, so a client is told of every channel at once.
+
+        A client that connected while channels were still being added lost, now
+        and then, a channel's messages altogether (seen with the official
+        client, which subscribes to each channel as it is advertised).
+
+        Raises
+        ------
+        AttitudeSilError
+            The address cannot be listened on.
+        """
+        if self._relay is not None or self._server is None:
+            return
+        try:
+            self._relay = SubprotocolRelay(self.host, self._requested_port, self._server.port, SUBPROTOCOL_RENAMES)
+        except OSError as exc:
+            raise AttitudeSilError(f"--foxglove {self._requested_port}: cannot listen on {self.host}:"
+                                   f"{self._requested_port}: {exc.strerror or exc}") from None
+
     @property
     def port(self) -> int:
         """The port clients connect to."""
-        return self._relay.port
+        return self._relay.port if self._relay is not None else self._requested_port
 
     @property
     def url(self) -> str:
@@ -194,7 +210,8 @@ class FoxgloveLive:
     def close(self) -> None:
         """Stop the server (idempotent); clients see the connection close."""
         if self._server is not None:
-            self._relay.close()
+            if self._relay is not None:
+                self._relay.close()
             self._server.stop()
             self._server = None
         if self.parameters is not None:

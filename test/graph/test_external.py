@@ -149,7 +149,10 @@ def test_hand_started_graph_with_a_default_qos_controller(builtin, tmp_path, cap
     assert codes[-2:] == [0, 0]  # the example and the finished recorder exit 0 on SIGINT
     assert episode["controller_type"] == "external"
     _same_metrics(episode, builtin[DURATION])
-    assert open_bag(tmp_path / "live").topics["/voltage_cmd"].count == round(DURATION / 0.01) + 1
+    # the recorder joined the graph and reads volatile, as ros2 bag record does: a volatile publisher's step 0 can
+    # be written before DDS matched it with the recorder (docs/flight-software.md); nothing after that is lost
+    steps = round(DURATION / 0.01) + 1
+    assert open_bag(tmp_path / "live").topics["/voltage_cmd"].count in (steps - 1, steps)
 
 
 BEST_EFFORT = """

@@ -112,22 +112,23 @@ def test_a_foxglove_client_watches_attitude_live():
 NODE_CLIENT = ROOT / "test" / "js" / "client.mjs"
 
 
-def _official_client(port: int, *args: str, duration: float = 3.0) -> tuple[dict, str]:
-    """``run --foxglove PORT`` for ``duration`` s and the official client against it: (its JSON, run's stderr)."""
+def _official_client(port: int, *args: str, duration: float = 3.0, bag=None) -> tuple[dict, str]:
+    """``run --foxglove PORT`` for ``duration`` s and the official client against it: (its JSON, run's stdout)."""
+    record = ["--record", str(bag)] if bag is not None else ["--no-record"]
     run = subprocess.Popen([sys.executable, "-m", "attitude_sil.cli", "run", SCENARIO, "--duration", str(duration),
-                            "--no-record", "--quiet", "--foxglove", str(port)], cwd=ROOT, stdin=subprocess.DEVNULL,
+                            *record, "--quiet", "--json", "--foxglove", str(port)], cwd=ROOT, stdin=subprocess.DEVNULL,
                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
         client = subprocess.run(["node", str(NODE_CLIENT), f"ws://127.0.0.1:{port}", *args, "--timeout", "90"],
                                 cwd=NODE_CLIENT.parent, capture_output=True, text=True, timeout=120)
-        _, err = run.communicate(timeout=120)
+        out, err = run.communicate(timeout=120)
     finally:
         if run.poll() is None:
             run.kill()
             run.wait()
     assert run.returncode == 0, err
     assert client.returncode == 0, client.stdout + client.stderr
-    return json.loads(client.stdout), err
+    return json.loads(client.stdout), out
 
 
 def test_the_official_open_source_client_watches_every_channel():
@@ -142,6 +143,33 @@ def test_the_official_open_source_client_watches_every_channel():
     assert len(att) == 50 and np.all(np.diff(stamps) == 10_000_000)  # one per 10 ms step, in order
     assert np.allclose(np.linalg.norm(att[:, 2:], axis=1), 1.0, atol=1e-12)
     assert got["counts"]["/clock"] > 0 and got["counts"]["/body_rate"] > 0
+
+
+def test_the_official_client_reads_and_sets_parameters_and_swaps_the_law(tmp_path):
+    # the Parameters panel's calls, under foxglove_bridge's names: get, subscribe, set (one value refused)
+    bag = tmp_path / "swapped"
+    got, out = _official_client(
+        _free_port(), "--attitude", "1", "--get", "/controller.controller_type,/controller.pid.kp",
+        "--set", '/controller.controller_type="ga_flc"', "--set", "/controller.geometric.k=[1.0, 1.0, 2.0]",
+        "--updates", "1", duration=6.0, bag=bag)
+    assert {"parameters", "parametersSubscribe"} <= set(got["capabilities"])
+    values = {p["name"]: p["value"] for p in got["parameters"]}
+    assert values == {"/controller.controller_type": "pid", "/controller.pid.kp": [48.894, 48.894, 48.894]}
+    after = {p["name"]: p["value"] for p in got["setResult"]}
+    assert after["/controller.controller_type"] == "ga_flc"
+    assert after["/controller.geometric.k"] != [1.0, 1.0, 2.0]  # refused: the node keeps its value
+    # the same one-line reason param set prints, as a status message to the client
+    assert "Setting parameter failed: controller.geometric.k entries must be distinct (paper 001: k1 != k2 != k3)" \
+        in got["statuses"]
+    assert {"name": "/controller.controller_type", "value": "ga_flc"} in got["updates"]
+    # the swap went through the node's parameter service: it is in the bag's /parameter_events
+    from mcap_ros2.reader import read_ros2_messages
+
+    events = [m.ros_msg for m in read_ros2_messages(str(next(bag.glob("*.mcap"))), topics=["/parameter_events"])]
+    assert any(p.name == "controller_type" and p.value.string_value == "ga_flc"
+               for e in events if e.node == "/controller" for p in e.changed_parameters)
+    metrics = json.loads(out.splitlines()[-1])
+    assert [s["controller_type"] for s in metrics["segments"]] == ["pid", "ga_flc"]  # in the run's summary
 
 
 def test_port_in_use_is_one_line(capfd):

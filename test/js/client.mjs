@@ -1,13 +1,14 @@
 // The official Foxglove WebSocket protocol client (@foxglove/ws-protocol, pinned in package.json) against
 // `attitude-sil run --foxglove`: what Lichtblick and older Foxglove releases connect with.
 //
-//   node client.mjs URL [--attitude N] [--get NAME,...] [--set NAME=JSON] [--timeout S]
+//   node client.mjs URL [--attitude N] [--get NAME,...] [--set NAME=JSON ...] [--updates N] [--timeout S]
 //
 // Connects asking for the subprotocol the client library supports (foxglove.websocket.v1), subscribes to
 // every advertised channel, decodes /attitude (geometry_msgs/msg/QuaternionStamped, CDR) until N messages
-// came, optionally gets and sets parameters (subscribing to their updates), and prints one JSON object:
+// came, optionally gets and sets parameters (subscribing to the got ones' updates, waiting for N of them),
+// and prints one JSON object:
 // {subprotocol, capabilities, channels, counts, attitude: [[sec, nanosec, x, y, z, w], ...], parameters,
-//  setResult, updates}. Exit 0 when everything asked for arrived, 1 otherwise (the JSON says what is missing).
+//  setResult, updates, statuses}. Exit 0 when everything asked for arrived, 1 otherwise (the JSON says what is missing).
 import cdr from "@foxglove/cdr";
 import wsProtocol from "@foxglove/ws-protocol";
 import WebSocket from "ws";
@@ -23,14 +24,15 @@ const opt = (name, fallback) => {
 };
 const wantAttitude = Number(opt("--attitude", "20"));
 const getNames = opt("--get", "") ? opt("--get", "").split(",") : [];
-const setArg = opt("--set", "");
+const setArgs = args.flatMap((a, i) => (a === "--set" ? [args[i + 1]] : []));
+const wantUpdates = Number(opt("--updates", "0"));
 const deadline = Date.now() + 1000 * Number(opt("--timeout", "60"));
 
 const out = { subprotocol: null, capabilities: [], channels: [], counts: {}, attitude: [], parameters: null,
-              setResult: null, updates: [] };
+              setResult: null, updates: [], statuses: [] };
 const subscriptions = new Map(); // subscription id -> channel
 let client;
-let setDone = !setArg;
+let setDone = setArgs.length === 0;
 let getDone = getNames.length === 0;
 
 function finish(code) {
@@ -39,7 +41,7 @@ function finish(code) {
 }
 
 function done() {
-  return out.attitude.length >= wantAttitude && getDone && setDone;
+  return out.attitude.length >= wantAttitude && getDone && setDone && out.updates.length >= wantUpdates;
 }
 
 function decodeAttitude(data) {
@@ -69,9 +71,9 @@ function connect() {
         client.subscribeParameterUpdates(getNames);
         client.getParameters(getNames, "get");
       }
-      if (setArg) {
-        const [name, value] = [setArg.slice(0, setArg.indexOf("=")), setArg.slice(setArg.indexOf("=") + 1)];
-        client.setParameters([{ name, value: JSON.parse(value) }], "set");
+      if (setArgs.length > 0) {
+        const params = setArgs.map((a) => ({ name: a.slice(0, a.indexOf("=")), value: JSON.parse(a.slice(a.indexOf("=") + 1)) }));
+        client.setParameters(params, "set");
       }
     });
     client.on("parameterValues", ({ parameters, id }) => {
@@ -84,15 +86,16 @@ function connect() {
       } else {
         out.updates.push(...parameters);
       }
+      if (done()) {
+        finish(0);
+      }
     });
-    client.on("unadvertise", (ids) => { out.log = (out.log ?? []).concat([`unadv ${ids}`]); });
+    client.on("status", (st) => out.statuses.push(st.message)); // the server's one-line problems (a refused set)
     client.on("advertise", (advertised) => {
       for (const ch of advertised) {
         out.channels.push({ topic: ch.topic, encoding: ch.encoding, schemaName: ch.schemaName,
                             schemaEncoding: ch.schemaEncoding });
-        const id = client.subscribe(ch.id); // subscribe returns the subscription's id
-        subscriptions.set(id, ch);
-        out.log = (out.log ?? []).concat([`adv ${ch.id} ${ch.topic} sub ${id}`]);
+        subscriptions.set(client.subscribe(ch.id), ch); // subscribe returns the subscription's id
       }
     });
     client.on("message", ({ subscriptionId, data }) => {

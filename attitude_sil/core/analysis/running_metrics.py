@@ -168,10 +168,19 @@ class EpisodeAccumulator:
             self._push_candidate(self._candidate_pending, t_next)
             self._candidate_pending = None
 
+    def swap(self, k: int, controller_type: str) -> None:
+        """A swap learned of while the episode runs (a live ``controller_type`` set): the law from step ``k``.
+
+        A step already taken into a stretch cannot move: the swap then starts
+        at the first step that is not.
+        """
+        k = max(int(k), self.k - 1 if self._pending is not None else self.k)
+        self._bounds.append(k)
+        self._kinds.append(controller_type)
+
     def _segment(self, t, q_BN, q_RN, tau_norm, cmd_max, dt) -> None:
-        # the pending sample (index k - 1) into its controller's stretch
-        if not self.schedule:
-            return
+        # the pending sample (index k - 1) into its controller's stretch (every run keeps them: a live swap
+        # can come at any time; a report shows them once there are two)
         k = self.k - 1
         if k == 0 or k in self._bounds:
             kinds = [self.controller_type] + [kind for b, kind in zip(self._bounds, self._kinds, strict=True)
@@ -317,6 +326,6 @@ class EpisodeAccumulator:
         for key in _EXTRA_KEYS:
             if key in m:
                 out[key] = _finite_or_none(m[key])
-        if self.schedule:
+        if self.schedule or len(self.segments) > 1:
             out["segments"] = [seg.report(seg.t_end) for seg in self.segments]
         return out
