@@ -190,8 +190,18 @@ def test_the_layout_plots_what_the_graph_publishes():
         return [node] if isinstance(node, str) else leaves(node["first"]) + leaves(node["second"])
 
     assert sorted(leaves(layout["layout"])) == sorted(panels)
-    topics = {re.match(r"(/[a-z_/]+?)[.{]", p["value"]).group(1) for cfg in panels.values() for p in cfg["paths"]}
-    assert topics == {"/attitude_error", "/body_rate", "/wheel_state", "/voltage_cmd", "/parameter_events",
-                      STATUS_TOPIC}
+    # the titles Foxglove and Lichtblick read, and a Parameters panel to swap the law from
+    assert all(cfg.get("foxglovePanelTitle") and "title" not in cfg for cfg in panels.values())
+    assert any(key.startswith("Parameters!") for key in panels)
+    paths = [p for cfg in panels.values() for p in cfg.get("paths", [])]
+    topics = {re.match(r"(/[a-z_/]+?)[.{]", p["value"]).group(1) for p in paths}
+    assert topics == {"/attitude", "/attitude_error", "/body_rate", "/wheel_state", "/voltage_cmd", "/torque_cmd",
+                      "/parameter_events", STATUS_TOPIC}
     assert topics - {STATUS_TOPIC} <= {n if n.startswith("/") else "/" + n for n in RECORDED_TOPICS}
-
+    # on sim time: the header stamp where the message has one; the status channel and /parameter_events have
+    # none and are logged (live and in the bags) at their sim time, which a client takes as their time
+    for p in paths:
+        header = not p["value"].startswith((STATUS_TOPIC, "/parameter_events"))
+        assert p["timestampMethod"] == ("headerStamp" if header else "receiveTime"), p
+    wheels = next(cfg for key, cfg in panels.items() if "wheel" in key)
+    assert wheels["yAxisLabel"] == "rad/s" and all("rad/s" in p["label"] for p in wheels["paths"])
