@@ -37,7 +37,7 @@ from attitude_sil.ros.contract import (
 from attitude_sil.ros.convert import quaternion_to_array, vector_to_array
 from attitude_sil.storage.reader import BagReader, open_bag
 
-__all__ = ['controller_swaps', 'initial_controller', 'plot_bag']
+__all__ = ['controller_swaps', 'effective_swaps', 'initial_controller', 'plot_bag']
 
 _PANEL_HEIGHT_IN = 2.2
 _FIG_WIDTH_IN = 11.0
@@ -230,6 +230,7 @@ def plot_bag(bag_path: str | Path, out_png: str | Path, title: str | None = None
         raise BagError(f'{where}: no attitude messages (topic .../attitude), nothing to plot')
     initial, swaps = _controller_events(reader)
     series, wheels = _read_series(reader)
+    swaps = _effective(swaps, series)
 
     t_att, q_att = series[ATTITUDE].arrays()
     t0, t1 = float(t_att.min()), float(t_att.max())
@@ -354,6 +355,27 @@ def _plot_flexible_mode(ax: Any, series: dict[str, _Series]) -> None:
     ax.plot(t, np.degrees(v[:, 0]), color='C4', lw=1.2, label=r'$\alpha$')
     ax.set_ylabel(r'flex mode $\alpha$ (deg)')
     _legend(ax)
+
+
+def effective_swaps(reader: BagReader) -> list[tuple[float, str]]:
+    """:func:`controller_swaps` at the step each new law first commands (sim time, s): what a plot shows.
+
+    A swap's parameter event is logged at the sim time of the last step
+    published before the set: 4.99 s for a swap at 5 s, where the plant holds
+    before step 5.00 s. The new law commands from the next command step on.
+    """
+    return _effective(controller_swaps(reader), _read_series(reader)[0])
+
+
+def _effective(swaps: list[tuple[float, str]], series: dict[str, _Series]) -> list[tuple[float, str]]:
+    """Each swap at the first command step after its parameter event (:func:`effective_swaps`)."""
+    stamps = np.unique(np.concatenate([series[c].arrays()[0] for c in (VOLTAGE_CMD, TORQUE_CMD) if c in series]
+                                      or [np.zeros(0)]))
+    out = []
+    for t, name in swaps:
+        later = stamps[stamps > t]
+        out.append((float(later[0]) if later.size else t, name))
+    return out
 
 
 def _mark_swaps(axes: Any, shown_swaps: list[tuple[float, str]]) -> None:

@@ -11,7 +11,7 @@ import yaml
 from attitude_sil.core.sim.scenario import load_scenario
 from attitude_sil.graph.session import run_graph
 from attitude_sil.storage.reader import open_bag
-from attitude_sil.tools.plot import controller_swaps
+from attitude_sil.tools.plot import controller_swaps, effective_swaps
 from attitude_sil.tools.replay import ReplayOptions, replay_bag
 from conftest import CONFIG, ROOT
 
@@ -112,7 +112,8 @@ def test_bag_info_and_plot_show_the_swap(swap_bag, tmp_path):
     assert info.returncode == 0
     assert "Topic: /attitude | Type: geometry_msgs/msg/QuaternionStamped | Count: 401" in info.stdout
     assert "Duration:          4.000000000s" in info.stdout  # sim time, parameter events included
-    assert controller_swaps(open_bag(swap_bag)) == [(pytest.approx(1.99), "fuzzy_pid")]
+    assert controller_swaps(open_bag(swap_bag)) == [(pytest.approx(1.99), "fuzzy_pid")]  # the event's log time
+    assert effective_swaps(open_bag(swap_bag)) == [(pytest.approx(2.0), "fuzzy_pid")]  # the plot's: the swap at 2 s
     out = tmp_path / "swap.png"
     res = cli("plot", str(swap_bag), "-o", str(out))
     assert res.returncode == 0 and out.stat().st_size > 20_000
