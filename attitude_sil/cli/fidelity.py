@@ -24,11 +24,20 @@ def add(sub: argparse._SubParsersAction) -> None:
 def execute(args: argparse.Namespace) -> int:
     """Run the verb; returns the exit code."""
     import json
+    import sys
 
     from attitude_sil.tuning.fidelity import check, format_report
 
-    results = check(tuple(args.paper) if args.paper else PAPERS, args.config)
-    print(format_report(results))
-    if args.json:
-        print(json.dumps([r.as_dict() for r in results]))
+    results = []
+    papers = tuple(args.paper) if args.paper else PAPERS
+    for i, paper in enumerate(papers, start=1):  # a paper at a time: the whole check takes a while
+        print(f"fidelity: paper {paper} ({i} of {len(papers)})", file=sys.stderr, flush=True)
+        results += check((paper,), args.config)
+    if args.json:  # one JSON object and nothing else on stdout, so it pipes
+        counts: dict[str, int] = {}
+        for r in results:
+            counts[r.status] = counts.get(r.status, 0) + 1
+        print(json.dumps({"rows": [r.as_dict() for r in results], "status_counts": counts}))
+    else:
+        print(format_report(results))
     return 0 if all(r.status != "FAIL" for r in results) else 1

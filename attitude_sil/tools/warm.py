@@ -22,17 +22,21 @@ from attitude_sil.core.sim.engine import simulate
 from attitude_sil.core.sim.scenario import PRESETS, ScenarioError, default_config_dir, load_scenario
 
 
-def warm(config_dir: str | Path | None = None) -> float:
+def warm(config_dir: str | Path | None = None, say=None) -> float:
     """Compile and cache the kernels; returns the wall seconds it took.
 
     Parameters
     ----------
     config_dir : path, optional
         Where the preset scenarios are (default: :func:`~attitude_sil.core.sim.scenario.default_config_dir`).
+    say : callable(str), optional
+        Told of each preset as it starts (a cold cache takes minutes).
     """
     folder = Path(config_dir) if config_dir is not None else default_config_dir()
     t0 = time.perf_counter()
-    for name in PRESETS:
+    for i, name in enumerate(PRESETS, start=1):
+        if say is not None:
+            say(f"  compiling the kernels: preset {i} of {len(PRESETS)} ({name}), {time.perf_counter() - t0:.0f} s")
         scn = load_scenario(folder / f"{name}.yaml")
         first = scn.param("controller", "controller_type")
         for controller in registry.names():
@@ -48,7 +52,9 @@ def warm(config_dir: str | Path | None = None) -> float:
 
 
 def main() -> int:
-    took = warm()
+    print("attitude_sil: compiling the numba kernels into their cache (a few minutes the first time; cached after)",
+          file=sys.stderr, flush=True)
+    took = warm(say=lambda line: print(line, file=sys.stderr, flush=True))
     print(f"attitude_sil kernels compiled and cached in {took:.1f} s", file=sys.stderr)
     return 0
 

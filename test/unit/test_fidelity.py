@@ -68,11 +68,13 @@ def test_published_values_match_the_copies_in_test_data():
     assert len(settling) == 10
 
 
-def test_fidelity_command_prints_the_table_and_json(capsys):
+def test_fidelity_json_is_one_object_alone_on_stdout(capsys):
     code = main(["fidelity", "--paper", "004", "--json"])
-    out = capsys.readouterr().out.splitlines()
-    rows = json.loads(out[-1])
+    captured = capsys.readouterr()
+    report = json.loads(captured.out)  # the whole of stdout: it pipes
+    rows = report["rows"]
     assert {r["paper"] for r in rows} == {"004"}
     assert code == (1 if any(r["status"] == "FAIL" for r in rows) else 0)
-    assert any(line.startswith("paper 004:") for line in out)
     assert all(r["status"] in fidelity.STATUSES for r in rows)
+    assert sum(report["status_counts"].values()) == len(rows)
+    assert "paper 004" in captured.err  # the progress goes to stderr
