@@ -9,7 +9,11 @@ recorded reason; nothing raises.
 
 Costs (``cost.name``):
 
-* ``paper000_j`` — J = |tau - tau_d| + w_os OS (paper 000 eq. 19, OS in %).
+* ``paper000_j`` — J = |tau - tau_d| + w_os OS (paper 000 eq. 19, OS in %),
+  plus ``cost.w_ts`` Ts (settling time, s) and ``cost.w_itae`` ITAE (rad s^2)
+  where they are given: J alone has no term for the error left at the end,
+  so a design tuned on it can settle slowly (docs/tuning.md); both weights
+  default to 0, the paper's J.
 * ``paper001_fitness`` — Ts + beta Ce, i.e. -f of paper 001 eq. 8, with its
   death penalty (a command above ``cost.limit``, N m) and its rule that the
   entries of K differ. The law runs unsaturated so the command it asks for
@@ -202,6 +206,14 @@ def score(spec: TuningSpec, scn, run: EpisodeSummary | Trajectory, final_time, F
         F[:, 0] += np.nan_to_num(m["cost_J"], nan=PENALTY)
         _add(terms, "time_constant_s", m["time_constant_s"])
         _add(terms, "overshoot_pct", m["overshoot_pct"])
+        w_ts, w_itae = float(cost.get("w_ts", 0.0)), float(cost.get("w_itae", 0.0))
+        if w_ts > 0.0:
+            fail(~np.isfinite(m["settling_time_s"]), "never settled (cost.w_ts > 0)")
+            F[:, 0] += w_ts * np.nan_to_num(m["settling_time_s"], nan=PENALTY)
+            _add(terms, "settling_time_s", m["settling_time_s"])
+        if w_itae > 0.0:
+            F[:, 0] += w_itae * np.nan_to_num(m["itae"], nan=PENALTY)
+            _add(terms, "itae", m["itae"])
     elif name in ("paper001_fitness", "ts_ce"):
         lim = float(cost.get("limit", scn.values["wheels"]["torque_limit"]))
         peak = s.peak_command

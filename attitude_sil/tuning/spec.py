@@ -80,6 +80,7 @@ def _boolean(v: Any) -> str:
 #: what each section of a spec may hold, and the rule of each value (unknown keys are refused)
 SECTIONS: dict[str, dict[str, Any]] = {
     "cost": {"name": _choice(COSTS), "beta": _real(0.0), "limit": _real(0.0, low_open=True),
+             "w_ts": _real(0.0), "w_itae": _real(0.0),
              "w1": _real(0.0), "w2": _real(0.0), "w3": _real(0.0), "k1": _real(0.0), "k2": _real(0.0),
              "K": _real(0.0), "theta_max_deg": _real(0.0, 180.0, low_open=True)},
     "algorithm": {"name": _choice(ALGORITHMS), "pop_size": _integer(2, 100_000), "generations": _integer(1, 10**9),
