@@ -28,11 +28,9 @@ def execute(args: argparse.Namespace) -> int:
 
     from attitude_sil.tuning.fidelity import check, format_report
 
-    results = []
-    papers = tuple(args.paper) if args.paper else PAPERS
-    for i, paper in enumerate(papers, start=1):  # a paper at a time: the whole check takes a while
-        print(f"fidelity: paper {paper} ({i} of {len(papers)})", file=sys.stderr, flush=True)
-        results += check((paper,), args.config)
+    results = check(tuple(args.paper) if args.paper else PAPERS, args.config,
+                    progress=lambda paper, i, n: print(f"fidelity: paper {paper} ({i} of {n})", file=sys.stderr,
+                                                       flush=True))
     if args.json:  # one JSON object and nothing else on stdout, so it pipes
         counts: dict[str, int] = {}
         for r in results:

@@ -170,13 +170,23 @@ def evaluate_row(row: Row, presets: Presets) -> RowResult:
     return RowResult(row, value, status)
 
 
-def check(papers=PAPERS, config_dir: str | Path | None = None) -> list[RowResult]:
-    """Every row of the given papers, evaluated on the presets of ``config_dir``."""
+def check(papers=PAPERS, config_dir: str | Path | None = None, progress=None) -> list[RowResult]:
+    """Every row of the given papers, evaluated on the presets of ``config_dir``.
+
+    ``progress(paper, i, n)``, if given, is called as each paper starts (the
+    whole check takes a while), once the input is known to be good.
+    """
     bad = [p for p in papers if p not in PAPERS]
     if bad:
         raise AttitudeSilError(f"--paper must be one of {', '.join(PAPERS)}, got {', '.join(bad)}")
     presets = Presets(config_dir)
-    return [evaluate_row(r, presets) for r in ROWS if r.paper in papers]
+    chosen = [p for p in PAPERS if p in papers]
+    out = []
+    for i, paper in enumerate(chosen, start=1):
+        if progress is not None:
+            progress(paper, i, len(chosen))
+        out += [evaluate_row(r, presets) for r in ROWS if r.paper == paper]
+    return out
 
 
 # ------------------------------------------------------------------ paper 000
