@@ -269,20 +269,10 @@ class GraphSession:
         KeyboardInterrupt
             After Ctrl-C, once the bag is closed (nothing recorded is lost).
         """
-        writer = None
         if controller_params and "controller" in self.external:
             raise RunError("the controller is external (--external controller): its parameters are its own, "
                            "not set by attitude-sil")
-        if record_dir is not None:
-            extra = dict(self.extra)
-            if controller_params:
-                extra.update(controller_params)
-            try:
-                own = [n for n in GRAPH_NODES if n not in self.external]  # what it knows of the nodes it ran
-                writer = BagWriter(record_dir, custom_data={PARAMETERS_KEY: self.scn.parameters_yaml(extra, own),
-                                                            SCENARIO_KEY: self.scn.scenario_yaml()})
-            except (FileExistsError, ValueError, OSError) as exc:
-                raise RunError(str(exc)) from None
+        writer = None if record_dir is None else self._bag_writer(record_dir, controller_params)
         if self.live is not None:
             self.live.set_controller((controller_params or {}).get("controller_type", self.controller), 0)
         prog = Progress(progress, self.duration)
@@ -290,16 +280,7 @@ class GraphSession:
         accumulator = EpisodeAccumulator(self.scn.values["scenario"], self.scn.param("guidance", "step_time"),
                                          self.controller, schedule or None)
         assembler = StepAssembler(accumulator)
-        dt_ns = int(round(self.scn.dt * 1e9))
-        scheduled = {k for _, k, _ in schedule}
-
-        def live_swap(kind: str, last_ns: int) -> None:
-            # a controller_type set while the run goes (param set, a Foxglove client): the law from the next step
-            k = last_ns // dt_ns + 1 if last_ns >= 0 else 0
-            if not scheduled & {k - 1, k, k + 1}:  # the runner's own scheduled swaps are in the schedule already
-                accumulator.swap(k, kind)
-
-        self.recorder.on_controller = live_swap
+        self.recorder.on_controller = _live_swaps(accumulator, schedule, int(round(self.scn.dt * 1e9)))
         self.recorder.start_episode(writer, keeping=keep_trajectory,
                                     sink=None if keep_trajectory else assembler.add)
         try:
@@ -341,6 +322,18 @@ class GraphSession:
         bag = None if writer is None else writer.run_dir
         metrics["bag"] = None if bag is None else str(bag)
         return RunResult(metrics=metrics, bag=bag, counts=dict(self.recorder.counts), trajectory=traj)
+
+    def _bag_writer(self, record_dir: str | Path, controller_params: dict | None) -> BagWriter:
+        """The episode's bag, with the parameters of the nodes the runner started and the scenario section."""
+        extra = dict(self.extra)
+        if controller_params:
+            extra.update(controller_params)
+        own = [n for n in GRAPH_NODES if n not in self.external]  # what it knows of the nodes it ran
+        try:
+            return BagWriter(record_dir, custom_data={PARAMETERS_KEY: self.scn.parameters_yaml(extra, own),
+                                                      SCENARIO_KEY: self.scn.scenario_yaml()})
+        except (FileExistsError, ValueError, OSError) as exc:
+            raise RunError(str(exc)) from None
 
     def __exit__(self, *exc) -> None:
         if getattr(self, "executor", None) is not None:
@@ -421,6 +414,19 @@ def run_graph(
     with session as graph:
         return graph.run_episode(record_dir=record_dir, controller_params=controller_params, progress=progress,
                                  keep_trajectory=keep_trajectory)
+
+
+def _live_swaps(accumulator: EpisodeAccumulator, schedule: list[tuple[float, int, str]], dt_ns: int):
+    """The recorder's ``on_controller``: a ``controller_type`` set while the run goes (``param set``, a Foxglove
+    client) into the accumulator, the law from the step after the last command taken."""
+    scheduled = {k for _, k, _ in schedule}
+
+    def swap(kind: str, last_ns: int) -> None:
+        k = last_ns // dt_ns + 1 if last_ns >= 0 else 0
+        if not scheduled & {k - 1, k, k + 1}:  # the runner's own scheduled swaps are in the schedule already
+            accumulator.swap(k, kind)
+
+    return swap
 
 
 def check_external(external, controller: str | None, scn: Scenario) -> tuple[str, ...]:
