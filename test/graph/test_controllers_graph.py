@@ -212,23 +212,34 @@ def test_sigterm_and_sighup_close_the_bag_and_end_every_node(tmp_path, sig, code
     cmd = [sys.executable, "-m", "attitude_sil.cli", "run", "config/hst_roll_step.yaml", "--real-time",
            "--duration", "3600", "--record", str(bag)] + (["--processes"] if processes else [])
     run = subprocess.Popen(cmd, cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                           stdin=subprocess.DEVNULL, preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
+                           stdin=subprocess.DEVNULL, preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL),
+                           start_new_session=True)
     try:
         assert "real time" in run.stderr.readline()  # the episode runs
         nodes = _children(run.pid)
         assert len(nodes) == (5 if processes else 0)
         run.send_signal(sig)
         _, err = run.communicate(timeout=60)
+        left = [pid for pid in nodes if _alive(pid)]  # looked at before the clean-up below kills anything
     finally:
-        run.kill()
+        _kill_group(run)
     assert run.returncode == code, err
     assert "Traceback" not in err and signal.Signals(sig).name in err
-    assert not [pid for pid in nodes if _alive(pid)]  # no node process left behind
+    assert not left  # no node process left behind
     info = yaml.safe_load((bag / "metadata.yaml").read_text())["rosbag2_bagfile_information"]
     assert info["message_count"] > 0
     with open(bag / "stopped_0.mcap", "rb") as f:
         summary = make_reader(f, decoder_factories=[DecoderFactory()]).get_summary()
     assert summary.statistics.message_count == info["message_count"]
+
+
+def _kill_group(run: subprocess.Popen) -> None:
+    """SIGKILL a runner started in a session of its own and every process of its group (its node processes)."""
+    try:
+        os.killpg(run.pid, signal.SIGKILL)
+    except ProcessLookupError:
+        pass
+    run.wait()
 
 
 def _node_of(pid: int) -> str:
@@ -251,7 +262,7 @@ def test_a_failed_node_process_ends_the_run_with_one_line_and_a_readable_bag(tmp
     run = subprocess.Popen([sys.executable, "-m", "attitude_sil.cli", "run", "config/hst_roll_step.yaml",
                             "--real-time", "--duration", "3600", "--processes", "--params", str(params),
                             "--record", str(bag)], cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                           text=True, stdin=subprocess.DEVNULL)
+                           text=True, stdin=subprocess.DEVNULL, start_new_session=True)
     nodes = []
     try:
         assert "real time" in run.stderr.readline()
@@ -259,15 +270,16 @@ def test_a_failed_node_process_ends_the_run_with_one_line_and_a_readable_bag(tmp
         target = next(pid for pid in nodes if _node_of(pid) == victim)
         os.kill(target, fault)
         _, err = run.communicate(timeout=60)  # bounded: the watchdogs, not the hour of sim time, end it
+        left = [pid for pid in nodes if _alive(pid)]  # looked at before the clean-up below kills anything
     finally:
-        run.kill()
+        _kill_group(run)  # a failed assertion above must not leave the node processes to the next tests
         for pid in nodes:
             if _alive(pid):
                 os.kill(pid, signal.SIGKILL)
     assert run.returncode == 2, err
     last = [ln for ln in err.splitlines() if ln.startswith("attitude-sil:")]
     assert len(last) == 1 and "error:" in last[0] and "Traceback" not in err
-    assert not [pid for pid in nodes if _alive(pid)]  # no node process left behind
+    assert not left  # no node process left behind
     info = yaml.safe_load((bag / "metadata.yaml").read_text())["rosbag2_bagfile_information"]
     assert info["message_count"] > 0
 
@@ -284,9 +296,10 @@ def test_ctrl_c_in_a_terminal_stops_every_process_with_one_line(tmp_path):
         nodes = _children(run.pid)
         os.killpg(run.pid, signal.SIGINT)
         _, err = run.communicate(timeout=60)
+        left = [pid for pid in nodes if _alive(pid)]  # looked at before the clean-up below kills anything
     finally:
-        run.kill()
+        _kill_group(run)
     assert run.returncode == 130
     assert err.strip().splitlines() == ["interrupted (SIGINT); everything recorded so far is kept"], err
-    assert not [pid for pid in nodes if _alive(pid)]
+    assert not left
     assert (bag / "metadata.yaml").is_file()
