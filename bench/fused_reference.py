@@ -77,8 +77,8 @@ def _episode(p, n_steps, dt, q0, q_r, inertia, inertia_inv, kp, ki, kd, nf, af, 
         qq[0, :] = q
         e = error3_row(qq, qr, 0, False)
         for i in range(3):
-            deriv = nf[p, i] * (e[i] - filt[i])
-            raw = kp[p, i] * e[i] + ki[p, i] * integral[i] + kd[p, i] * deriv
+            deriv = (1.0 - af[p, i]) / dt * (e[i] - filt[i])
+            raw = kp[p, i] * e[i] + ki[p, i] * (integral[i] + 0.5 * e[i] * dt) + kd[p, i] * deriv
             out = min(max(raw, -u_max), u_max)
             if not (out != raw and e[i] * raw > 0.0):
                 integral[i] += e[i] * dt

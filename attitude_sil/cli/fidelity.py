@@ -17,7 +17,8 @@ def add(sub: argparse._SubParsersAction) -> None:
                          "project, with tolerance and PASS / FAIL / EXPLAINED (exit 1 on any FAIL)")
     fid.add_argument("--paper", action="append", choices=PAPERS, help="only this paper (repeatable; default: all)")
     fid.add_argument("--config", help="folder of the presets (default: the package's config/)")
-    fid.add_argument("--json", action="store_true", help="also print the rows as one JSON list, last line")
+    fid.add_argument("--json", action="store_true", help="print one JSON object instead of the table: the rows (with their evidence kind), the "
+                     "counts by evidence and status, and the identified constants with the rows they were fitted on")
     fid.set_defaults(func=execute)
 
 
@@ -26,16 +27,13 @@ def execute(args: argparse.Namespace) -> int:
     import json
     import sys
 
-    from attitude_sil.tuning.fidelity import check, format_report
+    from attitude_sil.tuning.fidelity import check, format_report, report_dict
 
     results = check(tuple(args.paper) if args.paper else PAPERS, args.config,
                     progress=lambda paper, i, n: print(f"fidelity: paper {paper} ({i} of {n})", file=sys.stderr,
                                                        flush=True))
     if args.json:  # one JSON object and nothing else on stdout, so it pipes
-        counts: dict[str, int] = {}
-        for r in results:
-            counts[r.status] = counts.get(r.status, 0) + 1
-        print(json.dumps({"rows": [r.as_dict() for r in results], "status_counts": counts}))
+        print(json.dumps(report_dict(results)))
     else:
         print(format_report(results))
     return 0 if all(r.status != "FAIL" for r in results) else 1

@@ -13,6 +13,15 @@ and a function that computes the project's value from the presets in
   printed number (the readings tried and what each gives);
 * ``FAIL``: neither.
 
+Each row also says what kind of evidence it is (:data:`EVIDENCE`):
+
+* ``identification``: a constant the paper does not publish was fitted so the
+  model reproduces this number (:data:`IDENTIFIED` names each constant, its
+  preset keys and the rows it was fitted on); a PASS shows the fit, not the model;
+* ``prediction``: nothing of the model was fitted on this number;
+* ``construction``: the number holds by the way the project builds its value
+  (a design placed to meet it, a ratio of two other rows).
+
 Rows that share a simulation share it (each group is computed once per
 :class:`Presets`). ROS-free; the batch engine does every run.
 """
@@ -38,10 +47,27 @@ from attitude_sil.tuning.linearize import PAPER_000_TABLE_1, PAPER_000_TABLE_1_D
 
 from .rootlocus import closed_loop, place_poles, reduced_roll_loop
 
-__all__ = ["PAPERS", "Row", "RowResult", "Presets", "ROWS", "PAPER_000_GAINS", "PAPER_001_DESIGNS",
-           "PAPER_002_GAINS", "check", "format_report", "default_config_dir"]
+__all__ = ["PAPERS", "EVIDENCE", "IDENTIFIED", "Identified", "Row", "RowResult", "Presets", "ROWS",
+           "PAPER_000_GAINS", "PAPER_001_DESIGNS", "PAPER_002_GAINS", "check", "counts", "format_report",
+           "report_dict", "default_config_dir"]
 
 STATUSES = ("PASS", "EXPLAINED", "FAIL")
+EVIDENCE = ("prediction", "identification", "construction")
+
+
+@dataclass(frozen=True)
+class Identified:
+    """A constant no paper publishes, fitted to some of its published numbers and frozen in a preset.
+
+    ``keys``: the ``node.parameter`` names (or module constants) it sets;
+    ``how``: the fit in one line (docs/fidelity.md has the readings).
+    The rows it was fitted on are those whose ``fitted`` names it.
+    """
+
+    name: str
+    preset: str
+    keys: tuple[str, ...]
+    how: str
 
 #: paper 000 PID gains (Kp, Ki, Kd, N): "Genetic algorithm based tuning" and "Root locus-based tuning"
 PAPER_000_GAINS = {"ga": (48.894, 0.071, 106.046, 1.427), "root_locus": (113.554, 0.006, 260.942, 14.626)}
@@ -75,12 +101,36 @@ PAPER_002_SETTLING = {
 }
 
 
+#: every constant of the presets that was fitted to published results (the rows name them in ``fitted``)
+IDENTIFIED = {i.name: i for i in (
+    Identified("000 motor", "hst_roll_step",
+               ("wheels.motor.torque_constant", "wheels.motor.back_emf_constant", "wheels.motor.resistance",
+                "wheels.motor.v_max", "controller.output_limit"),
+               "least squares of the printed J of both gain sets, with the root-locus requirements on the "
+               "linear model as penalties"),
+    Identified("000 Table 1 run length", "hst_roll_step", ("tuning.linearize.PAPER_000_TABLE_1_DURATION",),
+               "the run length whose RMSE table is nearest Table 1 (RMS log ratio)"),
+    Identified("002 filter and band", "flexible_axis", ("controller.pid.n", "scenario.metrics.settling_band"),
+               "least squares of the PSO gains' ten settling times"),
+    Identified("002 manual gains", "flexible_axis", ("tuning.fidelity.PAPER_002_GAINS['manual']",),
+               "grid least squares of the manual PID's settling times, case 4 never settling"),
+    Identified("003 motor reading", "cubesat_1u",
+               ("wheels.speed_loop.motor_gain", "wheels.speed_loop.motor_a2", "wheels.speed_loop.motor_a1"),
+               "the reading of the garbled H(s) print that gives the speed loop's three figures"),
+    Identified("003 attitude gains and step", "cubesat_1u",
+               ("controller.pid.kp", "controller.pid.kd", "controller.fuzzy_pid.kp", "controller.fuzzy_pid.kd",
+                "guidance.setpoint_rpy_deg"),
+               "Nelder-Mead on the two attitude settling times (2.5 s PID, 2.0 s hybrid)"),
+)}
+
 class Presets:
     """The preset scenarios of a config folder, with each shared computation done once."""
 
     NAMES = PRESETS
 
-    def __init__(self, config_dir: str | Path | None = None) -> None:
+    def __init__(self, config_dir: str | Path | None = None, refine: int = 1) -> None:
+        """``refine``: divide every preset's control period (and so its integration step) by this."""
+        self.refine = int(refine)
         self.dir = Path(config_dir) if config_dir is not None else default_config_dir()
         if not self.dir.is_dir():
             raise AttitudeSilError(f"--config {self.dir}: not a folder of presets")
@@ -91,7 +141,10 @@ class Presets:
 
     def scenario(self, name: str) -> Scenario:
         """A preset, loaded and validated once."""
-        return self.memo(f"scn:{name}", lambda: load_scenario(self.dir / f"{name}.yaml"))
+        def load() -> Scenario:
+            scn = load_scenario(self.dir / f"{name}.yaml")
+            return scn if self.refine == 1 else scn.with_values("/**", control_period=scn.dt / self.refine)
+        return self.memo(f"scn:{name}", load)
 
     def memo(self, key: str, fn: Callable[[], object]):
         """``fn()`` computed once per key."""
@@ -121,7 +174,16 @@ class Row:
     tolerance: float
     reason: str
     compute: Callable[[Presets], float]
+    evidence: str
     explained: str = ""
+    fitted: tuple[str, ...] = ()
+
+    def __post_init__(self) -> None:
+        if self.evidence not in EVIDENCE:
+            raise ValueError(f"row {self.id}: evidence must be one of {EVIDENCE}, got {self.evidence!r}")
+        if (self.evidence == "identification") != bool(self.fitted):
+            raise ValueError(f"row {self.id}: an identification row names the constants fitted on it, "
+                             "and only such a row does")
 
     @property
     def id(self) -> str:
@@ -145,7 +207,8 @@ class RowResult:
         p = None if not math.isfinite(r.paper_value) else r.paper_value
         return {"id": r.id, "paper": r.paper, "where": r.where, "quantity": r.quantity, "unit": r.unit,
                 "paper_value": p, "project_value": v, "kind": r.kind, "tolerance": r.tolerance,
-                "reason": r.reason, "status": self.status, "explained": r.explained or None}
+                "reason": r.reason, "status": self.status, "evidence": r.evidence, "fitted": list(r.fitted),
+                "explained": r.explained or None}
 
 
 def within(row: Row, value: float) -> bool:
@@ -170,16 +233,17 @@ def evaluate_row(row: Row, presets: Presets) -> RowResult:
     return RowResult(row, value, status)
 
 
-def check(papers=PAPERS, config_dir: str | Path | None = None, progress=None) -> list[RowResult]:
+def check(papers=PAPERS, config_dir: str | Path | None = None, progress=None, refine: int = 1) -> list[RowResult]:
     """Every row of the given papers, evaluated on the presets of ``config_dir``.
 
     ``progress(paper, i, n)``, if given, is called as each paper starts (the
     whole check takes a while), once the input is known to be good.
+    ``refine``: control period and integration step divided by this (the convergence check).
     """
     bad = [p for p in papers if p not in PAPERS]
     if bad:
         raise AttitudeSilError(f"--paper must be one of {', '.join(PAPERS)}, got {', '.join(bad)}")
-    presets = Presets(config_dir)
+    presets = Presets(config_dir, refine)
     chosen = [p for p in PAPERS if p in papers]
     out = []
     for i, paper in enumerate(chosen, start=1):
@@ -235,31 +299,33 @@ def _rows_000() -> list[Row]:
     rows = [
         Row("000", "Results", "cost J of the GA gains", 0.5129, "", "rel", 0.05,
             "J = |tau - 1.5| + OS printed to 4 digits; 5 % covers the time-constant read-off",
-            lambda ps: _hst_step(ps)["ga"]["cost_J"], explained="paper-000-cost-j"),
+            lambda ps: _hst_step(ps)["ga"]["cost_J"], evidence="identification", fitted=("000 motor",), explained="paper-000-cost-j"),
         Row("000", "Results", "cost J of the root-locus gains", 0.7215, "", "rel", 0.05,
-            "as the GA row", lambda ps: _hst_step(ps)["root_locus"]["cost_J"], explained="paper-000-cost-j"),
+            "as the GA row", lambda ps: _hst_step(ps)["root_locus"]["cost_J"],
+            evidence="identification", fitted=("000 motor",), explained="paper-000-cost-j"),
         Row("000", "Root locus-based tuning", "overshoot of the root-locus gains (linear model)", 2.0, "%", "max", 0.0,
             "the paper's requirement, met on the linearised model",
-            lambda ps: _hst_linear(ps, "root_locus")["overshoot_pct"]),
+            lambda ps: _hst_linear(ps, "root_locus")["overshoot_pct"], evidence="identification", fitted=("000 motor",)),
         Row("000", "Root locus-based tuning", "settling time of the root-locus gains (linear model)", 6.0, "s",
             "max", 0.0, "the paper's requirement, met on the linearised model",
-            lambda ps: _hst_linear(ps, "root_locus")["settling_time_s"]),
+            lambda ps: _hst_linear(ps, "root_locus")["settling_time_s"], evidence="identification", fitted=("000 motor",)),
         Row("000", "Root locus-based tuning", "project root-locus design: settling time (linear model)", 6.0, "s",
             "max", 0.0, "the paper's requirement for its design, applied to the project's",
-            lambda ps: _hst_design(ps)["settling_time_s"]),
+            lambda ps: _hst_design(ps)["settling_time_s"], evidence="construction"),
         Row("000", "Root locus-based tuning", "project root-locus design: overshoot (linear model)", 2.0, "%",
             "max", 0.0, "the paper's requirement for its design, applied to the project's",
-            lambda ps: _hst_design(ps)["overshoot_pct"]),
+            lambda ps: _hst_design(ps)["overshoot_pct"], evidence="construction"),
         Row("000", "Root locus-based tuning", "project root-locus design: time constant (linear model)", 1.5, "s",
             "abs", 0.1, "the design target tau_d; 0.1 s is the placement grid's resolution",
-            lambda ps: _hst_design(ps)["time_constant_s"]),
+            lambda ps: _hst_design(ps)["time_constant_s"], evidence="construction"),
     ]
     for i, ang in enumerate(PAPER_000_TABLE_1):
         for a, axis in enumerate(("roll", "pitch", "yaw")):
             rows.append(Row("000", "Table 1", f"RMSE nonlinear vs linear, {ang} deg {axis}",
                             PAPER_000_TABLE_1[ang][a], "deg", "rel", 0.5,
                             "the run length is identified from the table itself; 50 %",
-                            lambda ps, i=i, a=a: float(_hst_table1(ps)[i, a]), explained="paper-000-table-1"))
+                            lambda ps, i=i, a=a: float(_hst_table1(ps)[i, a]), evidence="identification",
+                            fitted=("000 Table 1 run length", "000 motor"), explained="paper-000-table-1"))
     return rows
 
 
@@ -283,12 +349,12 @@ def _rows_001() -> list[Row]:
         digits = len(f"{ce}".split(".")[1])
         rows.append(Row("001", where, "settling time Ts" + (" (hand-tuned gains)" if label == "hand-tuned" else ""),
                         ts, "s", "rel", 0.03, "the issue's 3 % (the control period is assumed)",
-                        lambda ps, k=label: _hawaiisat(ps)[k][0]))
+                        lambda ps, k=label: _hawaiisat(ps)[k][0], evidence="prediction"))
         tol = 0.05 if digits >= 3 else 0.15
         rows.append(Row("001", where, "control effort Ce" + (" (hand-tuned gains)" if label == "hand-tuned" else ""),
                         ce, "N m s", "rel", tol,
                         "printed to 3-4 digits: 5 %" if digits >= 3 else "printed to 1-2 digits: 15 %",
-                        lambda ps, k=label: _hawaiisat(ps)[k][1],
+                        lambda ps, k=label: _hawaiisat(ps)[k][1], evidence="prediction",
                         explained="paper-001-table-3-row-2" if label == "Tables 3-4 row 2" else ""))
     return rows
 
@@ -329,6 +395,8 @@ def _rows_002() -> list[Row]:
                                 "s", kind, 5.0, "read off a figure by the authors to 5-10 s" if kind == "abs"
                                 else "the paper: continuous vibration",
                                 lambda ps, w=which, c=case, p=part: _flexible(ps)[w, c][p],
+                                evidence="identification",
+                                fitted=("002 filter and band",) + (("002 manual gains",) if which == "manual" else ()),
                                 explained="paper-002-settling"))
     return rows
 
@@ -350,13 +418,13 @@ def _speed_loop(ps: Presets) -> dict:
     """Paper 003's wheel-speed step (7330 rpm reference) with the preset's identified motor and GA PID."""
     def run():
         w = ps.scenario("cubesat_1u").values["wheels"]
-        dt = 0.001
+        dt = 0.001 / ps.refine
         wheels = SpeedLoopWheels(w["speed_loop.motor_gain"], w["speed_loop.motor_a2"], w["speed_loop.motor_a1"],
                                  w["speed_loop.kp"], w["speed_loop.ki"], w["speed_loop.kd"], w["speed_loop.n"],
                                  w["motor.rotor_inertia"], w["motor.speed_max_rpm"], w["speed_loop.rpm_per_volt"],
                                  dt, 1)
         ref = -7330.0 / w["speed_loop.rpm_per_volt"]
-        speeds = [wheels.advance(np.array([[ref, 0.0, 0.0]])).velocity[0, 0] for _ in range(10000)]
+        speeds = [wheels.advance(np.array([[ref, 0.0, 0.0]])).velocity[0, 0] for _ in range(10000 * ps.refine)]
         t = np.arange(len(speeds)) * dt
         y = np.array(speeds)[None] / (2 * np.pi / 60)
         m = step_metrics(t, y, np.array([y[0, -1]]), np.array([0.0]))
@@ -367,18 +435,22 @@ def _speed_loop(ps: Presets) -> dict:
 def _rows_003() -> list[Row]:
     return [
         Row("003", "sec. 6, speed loop", "wheel-speed rise time", 0.55, "s", "abs", 0.02,
-            "printed to 2 digits", lambda ps: _speed_loop(ps)["rise_time_s"]),
+            "printed to 2 digits", lambda ps: _speed_loop(ps)["rise_time_s"],
+            evidence="identification", fitted=("003 motor reading",)),
         Row("003", "sec. 6, speed loop", "wheel-speed settling time", 2.00, "s", "abs", 0.05,
-            "printed to 3 digits", lambda ps: _speed_loop(ps)["settling_time_s"]),
+            "printed to 3 digits", lambda ps: _speed_loop(ps)["settling_time_s"],
+            evidence="identification", fitted=("003 motor reading",)),
         Row("003", "sec. 6, speed loop", "wheel-speed overshoot", 3.99, "%", "abs", 0.1,
-            "printed to 3 digits", lambda ps: _speed_loop(ps)["overshoot_pct"]),
+            "printed to 3 digits", lambda ps: _speed_loop(ps)["overshoot_pct"],
+            evidence="identification", fitted=("003 motor reading",)),
         Row("003", "Fig. 8", "attitude settling time, PID", 2.5, "s", "abs", 0.1,
-            "printed as 2.5 s", lambda ps: _cubesat(ps)["pid"]),
+            "printed as 2.5 s", lambda ps: _cubesat(ps)["pid"], evidence="identification", fitted=("003 attitude gains and step",)),
         Row("003", "Fig. 9", "attitude settling time, hybrid fuzzy PID", 2.0, "s", "abs", 0.1,
-            "printed as 2 s", lambda ps: _cubesat(ps)["fuzzy_pid"]),
+            "printed as 2 s", lambda ps: _cubesat(ps)["fuzzy_pid"], evidence="identification", fitted=("003 attitude gains and step",)),
         Row("003", "Conclusion", "hybrid faster than PID by", 20.0, "%", "abs", 3.0,
             "'up to 20 %' from 2.5 s and 2.0 s",
-            lambda ps: 100.0 * (1.0 - _cubesat(ps)["fuzzy_pid"] / _cubesat(ps)["pid"])),
+            lambda ps: 100.0 * (1.0 - _cubesat(ps)["fuzzy_pid"] / _cubesat(ps)["pid"]),
+            evidence="identification", fitted=("003 attitude gains and step",)),
     ]
 
 
@@ -399,10 +471,11 @@ def _pitch(ps: Presets) -> dict:
 def _rows_004() -> list[Row]:
     return [
         Row("004", "Fig. 8 (a)", "impulse response: settling time", 10.0, "normalised",
-            "max", 0.0, "the figure ends at t = 10 with the states at rest", lambda ps: _pitch(ps)["impulse"]),
+            "max", 0.0, "the figure ends at t = 10 with the states at rest", lambda ps: _pitch(ps)["impulse"],
+            evidence="prediction"),
         Row("004", "Fig. 8 (b)", "impulse and 30 deg initial pitch: settling time", 10.0,
             "normalised", "max", 0.0, "the figure ends at t = 10 with the states at rest (initial angle: "
-            "theta_max, assumed)", lambda ps: _pitch(ps)["impulse+angle"]),
+            "theta_max, assumed)", lambda ps: _pitch(ps)["impulse+angle"], evidence="prediction"),
     ]
 
 
@@ -415,20 +488,50 @@ def _fmt(v: float) -> str:
     return f"{v:.4g}"
 
 
+def counts(results: list[RowResult]) -> dict[str, dict[str, int]]:
+    """Rows per evidence kind and status: ``{evidence: {status: n}}`` (every kind and status present)."""
+    return {e: {st: sum(r.row.evidence == e and r.status == st for r in results) for st in STATUSES}
+            for e in EVIDENCE}
+
+
+def identified_rows(results: list[RowResult]) -> list[dict]:
+    """Each identified constant with the ids of the rows (of ``results``) it was fitted on."""
+    return [{"name": i.name, "preset": i.preset, "keys": list(i.keys), "how": i.how,
+             "fitted_on": [r.row.id for r in results if i.name in r.row.fitted]}
+            for i in IDENTIFIED.values()]
+
+
+def report_dict(results: list[RowResult]) -> dict:
+    """``fidelity --json``: the rows, the counts by evidence and status, and the identified constants."""
+    status_counts = {st: sum(r.status == st for r in results) for st in STATUSES}
+    return {"rows": [r.as_dict() for r in results], "status_counts": status_counts,
+            "evidence_counts": counts(results), "identified": identified_rows(results)}
+
+
+def _headline(results: list[RowResult]) -> str:
+    c = counts(results)
+    parts = [f"{e}s {sum(c[e].values())} ({', '.join(f'{st} {n}' for st, n in c[e].items())})" for e in EVIDENCE]
+    return "; ".join(parts)
+
+
 def format_report(results: list[RowResult]) -> str:
-    """The paper-vs-project table and the counts per paper."""
-    lines = [f"{'paper':<5} {'where':<28} {'quantity':<62} {'paper':>9} {'project':>9} {'tolerance':>11} status"]
+    """The paper-vs-project table, then the counts per paper and per kind of evidence."""
+    lines = [f"{'paper':<5} {'where':<26} {'quantity':<60} {'paper':>9} {'project':>9} {'tolerance':>11} "
+             f"{'evidence':<6} status"]
+    short = {"prediction": "pred", "identification": "fit", "construction": "constr"}
     for r in results:
         row = r.row
         tol = {"abs": f"±{row.tolerance:g}", "rel": f"±{row.tolerance * 100:g} %", "max": "<= paper",
                "never": "never"}[row.kind]
         unit = f" [{row.unit}]" if row.unit else ""
-        lines.append(f"{row.paper:<5} {row.where[:28]:<28} {(row.quantity + unit)[:62]:<62} {_fmt(row.paper_value):>9} "
-                     f"{_fmt(r.value):>9} {tol:>11} {r.status}")
+        lines.append(f"{row.paper:<5} {row.where[:26]:<26} {(row.quantity + unit)[:60]:<60} {_fmt(row.paper_value):>9} "
+                     f"{_fmt(r.value):>9} {tol:>11} {short[row.evidence]:<8} {r.status}")
     lines.append("")
     for paper in PAPERS:
         sub = [r for r in results if r.row.paper == paper]
         if sub:
-            counts = ", ".join(f"{s} {sum(r.status == s for r in sub)}" for s in STATUSES)
-            lines.append(f"paper {paper}: {len(sub)} rows: {counts}")
+            lines.append(f"paper {paper}: {len(sub)} rows: {_headline(sub)}")
+    passing = counts(results)["prediction"]["PASS"]
+    lines.append(f"all: {len(results)} rows: {_headline(results)}")
+    lines.append(f"predictions that pass: {passing} (fits reproduce what they were fitted on: not evidence)")
     return "\n".join(lines)

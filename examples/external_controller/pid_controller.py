@@ -21,8 +21,10 @@ The per-step contract it follows (docs/flight-software.md):
 
 The law is paper 000's PID, the arithmetic of attitude_sil's ``pid`` law
 (``e = -vec(q_RN* q_BN)`` with a non-negative scalar part, a first-order
-derivative filter ``N/(s + N)`` discretised exactly for a held error,
-forward-Euler integral with conditional integration at the output limit), so
+derivative filter ``N/(s + N)``; the command held over a period is the
+mean over that period of the continuous PID's output for the held error:
+derivative ``(1 - a)/dt (e - x_f)`` with ``a = exp(-N dt)``, integral
+``I + e dt/2``; conditional integration at the output limit), so
 a run with this node gives the built-in law's numbers. ``compute_delay``
 (s) makes each step take that long, as slow flight software would.
 """
@@ -105,12 +107,12 @@ class PidController(Node):
         dt = self.get_parameter("control_period").value
         u = []
         for i in range(3):
-            deriv = p["n"][i] * (e[i] - self.filt[i])
-            raw = p["kp"][i] * e[i] + p["ki"][i] * self.integral[i] + p["kd"][i] * deriv
+            a = math.exp(-p["n"][i] * dt)
+            deriv = (1.0 - a) / dt * (e[i] - self.filt[i])  # mean of N (e - x_f(t)) over the period
+            raw = p["kp"][i] * e[i] + p["ki"][i] * (self.integral[i] + 0.5 * e[i] * dt) + p["kd"][i] * deriv
             out = min(max(raw, -u_max), u_max)
             if not (out != raw and e[i] * raw > 0.0):  # no integration into the limit
                 self.integral[i] += e[i] * dt
-            a = math.exp(-p["n"][i] * dt)
             self.filt[i] = a * self.filt[i] + (1.0 - a) * e[i]
             u.append(out)
         return u[0], u[1], u[2]

@@ -33,16 +33,31 @@ def test_pid_derivative_filter_matches_continuous_ramp():
     t = np.arange(1000) * dt  # 10 s: the transient exp(-N t) has died out to 2e-22
     u = _pid_on_error(pid, r * t)
     exact = 2.0 * r * (1 - np.exp(-n * t))
-    # ZOH discretisation of a ramp lags by half a step: error O(dt)
+    # the held staircase of a ramp lags by half a step: error O(dt)
     assert np.max(np.abs(u - exact)) < 2.0 * r * n * dt
-    # steady state of the exact ZOH filter: Kd r N dt / (1 - exp(-N dt)), i.e. Kd r (1 + N dt / 2 + ...)
-    assert u[-1] == pytest.approx(2.0 * r * n * dt / (1 - np.exp(-n * dt)), rel=1e-9)
+    # the held interval mean of the derivative term reaches the continuous steady state Kd r exactly
+    # (the sample value N (e - x_f) reached Kd r N dt / (1 - exp(-N dt)): 7.7 % high at N dt = 0.15)
+    assert u[-1] == pytest.approx(2.0 * r, rel=1e-9)
+
+
+@pytest.mark.parametrize("n_dt", [0.15, 1.0, 10.0])
+def test_pid_derivative_kick_keeps_the_continuous_area(n_dt):
+    # a step e = e0 through Kd N s / (s + N): the continuous output is an impulse-like exp(-N t) of area
+    # Kd e0, whatever N. The held commands must carry that area at any N dt (the convergence in dt of
+    # every preset's step response rests on it); the old sample-value form gave Kd e0 N dt / (1 - a).
+    dt, kd, e0 = 0.01, 3.0, 0.02
+    pid = _pid(0.0, 0.0, kd, n_dt / dt, dt, 1e9)
+    u = _pid_on_error(pid, np.full(int(60 / n_dt) + 50, e0))
+    assert np.sum(u) * dt == pytest.approx(kd * e0, rel=1e-9)
+    # and the mean over the first period is the continuous one: Kd e0 (1 - exp(-N dt)) / dt
+    assert u[0] == pytest.approx(kd * e0 * (1 - np.exp(-n_dt)) / dt, rel=1e-12)
 
 
 def test_pid_integrator_and_anti_windup():
     pid = _pid(0.0, 1.0, 0.0, 1.0, 0.1, 1e9)
     u = _pid_on_error(pid, np.full(11, 0.01))
-    assert u[-1] == pytest.approx(0.01 * 1.0, rel=1e-12)  # 10 steps of 0.1 s
+    # 10 steps of 0.1 s integrated, plus the held interval's mean e dt / 2
+    assert u[-1] == pytest.approx(0.01 * 1.0 + 0.01 * 0.05, rel=1e-12)
     sat = _pid(100.0, 1.0, 0.0, 1.0, 0.1, 0.5)
     u = _pid_on_error(sat, np.full(50, 0.01))  # saturated throughout: kp e = 1 > 0.5
     assert np.all(u == 0.5)

@@ -28,6 +28,12 @@ def presets() -> fidelity.Presets:
     return fidelity.Presets(CONFIG)
 
 
+@pytest.fixture(scope="module")
+def refined() -> fidelity.Presets:
+    """The same presets with the control period and the integration step divided by 10."""
+    return fidelity.Presets(CONFIG, refine=10)
+
+
 @pytest.mark.parametrize("row", fidelity.ROWS, ids=[r.id for r in fidelity.ROWS])
 def test_row(row, presets):
     result = fidelity.evaluate_row(row, presets)
@@ -36,6 +42,56 @@ def test_row(row, presets):
         f"({row.kind} {row.tolerance})")
     if result.status == "EXPLAINED":
         assert f'<a id="{row.explained}"></a>' in (ROOT / "docs" / "fidelity.md").read_text()
+
+
+@pytest.mark.parametrize("row", fidelity.ROWS, ids=[r.id for r in fidelity.ROWS])
+def test_row_is_converged_in_the_step(row, presets, refined):
+    """The value moves by less than 1 % (settling times: 0.5 s or 1 %) with the period divided by 10.
+
+    A row that is not converged measures the discretisation, and a constant fitted on it absorbs that
+    error (issue 22): every row must hold this whatever its status.
+    """
+    coarse = fidelity.evaluate_row(row, presets).value
+    fine = fidelity.evaluate_row(row, refined).value
+    if not (math.isfinite(coarse) and math.isfinite(fine)):
+        assert math.isinf(coarse) and math.isinf(fine), f"{row.id}: {coarse} at dt, {fine} at dt / 10"
+        return
+    settling = "settling time" in row.quantity and row.unit == "s"
+    bound = max(0.5, 0.01 * abs(fine)) if settling else 0.01 * abs(fine)
+    assert abs(coarse - fine) <= bound, f"{row.id}: {coarse:.6g} at dt, {fine:.6g} at dt / 10"
+
+
+def test_every_row_says_what_evidence_it_is():
+    for row in fidelity.ROWS:
+        assert row.evidence in fidelity.EVIDENCE
+        for name in row.fitted:
+            assert name in fidelity.IDENTIFIED, f"{row.id} names an unknown identified constant {name!r}"
+    for name, ident in fidelity.IDENTIFIED.items():
+        rows = [r.id for r in fidelity.ROWS if name in r.fitted]
+        assert rows, f"identified constant {name!r} names no row it was fitted on"
+        assert (CONFIG / f"{ident.preset}.yaml").is_file()
+    with pytest.raises(ValueError, match="evidence"):
+        fidelity.Row("000", "x", "y", 1.0, "", "abs", 0.1, "r", lambda ps: 1.0, evidence="fit")
+    with pytest.raises(ValueError, match="names the constants"):
+        fidelity.Row("000", "x", "y", 1.0, "", "abs", 0.1, "r", lambda ps: 1.0, evidence="identification")
+
+
+def test_the_headline_counts_predictions_apart_from_fits():
+    def result(evidence, status, fitted=()):
+        row = fidelity.Row("000", "x", f"{evidence} {status}", 1.0, "", "abs", 0.1, "r", lambda ps: 1.0,
+                           evidence=evidence, fitted=fitted)
+        return fidelity.RowResult(row, 1.0, status)
+    name = next(iter(fidelity.IDENTIFIED))
+    results = [result("prediction", "PASS"), result("prediction", "FAIL"),
+               result("identification", "PASS", (name,)), result("construction", "PASS")]
+    c = fidelity.counts(results)
+    assert c["prediction"] == {"PASS": 1, "EXPLAINED": 0, "FAIL": 1}
+    assert c["identification"]["PASS"] == 1 and c["construction"]["PASS"] == 1
+    text = fidelity.format_report(results)
+    assert "predictions that pass: 1" in text.splitlines()[-1]
+    report = fidelity.report_dict(results)
+    fitted = {i["name"]: i["fitted_on"] for i in report["identified"]}
+    assert fitted[name] == [results[2].row.id]
 
 
 def test_row_ids_are_unique():
@@ -77,4 +133,6 @@ def test_fidelity_json_is_one_object_alone_on_stdout(capsys):
     assert code == (1 if any(r["status"] == "FAIL" for r in rows) else 0)
     assert all(r["status"] in fidelity.STATUSES for r in rows)
     assert sum(report["status_counts"].values()) == len(rows)
+    assert sum(sum(c.values()) for c in report["evidence_counts"].values()) == len(rows)
+    assert {r["evidence"] for r in rows} == {"prediction"}  # paper 004: nothing fitted
     assert "paper 004" in captured.err  # the progress goes to stderr

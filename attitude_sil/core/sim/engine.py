@@ -240,15 +240,13 @@ def flexible_states(scn: Scenario, tr) -> tuple[np.ndarray, np.ndarray]:
     internal states exactly (the published attitude is only ``y = theta + k2 alpha``).
     """
     plant = build_plant(scn, tr.tau_c_B.shape[0])
-    theta = np.empty(tr.tau_c_B.shape[:2])
-    alpha = np.empty_like(theta)
-    ext = np.zeros_like(tr.tau_c_B) if tr.tau_ext_B is None else tr.tau_ext_B
-    for k in range(theta.shape[1]):
-        theta[:, k] = plant.x[:, 0]
-        alpha[:, k] = plant.x[:, 2]
-        if k + 1 < theta.shape[1]:
-            plant.advance(tr.tau_c_B[:, k], None, ext[:, k])
-    return theta, alpha
+    x = plant.x
+    u = tr.tau_c_B[:, :, plant.axis] + (0.0 if tr.tau_ext_B is None else tr.tau_ext_B[:, :, plant.axis])
+    states = np.empty(tr.tau_c_B.shape[:2] + (4,))
+    for k in range(states.shape[1]):  # FlexibleAxisPlant.advance's arithmetic, without its published state
+        states[:, k] = x
+        x = np.einsum("pi,pij->pj", x, plant.phi_T) + u[:, k, None] * plant.gamma
+    return states[:, :, 0], states[:, :, 2]
 
 
 def motor_params(values: dict) -> MotorParams:

@@ -113,7 +113,7 @@ def enter(q_BN, omega_BN_B, q_RN, omega_RN_R, p, par, st, dt, decay, u_last, off
             up = target
         u_pid[i] = up
         rest[i] = target - mix(up, u_f, f)
-    pid_bumpless_row(e, de, p, par, st, (u_pid[0], u_pid[1], u_pid[2]))
+    pid_bumpless_row(e, de, p, par, st, (u_pid[0], u_pid[1], u_pid[2]), dt)
     st.has_prev[p, 0] = True
     needed = decay > 0.0 and (abs(rest[0]) > 1e-12 or abs(rest[1]) > 1e-12 or abs(rest[2]) > 1e-12)
     for i in range(3):

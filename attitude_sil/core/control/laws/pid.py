@@ -3,16 +3,25 @@
 ``u = Kp e + Ki ∫e dt + Kd N s / (s + N) e`` per body axis, volts (or N m on a
 torque preset).
 
-Discretisation at the control period ``dt`` (state held between steps):
+Discretisation at the control period ``dt`` (state held between steps): the
+command held over ``[t_k, t_k + dt)`` is the *mean over that interval* of the
+continuous PID's output for the error ``e[k]`` held there, so results converge
+as ``dt`` shrinks even when the filter is fast (``N dt`` near or above 1):
 
 * the error vector is ``e = -vec(q_RN* ⊗ q_BN)`` with the scalar part made
   non-negative (:func:`attitude_sil.core.plant.kernels.error3_row`); in the angle
   mode (``error_mode: angle``) each component becomes ``2 asin(e_i)``;
-* derivative filter: low-pass state ``x_f`` of ``N / (s + N)`` discretised
-  exactly for a held error, ``x_f[k+1] = a x_f[k] + (1 - a) e[k]`` with
-  ``a = exp(-N dt)``; derivative term ``N (e[k] - x_f[k])``. ``x_f`` starts
-  at 0, so a step at t = 0 gives the derivative kick a continuous PID has;
-* integrator: forward Euler, ``I[k+1] = I[k] + e[k] dt``;
+* derivative filter: low-pass state ``x_f`` of ``N / (s + N)``, exact for a
+  held error, ``x_f[k+1] = a x_f[k] + (1 - a) e[k]`` with ``a = exp(-N dt)``;
+  the continuous derivative term ``N (e - x_f(t))`` decays as ``exp(-N t)``
+  over the interval, and its mean is ``(1 - a) / dt (e[k] - x_f[k])``: the
+  derivative kick of a step keeps the continuous area ``Kd e`` at any ``dt``
+  (the sample value ``N (e[k] - x_f[k])`` made it ``N dt / (1 - a)`` times too
+  large: +7.7 % at ``N dt = 0.15``). ``x_f`` starts at 0, so a step at t = 0
+  gives the derivative kick a continuous PID has; as ``N -> inf`` the term
+  becomes the backward difference ``(e[k] - e[k-1]) / dt``;
+* integrator: exact for the held error, ``I[k+1] = I[k] + e[k] dt``, and the
+  command uses its interval mean ``I[k] + e[k] dt / 2``;
 * output saturation at ``±output_limit`` with anti-windup by conditional
   integration: the integrator holds while the output is saturated and the
   error pushes further into the limit.
@@ -59,26 +68,29 @@ def pid_axis(e, i, p, par, st, dt):
     ``u_max``; ``st`` the fields ``integral`` and ``filt`` (n, 3): the PID's
     record and state, or any law's that carries a PID (the fuzzy PID).
     """
-    deriv = par.n[p, i] * (e - st.filt[p, i])
-    raw = par.kp[p, i] * e + par.ki[p, i] * st.integral[p, i] + par.kd[p, i] * deriv
+    a = par.a[p, i]
+    deriv = (1.0 - a) / dt * (e - st.filt[p, i])  # interval mean of N (e - x_f(t)) (module docstring)
+    raw = par.kp[p, i] * e + par.ki[p, i] * (st.integral[p, i] + 0.5 * e * dt) + par.kd[p, i] * deriv
     out = min(max(raw, -par.u_max), par.u_max)
     if not (out != raw and e * raw > 0.0):
         st.integral[p, i] += e * dt
-    st.filt[p, i] = par.a[p, i] * st.filt[p, i] + (1.0 - par.a[p, i]) * e
+    st.filt[p, i] = a * st.filt[p, i] + (1.0 - a) * e
     return out
 
 
 @njit(cache=True, inline="always")
-def pid_bumpless_row(e, de, p, par, st, u_last):
+def pid_bumpless_row(e, de, p, par, st, u_last, dt):
     """Set the PID state of row ``p`` so its next command is ``clip(u_last)`` (a 3-tuple; module docstring).
 
-    ``e``, ``de``: the error and its rate (3-tuples); ``par`` and ``st`` as for :func:`pid_axis`.
+    ``e``, ``de``: the error and its rate (3-tuples); ``par`` and ``st`` as for :func:`pid_axis`;
+    ``dt``: the control period, s.
     """
     for i in range(3):
         target = min(max(u_last[i], -par.u_max), par.u_max)
         st.filt[p, i] = e[i] - de[i] / par.n[p, i]
-        rest = target - par.kp[p, i] * e[i] - par.kd[p, i] * de[i]
-        st.integral[p, i] = rest / par.ki[p, i] if par.ki[p, i] > 0.0 else 0.0
+        deriv = (1.0 - par.a[p, i]) / dt * (e[i] - st.filt[p, i])
+        rest = target - par.kp[p, i] * e[i] - par.kd[p, i] * deriv
+        st.integral[p, i] = rest / par.ki[p, i] - 0.5 * e[i] * dt if par.ki[p, i] > 0.0 else 0.0
 
 
 @njit(cache=True, inline="always")
@@ -93,7 +105,7 @@ def step(q_BN, omega_BN_B, q_RN, omega_RN_R, p, par, st, dt, u):
 def enter(q_BN, omega_BN_B, q_RN, omega_RN_R, p, par, st, dt, decay, u_last, offset):
     """Bumpless entry: the state that makes the first command ``u_last[p]`` (no offset left)."""
     e, de = error_and_rate_row(q_BN, omega_BN_B, q_RN, omega_RN_R, p, par.angle_mode)
-    pid_bumpless_row(e, de, p, par, st, (u_last[p, 0], u_last[p, 1], u_last[p, 2]))
+    pid_bumpless_row(e, de, p, par, st, (u_last[p, 0], u_last[p, 1], u_last[p, 2]), dt)
     return False
 
 
