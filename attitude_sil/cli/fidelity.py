@@ -17,8 +17,10 @@ def add(sub: argparse._SubParsersAction) -> None:
                          "project, with tolerance and PASS / FAIL / EXPLAINED (exit 1 on any FAIL)")
     fid.add_argument("--paper", action="append", choices=PAPERS, help="only this paper (repeatable; default: all)")
     fid.add_argument("--config", help="folder of the presets (default: the package's config/)")
-    fid.add_argument("--json", action="store_true", help="print one JSON object instead of the table: the rows (with their evidence kind), the "
-                     "counts by evidence and status, and the identified constants with the rows they were fitted on")
+    fid.add_argument("--json", action="store_true",
+                     help="print one JSON object instead of the table: the rows (with their evidence kind), the "
+                     "counts by evidence and status, and the identified constants with the rows they were "
+                     "fitted on")
     fid.set_defaults(func=execute)
 
 

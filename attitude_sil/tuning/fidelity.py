@@ -255,6 +255,9 @@ def check(papers=PAPERS, config_dir: str | Path | None = None, progress=None, re
 
 
 # ------------------------------------------------------------------ paper 000
+_FIT_MOTOR = {"evidence": "identification", "fitted": ("000 motor",)}
+_FIT_003 = {"evidence": "identification", "fitted": ("003 attitude gains and step",)}
+
 def _pid(gains, n_rows: int = 1) -> dict:
     kp, ki, kd, n = gains
     return {"pid.kp": [[kp] * 3] * n_rows, "pid.ki": [[ki] * 3] * n_rows, "pid.kd": [[kd] * 3] * n_rows,
@@ -325,25 +328,25 @@ def _rows_000() -> list[Row]:
     rows = [
         Row("000", "Results", "cost J of the GA gains, wheels as rated", 0.5129, "", "rel", 0.05,
             "J = |tau - 1.5| + OS printed to 4 digits; 5 % covers the time-constant read-off",
-            lambda ps: _hst_step(ps)["ga"]["cost_J"], evidence="identification", fitted=("000 motor",), explained="paper-000-cost-j"),
+            lambda ps: _hst_step(ps)["ga"]["cost_J"], **_FIT_MOTOR, explained="paper-000-cost-j"),
         Row("000", "Results", "cost J of the root-locus gains, wheels as rated", 0.7215, "", "rel", 0.05,
             "as the GA row", lambda ps: _hst_step(ps)["root_locus"]["cost_J"],
-            evidence="identification", fitted=("000 motor",), explained="paper-000-cost-j"),
+            **_FIT_MOTOR, explained="paper-000-cost-j"),
         Row("000", "Results", "cost J of the GA gains, UNLIMITED wheels variant", 0.5129, "", "rel", 0.05,
             "as above, on hst_roll_step_unlimited.yaml (no 0.8 N m limit, as eq. 15-16)",
-            lambda ps: _hst_step(ps, unl)["ga"]["cost_J"], evidence="identification", fitted=("000 motor",)),
+            lambda ps: _hst_step(ps, unl)["ga"]["cost_J"], **_FIT_MOTOR),
         Row("000", "Results", "cost J of the root-locus gains, UNLIMITED wheels variant", 0.7215, "", "rel", 0.05,
-            "as above", lambda ps: _hst_step(ps, unl)["root_locus"]["cost_J"], evidence="identification", fitted=("000 motor",)),
+            "as above", lambda ps: _hst_step(ps, unl)["root_locus"]["cost_J"], **_FIT_MOTOR),
         Row("000", "Fig. 8", "disturbance rejection: RMS roll error GA gains / root-locus gains", 1.0, "",
             "min", 0.0, "the paper: the root-locus gains reject the disturbance better (a ratio above 1); "
             f"{FIG8_SEEDS} seeds of its noise, 10-20 s, wheels as rated",
             lambda ps: _hst_disturbed(ps)["ga"] / _hst_disturbed(ps)["root_locus"], evidence="prediction"),
         Row("000", "Root locus-based tuning", "overshoot of the root-locus gains (linear model)", 2.0, "%", "max", 0.0,
             "the paper's requirement, met on the linearised model",
-            lambda ps: _hst_linear(ps, "root_locus")["overshoot_pct"], evidence="identification", fitted=("000 motor",)),
+            lambda ps: _hst_linear(ps, "root_locus")["overshoot_pct"], **_FIT_MOTOR),
         Row("000", "Root locus-based tuning", "settling time of the root-locus gains (linear model)", 6.0, "s",
             "max", 0.0, "the paper's requirement, met on the linearised model",
-            lambda ps: _hst_linear(ps, "root_locus")["settling_time_s"], evidence="identification", fitted=("000 motor",)),
+            lambda ps: _hst_linear(ps, "root_locus")["settling_time_s"], **_FIT_MOTOR),
         Row("000", "Root locus-based tuning", "project root-locus design: settling time (linear model)", 6.0, "s",
             "max", 0.0, "the paper's requirement for its design, applied to the project's",
             lambda ps: _hst_design(ps)["settling_time_s"], evidence="construction"),
@@ -377,6 +380,34 @@ def _hawaiisat(ps: Presets) -> dict:
     return ps.memo("001", run)
 
 
+#: paper 001 Fig. 6: inertia perturbations (%) flown with one GA design, and the design (assumed: the best of
+#: Tables 1-2, beta = 1, by its printed fitness; the paper says "the GA-derived 'optimal' controller")
+FIG6_PCT = (-12.5, -5.0, 0.0, 5.0, 10.0, 12.5)
+FIG6_DESIGN = "Tables 1-2 row 4"
+
+
+def _fig6(ps: Presets) -> dict:
+    """Ts (s) and Ce (N m s) per inertia perturbation of FIG6_PCT (the controller keeps the nominal J)."""
+    def run():
+        scn = ps.scenario("hawaiisat_lvlh")
+        inertia = np.asarray(scn.param("plant", "inertia"), float)
+        k, l_gain, _, _ = PAPER_001_DESIGNS[FIG6_DESIGN]
+        n = len(FIG6_PCT)
+        tr = simulate(scn, n, controller_params={"geometric.k": [list(k)] * n, "geometric.l": [list(l_gain)] * n},
+                      schedule=[], threads=1,
+                      episode_values={"plant.inertia": np.array([inertia * (1 + p / 100) for p in FIG6_PCT])})
+        m = tracking_metrics(tr.t, tr.q_BN, tr.q_RN, tr.tau_c_B)
+        return {"ts": np.asarray(m["settling_time_s"], float), "ce": np.asarray(m["control_effort_Nms"], float)}
+    return ps.memo("001:fig6", run)
+
+
+def _fig6_jump(ps: Presets) -> float:
+    """Ts(+12.5 %) - Ts(+10 %) over the mean change per 2.5 % of inertia from -12.5 % to +10 %."""
+    ts = _fig6(ps)["ts"]
+    per_step = (ts[-2] - ts[0]) / ((FIG6_PCT[-2] - FIG6_PCT[0]) / 2.5)
+    return float((ts[-1] - ts[-2]) / per_step)
+
+
 def _rows_001() -> list[Row]:
     rows = []
     for label, (_, _, ts, ce) in PAPER_001_DESIGNS.items():
@@ -391,6 +422,15 @@ def _rows_001() -> list[Row]:
                         "printed to 3-4 digits: 5 %" if digits >= 3 else "printed to 1-2 digits: 15 %",
                         lambda ps, k=label: _hawaiisat(ps)[k][1], evidence="prediction",
                         explained="paper-001-table-3-row-2" if label == "Tables 3-4 row 2" else ""))
+    for key, name in (("ts", "settling time Ts"), ("ce", "control effort Ce")):
+        rows.append(Row("001", "Fig. 6", f"{name} rises with the inertia: steps where it does not", 0.0,
+                        "", "abs", 0.0, f"'both Ts and Ce ... get worse for increasing values of J'; {FIG6_DESIGN}, "
+                        "inertia -12.5 ... +12.5 %", lambda ps, key=key: float(np.sum(np.diff(_fig6(ps)[key]) <= 0)),
+                        evidence="prediction"))
+    rows.append(Row("001", "Fig. 6", "jump in Ts from +10 % to +12.5 % inertia, in mean steps per 2.5 %", 3.0, "",
+                    "min", 0.0, "'the large jump in the value of Ts when the inertia perturbation is increased "
+                    "from 10% to 12.5%'; read as at least 3 times the mean step (assumed)", _fig6_jump,
+                    evidence="prediction", explained="paper-001-fig-6", converged_within=0.1))
     return rows
 
 
@@ -497,13 +537,13 @@ def _rows_003() -> list[Row]:
             "printed to 3 digits", lambda ps: _speed_loop(ps)["overshoot_pct"],
             evidence="prediction"),
         Row("003", "Fig. 8", "attitude settling time, PID", 2.5, "s", "abs", 0.1,
-            "printed as 2.5 s", lambda ps: _cubesat(ps)["pid"], evidence="identification", fitted=("003 attitude gains and step",)),
+            "printed as 2.5 s", lambda ps: _cubesat(ps)["pid"], **_FIT_003),
         Row("003", "Fig. 9", "attitude settling time, hybrid fuzzy PID", 2.0, "s", "abs", 0.1,
-            "printed as 2 s", lambda ps: _cubesat(ps)["fuzzy_pid"], evidence="identification", fitted=("003 attitude gains and step",)),
+            "printed as 2 s", lambda ps: _cubesat(ps)["fuzzy_pid"], **_FIT_003),
         Row("003", "Conclusion", "hybrid faster than PID by", 20.0, "%", "abs", 3.0,
             "'up to 20 %' from 2.5 s and 2.0 s",
             lambda ps: 100.0 * (1.0 - _cubesat(ps)["fuzzy_pid"] / _cubesat(ps)["pid"]),
-            evidence="identification", fitted=("003 attitude gains and step",),
+            **_FIT_003,
             converged_within=1.0),  # points: a ratio of two settling times, each read on the step's grid
     ]
 

@@ -53,7 +53,7 @@ class PidController(Node):
         super().__init__("controller")
         for name, value in HST_GA_GAINS.items():
             self.declare_parameter(name, [value] * 3)
-        self.declare_parameter("output_limit", 10.928)  # V
+        self.declare_parameter("output_limit", 314.79)  # V, the HST preset's drive
         self.declare_parameter("control_period", 0.01)  # s
         self.declare_parameter("compute_delay", 0.0)  # s, simulated computation time per step
         self.pub = self.create_publisher(Vector3Stamped, "voltage_cmd", 10)

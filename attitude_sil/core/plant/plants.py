@@ -23,7 +23,6 @@ from __future__ import annotations
 import numpy as np
 from scipy.linalg import expm
 
-from attitude_sil.core.plant.quaternion import quat_from_euler
 from attitude_sil.core.plant.rigid_body import BodyState
 
 __all__ = ["FLEXIBLE_CASES", "FlexibleAxisPlant", "PitchNormalizedPlant", "exact_discretization"]

@@ -35,10 +35,9 @@ _K_MOTOR = 1.5  # assumed, see below
 HST_MOTOR = {
     # Schema defaults (a generic wheel, assumed): K_i = K_b = 1.5 (SI units, ideal
     # PMDC), R_a = 1.5 ohm, 0.8 N m current limit, 3000 rpm no-load drive. The HST
-    # presets (config/hst_*.yaml) override them with the constants identified from
-    # paper 000's published results (K 1.0019, R 1.1904 ohm, 10.928 V, no current
-    # limit; docs/fidelity.md): with these defaults the paper's J's are missed
-    # (0.067 and 1.81 for 0.5129 and 0.7215).
+    # presets (config/hst_*.yaml) override K and R with the constants identified from
+    # paper 000's published results (K 1.002, R 1.1889 ohm; docs/fidelity.md) and keep
+    # the 0.8 N m / 3000 rpm rating; hst_roll_step_unlimited.yaml lifts it, as the paper's model.
     "motor.back_emf_constant": _K_MOTOR,
     "motor.torque_constant": _K_MOTOR,
     "motor.resistance": 1.5,
