@@ -137,3 +137,40 @@ def test_fidelity_json_is_one_object_alone_on_stdout(capsys):
     assert sum(sum(c.values()) for c in report["evidence_counts"].values()) == len(rows)
     assert {r["evidence"] for r in rows} == {"prediction"}  # paper 004: nothing fitted
     assert "paper 004" in captured.err  # the progress goes to stderr
+
+
+@pytest.mark.parametrize("preset", ["hst_roll_step", "hst_roll_yaw"])
+def test_paper_000_presets_fly_the_wheels_as_rated(preset):
+    """Paper 000 sec. 2.A rates each wheel at 0.8 N m and 3000 rpm: the presets hold it, in a run too.
+
+    The root-locus gains' derivative kick asks the most torque of any published gain set (8.7 N m per
+    wheel on the unlimited variant).
+    """
+    import numpy as np
+
+    from attitude_sil.core.sim.engine import simulate
+    from attitude_sil.core.sim.scenario import load_scenario
+
+    scn = load_scenario(CONFIG / f"{preset}.yaml")
+    w = scn.values["wheels"]
+    rated = 3000.0 * 2.0 * math.pi / 60.0
+    assert w["motor.torque_max"] == 0.8 and w["motor.speed_max_rpm"] == 3000.0
+    assert w["motor.v_max"] / w["motor.back_emf_constant"] == pytest.approx(rated, rel=1e-4)  # no-load speed
+    kp, ki, kd, n = fidelity.PAPER_000_GAINS["root_locus"]
+    gains = {"pid.kp": [[kp] * 3], "pid.ki": [[ki] * 3], "pid.kd": [[kd] * 3], "pid.n": [[n] * 3]}
+    tr = simulate(scn, 1, duration=10.0, controller_params=gains, schedule=[], threads=1)
+    assert np.max(np.abs(tr.wheel_effort)) <= 0.8 + 1e-12
+    assert np.max(np.abs(tr.wheel_speed)) <= rated
+
+
+def test_the_unlimited_variant_says_so_everywhere_it_appears():
+    from attitude_sil.core.sim.scenario import load_scenario
+
+    text = (CONFIG / "hst_roll_step_unlimited.yaml").read_text()
+    scn = load_scenario(CONFIG / "hst_roll_step_unlimited.yaml")
+    assert text.startswith("# UNLIMITED")
+    assert scn.name == "hst_roll_step_unlimited"
+    assert scn.values["scenario"]["description"].startswith("UNLIMITED")
+    assert scn.values["wheels"]["motor.torque_max"] > 0.8  # what makes it the paper's motor, not the rated one
+    rows = [r for r in fidelity.ROWS if "unlimited" in r.reason or "UNLIMITED" in r.quantity]
+    assert rows and all("UNLIMITED" in r.quantity for r in rows)
