@@ -10,7 +10,11 @@ Prints, for the HST roll step at 100 Hz control:
   the engine keeping the same arrays (equal work), its whole trajectory, and
   only the running sums of the metrics; and the stepwise driver (the first
   engine) where it is not too slow;
-* the cost of each control law per step and episode.
+* the cost of each control law per step and episode;
+* issue 25's question, ``simd``: the same fused episode with the episodes as
+  the vector axis (``soa_reference.py``), checked equal to the fused loop, at
+  P = 1, 64, 1,024 and 16,384 on one core and on both, against the fused loop
+  and the engine's summaries. ``python bench/bench_engine.py simd`` runs it alone.
 
 Figures from one run are comparable with each other (the machine is shared);
 quote ratios. Run with ``make bench``.
@@ -31,6 +35,8 @@ sys.path.insert(0, str(ROOT))
 os.environ.setdefault("ROS_DOMAIN_ID", str(150 + os.getpid() % 50))
 
 from fused_reference import fused_parallel, fused_serial, fused_setup  # noqa: E402
+from numba import set_num_threads  # noqa: E402
+from soa_reference import LANES, lanes_args, lanes_run  # noqa: E402
 
 from attitude_sil.core.control.registry import names as law_names  # noqa: E402
 from attitude_sil.core.plant.quaternion import quat_from_euler  # noqa: E402
@@ -41,6 +47,9 @@ from attitude_sil.graph.session import run_graph  # noqa: E402
 
 def main() -> None:
     scn = load_scenario(ROOT / "config" / "hst_roll_step.yaml")
+    if sys.argv[1:] == ["simd"]:
+        simd(scn)
+        return
     duration = scn.duration
     simulate(scn, 2, duration=0.1)  # compile / load the kernels once
     print(f"HST roll step, {duration:g} s episodes, control period {scn.dt * 1e3:g} ms")
@@ -54,6 +63,7 @@ def main() -> None:
     ceiling(scn)
     newly_compiled(scn)
     costs = {p: controller_cost(scn, p) for p in (1, 50)}
+    simd(scn)
     print("controller cost, us per step per episode (ratio to pid at the same P):")
     for kind in law_names():
         cells = "   ".join(f"P={p:<3} {costs[p][kind]:7.2f} ({costs[p][kind] / costs[p]['pid']:4.1f}x)" for p in costs)
@@ -133,6 +143,37 @@ def ceiling(scn) -> None:
                 step = f"{p * duration / w:14,.0f}"
             cells = "".join(f"{p * duration / e:13,.0f} ({f / e:4.2f})" for e in (same, whole, sums))
             print(f"{p:>6} {cores:>5} {p * duration / f:14,.0f}{cells} {step:>14}")
+
+
+def simd(scn) -> None:
+    """The fused episode with episodes as the vector axis, against the fused loop and the engine's summaries.
+
+    Both fused variants keep only the final state (the fused loop: its first and last step), so what is
+    timed is the step; the engine column is ``simulate_summary`` (running sums, what tuning uses).
+    """
+    duration = scn.duration
+    args, out = fused_setup(scn, 256, np.linspace(30.0, 60.0, 3 * 256).reshape(256, 3))
+    fused_serial(*args)
+    la = lanes_args(args)
+    lanes_run(*la)
+    diff = max(np.max(np.abs(out[0][:, -1] - la[-2])), np.max(np.abs(out[1][:, -1] - la[-1])))
+    print(f"episodes as the vector axis ({LANES} lanes a block) == fused loop: max |final state difference| "
+          f"{diff:.1e} over 256 designs")
+    print("simulated s per wall s (ratio to the fused loop on the same cores):")
+    print(f"{'P':>6} {'cores':>5} {'fused loop':>12} {'lanes':>20} {'engine, sums only':>20}")
+    for p in (1, 64, 1024, 16384):
+        reps = 5 if p <= 64 else 2
+        args, _ = fused_setup(scn, p, stride=scn.steps())  # keeps step 0 and the last: the step is what is timed
+        la = lanes_args(args)
+        for cores, fused in ((1, fused_serial), (2, fused_parallel)):
+            set_num_threads(cores)
+            fused(*args)
+            f = _best(lambda fused=fused, args=args: fused(*args), reps)
+            lanes = _best(lambda la=la: lanes_run(*la), reps)
+            eng = _best(lambda p=p, cores=cores: simulate_summary(scn, p, threads=cores), reps)
+            cells = "".join(f"{p * duration / t:13,.0f} ({f / t:4.2f})" for t in (lanes, eng))
+            print(f"{p:>6} {cores:>5} {p * duration / f:12,.0f}{cells}")
+    set_num_threads(2)
 
 
 def controller_cost(scn, n_episodes: int, steps: int = 2000) -> dict[str, float]:
