@@ -5,7 +5,11 @@ registers: the compiler has nothing to put in a vector register but one
 episode's three axes. Here the same arithmetic, in the same order, runs on a
 block of ``LANES`` episodes held as separate 1-D arrays (structure of arrays),
 each stage of the step its own short loop over the lanes: the PID, each wheel,
-each RK4 stage's derivatives and sums, the renormalisation. Loops of that
+each RK4 stage's derivatives and sums, the renormalisation. Every lane
+quantity is its own 1-D allocation and every stage is written out in the
+block (no helper calls): rows of one 2-D array, or arrays passed to a helper,
+leave LLVM unable to prove that what a loop writes does not alias what it
+reads, and the loop stays scalar (bench/README.md has the measurements). Loops of that
 shape are what this CPU's compiler turns into packed (4-wide) instructions;
 a loop that calls a scalar step per lane is not (the probe of
 ``../shared/probes`` measured 0.65-0.85x for that).
@@ -23,147 +27,304 @@ from __future__ import annotations
 import numpy as np
 from numba import njit, prange
 
-#: episodes per block: the block's ~60 lane arrays of 64 doubles stay in L1 (30 KiB)
+#: episodes per block: the block's ~80 lane arrays of 64 doubles stay in L1 (40 KiB)
 LANES = 64
-
-
-@njit(cache=True, error_model="numpy", inline="always")
-def _deriv_lanes(n, q0, q1, q2, q3, w0, w1, w2, h0, h1, h2, J, Ji, tc0, tc1, tc2, dq, dw):
-    # the body's derivatives (paper 000 eq. 4, 10-11) for n lanes, fused_reference._deriv's arithmetic
-    for p in range(n):
-        hx = J[0, 0] * w0[p] + J[0, 1] * w1[p] + J[0, 2] * w2[p] + h0[p]
-        hy = J[1, 0] * w0[p] + J[1, 1] * w1[p] + J[1, 2] * w2[p] + h1[p]
-        hz = J[2, 0] * w0[p] + J[2, 1] * w1[p] + J[2, 2] * w2[p] + h2[p]
-        rx = -(w1[p] * hz - w2[p] * hy) + tc0[p] + 0.0
-        ry = -(w2[p] * hx - w0[p] * hz) + tc1[p] + 0.0
-        rz = -(w0[p] * hy - w1[p] * hx) + tc2[p] + 0.0
-        dw[0, p] = Ji[0, 0] * rx + Ji[0, 1] * ry + Ji[0, 2] * rz
-        dw[1, p] = Ji[1, 0] * rx + Ji[1, 1] * ry + Ji[1, 2] * rz
-        dw[2, p] = Ji[2, 0] * rx + Ji[2, 1] * ry + Ji[2, 2] * rz
-        x, y, z, s = q0[p], q1[p], q2[p], q3[p]
-        dq[0, p] = 0.5 * (w2[p] * y - w1[p] * z + w0[p] * s)
-        dq[1, p] = 0.5 * (-w2[p] * x + w0[p] * z + w1[p] * s)
-        dq[2, p] = 0.5 * (w1[p] * x - w0[p] * y + w2[p] * s)
-        dq[3, p] = 0.5 * (-w0[p] * x - w1[p] * y - w2[p] * z)
 
 
 @njit(cache=True, error_model="numpy")
 def _block(g0, n, n_steps, dt, q_init, q_r, J, Ji, kp, ki, kd, af, u_max, alloc, axes, phi_T, gamma, j_m, k_b,
            headroom, speed_max, v_max, out_q, out_w):
     nw = axes.shape[1]
-    q = np.empty((4, n))
-    for i in range(4):
-        for p in range(n):
-            q[i, p] = q_init[g0 + p, i]
-    w = np.zeros((3, n))
-    h = np.zeros((3, n))
-    x = np.zeros((nw, 3, n))
-    xn = np.zeros((nw, 3, n))
-    integ = np.zeros((3, n))
-    filt = np.zeros((3, n))
-    u = np.zeros((3, n))
-    tc = np.zeros((3, n))
-    e = np.empty((3, n))
-    gk = np.empty((4, 3, n))  # per-lane gains: kp, ki, kd, a
-    for i in range(3):
-        for p in range(n):
-            gk[0, i, p] = kp[g0 + p, i]
-            gk[1, i, p] = ki[g0 + p, i]
-            gk[2, i, p] = kd[g0 + p, i]
-            gk[3, i, p] = af[g0 + p, i]
-    r = np.empty((4, n))
-    for i in range(4):
-        for p in range(n):
-            r[i, p] = q_r[g0 + p, i]
-    kq = np.empty((4, 4, n))
-    kw = np.empty((4, 3, n))
-    tq = np.empty((4, n))
-    tw = np.empty((3, n))
-    th = np.empty((3, n))
+    q0 = np.zeros(n)
+    q1 = np.zeros(n)
+    q2 = np.zeros(n)
+    q3 = np.zeros(n)
+    w0 = np.zeros(n)
+    w1 = np.zeros(n)
+    w2 = np.zeros(n)
+    h0 = np.zeros(n)
+    h1 = np.zeros(n)
+    h2 = np.zeros(n)
+    i0 = np.zeros(n)
+    i1 = np.zeros(n)
+    i2 = np.zeros(n)
+    f0 = np.zeros(n)
+    f1 = np.zeros(n)
+    f2 = np.zeros(n)
+    u0 = np.zeros(n)
+    u1 = np.zeros(n)
+    u2 = np.zeros(n)
+    c0 = np.zeros(n)
+    c1 = np.zeros(n)
+    c2 = np.zeros(n)
+    r0 = np.zeros(n)
+    r1 = np.zeros(n)
+    r2 = np.zeros(n)
+    r3 = np.zeros(n)
+    e0 = np.zeros(n)
+    e1 = np.zeros(n)
+    e2 = np.zeros(n)
+    tq0 = np.zeros(n)
+    tq1 = np.zeros(n)
+    tq2 = np.zeros(n)
+    tq3 = np.zeros(n)
+    tw0 = np.zeros(n)
+    tw1 = np.zeros(n)
+    tw2 = np.zeros(n)
+    th0 = np.zeros(n)
+    th1 = np.zeros(n)
+    th2 = np.zeros(n)
+    aq0 = np.zeros(n)
+    aq1 = np.zeros(n)
+    aq2 = np.zeros(n)
+    aq3 = np.zeros(n)
+    aw0 = np.zeros(n)
+    aw1 = np.zeros(n)
+    aw2 = np.zeros(n)
+    bq0 = np.zeros(n)
+    bq1 = np.zeros(n)
+    bq2 = np.zeros(n)
+    bq3 = np.zeros(n)
+    bw0 = np.zeros(n)
+    bw1 = np.zeros(n)
+    bw2 = np.zeros(n)
+    cq0 = np.zeros(n)
+    cq1 = np.zeros(n)
+    cq2 = np.zeros(n)
+    cq3 = np.zeros(n)
+    cw0 = np.zeros(n)
+    cw1 = np.zeros(n)
+    cw2 = np.zeros(n)
+    dq0 = np.zeros(n)
+    dq1 = np.zeros(n)
+    dq2 = np.zeros(n)
+    dq3 = np.zeros(n)
+    dw0 = np.zeros(n)
+    dw1 = np.zeros(n)
+    dw2 = np.zeros(n)
+    gp0 = np.zeros(n)
+    gi0 = np.zeros(n)
+    gd0 = np.zeros(n)
+    ga0 = np.zeros(n)
+    gp1 = np.zeros(n)
+    gi1 = np.zeros(n)
+    gd1 = np.zeros(n)
+    ga1 = np.zeros(n)
+    gp2 = np.zeros(n)
+    gi2 = np.zeros(n)
+    gd2 = np.zeros(n)
+    ga2 = np.zeros(n)
+    J00, J01, J02 = J[0, 0], J[0, 1], J[0, 2]
+    J10, J11, J12 = J[1, 0], J[1, 1], J[1, 2]
+    J20, J21, J22 = J[2, 0], J[2, 1], J[2, 2]
+    K00, K01, K02 = Ji[0, 0], Ji[0, 1], Ji[0, 2]  # J^-1
+    K10, K11, K12 = Ji[1, 0], Ji[1, 1], Ji[1, 2]
+    K20, K21, K22 = Ji[2, 0], Ji[2, 1], Ji[2, 2]
+    for p in range(n):
+        q0[p], q1[p], q2[p], q3[p] = q_init[g0 + p, 0], q_init[g0 + p, 1], q_init[g0 + p, 2], q_init[g0 + p, 3]
+        r0[p], r1[p], r2[p], r3[p] = q_r[g0 + p, 0], q_r[g0 + p, 1], q_r[g0 + p, 2], q_r[g0 + p, 3]
+        gp0[p], gi0[p], gd0[p], ga0[p] = kp[g0 + p, 0], ki[g0 + p, 0], kd[g0 + p, 0], af[g0 + p, 0]
+        gp1[p], gi1[p], gd1[p], ga1[p] = kp[g0 + p, 1], ki[g0 + p, 1], kd[g0 + p, 1], af[g0 + p, 1]
+        gp2[p], gi2[p], gd2[p], ga2[p] = kp[g0 + p, 2], ki[g0 + p, 2], kd[g0 + p, 2], af[g0 + p, 2]
+    xw = np.zeros((nw, 3, n))
+    xwn = np.zeros((nw, 3, n))
     half = 0.5 * dt
     sixth = dt / 6.0
     for k in range(n_steps + 1):
-        # the quaternion error, short way round (error3_row), then the PID per axis
         for p in range(n):
-            bx, by, bz, bw = q[0, p], q[1, p], q[2, p], q[3, p]
-            rx, ry, rz, rw = -r[0, p], -r[1, p], -r[2, p], r[3, p]
+            bx, by, bz, bw = q0[p], q1[p], q2[p], q3[p]
+            rx, ry, rz, rw = -r0[p], -r1[p], -r2[p], r3[p]
             ex = rw * bx + bw * rx + ry * bz - rz * by
             ey = rw * by + bw * ry + rz * bx - rx * bz
             ez = rw * bz + bw * rz + rx * by - ry * bx
             ew = rw * bw - rx * bx - ry * by - rz * bz
             sgn = -1.0 if ew < 0.0 else 1.0
-            e[0, p] = -(sgn * ex)
-            e[1, p] = -(sgn * ey)
-            e[2, p] = -(sgn * ez)
-        for i in range(3):
-            for p in range(n):
-                ei = e[i, p]
-                a = gk[3, i, p]
-                deriv = (1.0 - a) / dt * (ei - filt[i, p])
-                raw = gk[0, i, p] * ei + gk[1, i, p] * (integ[i, p] + 0.5 * ei * dt) + gk[2, i, p] * deriv
-                out = min(max(raw, -u_max), u_max)
-                hold = out != raw and ei * raw > 0.0
-                integ[i, p] = integ[i, p] if hold else integ[i, p] + ei * dt
-                filt[i, p] = a * filt[i, p] + (1.0 - a) * ei
-                u[i, p] = out
-        # wheels: allocation, drive limits, exact motor step, mean torque on the body
-        for i in range(3):
-            for p in range(n):
-                h[i, p] = 0.0
-                tc[i, p] = 0.0
+            e0[p] = -(sgn * ex)
+            e1[p] = -(sgn * ey)
+            e2[p] = -(sgn * ez)
+        for p in range(n):
+            ei = e0[p]
+            a = ga0[p]
+            deriv = (1.0 - a) / dt * (ei - f0[p])
+            raw = gp0[p] * ei + gi0[p] * (i0[p] + 0.5 * ei * dt) + gd0[p] * deriv
+            out = min(max(raw, -u_max), u_max)
+            hold = out != raw and ei * raw > 0.0
+            i0[p] = i0[p] if hold else i0[p] + ei * dt
+            f0[p] = a * f0[p] + (1.0 - a) * ei
+            u0[p] = out
+        for p in range(n):
+            ei = e1[p]
+            a = ga1[p]
+            deriv = (1.0 - a) / dt * (ei - f1[p])
+            raw = gp1[p] * ei + gi1[p] * (i1[p] + 0.5 * ei * dt) + gd1[p] * deriv
+            out = min(max(raw, -u_max), u_max)
+            hold = out != raw and ei * raw > 0.0
+            i1[p] = i1[p] if hold else i1[p] + ei * dt
+            f1[p] = a * f1[p] + (1.0 - a) * ei
+            u1[p] = out
+        for p in range(n):
+            ei = e2[p]
+            a = ga2[p]
+            deriv = (1.0 - a) / dt * (ei - f2[p])
+            raw = gp2[p] * ei + gi2[p] * (i2[p] + 0.5 * ei * dt) + gd2[p] * deriv
+            out = min(max(raw, -u_max), u_max)
+            hold = out != raw and ei * raw > 0.0
+            i2[p] = i2[p] if hold else i2[p] + ei * dt
+            f2[p] = a * f2[p] + (1.0 - a) * ei
+            u2[p] = out
+
+        for p in range(n):
+            h0[p] = 0.0
+            h1[p] = 0.0
+            h2[p] = 0.0
+            c0[p] = 0.0
+            c1[p] = 0.0
+            c2[p] = 0.0
         for j in range(nw):
+            a0, a1, a2 = alloc[j, 0], alloc[j, 1], alloc[j, 2]
+            x0, x1, x2 = axes[0, j], axes[1, j], axes[2, j]
             for p in range(n):
-                speed = x[j, 2, p]
-                v = -(alloc[j, 0] * u[0, p] + alloc[j, 1] * u[1, p] + alloc[j, 2] * u[2, p])
+                speed = xw[j, 2, p]
+                v = -(a0 * u0[p] + a1 * u1[p] + a2 * u2[p])
                 emf = k_b * speed
                 v = min(max(v, emf - headroom), emf + headroom)
                 v = emf if (abs(speed) >= speed_max and (v - emf) * speed > 0.0) else v
                 v = min(max(v, -v_max), v_max)
-                for c in range(3):
-                    xn[j, c, p] = (x[j, 0, p] * phi_T[0, c] + x[j, 1, p] * phi_T[1, c] + x[j, 2, p] * phi_T[2, c]
-                                   + v * gamma[c])
-                for i in range(3):
-                    h[i, p] += axes[i, j] * (speed * j_m)
-                    tc[i, p] += axes[i, j] * (xn[j, 2, p] * j_m)
-        for i in range(3):
-            for p in range(n):
-                tc[i, p] = -(tc[i, p] - h[i, p]) / dt
+                xa = xw[j, 0, p]
+                xb = xw[j, 1, p]
+                xwn[j, 0, p] = xa * phi_T[0, 0] + xb * phi_T[1, 0] + speed * phi_T[2, 0] + v * gamma[0]
+                xwn[j, 1, p] = xa * phi_T[0, 1] + xb * phi_T[1, 1] + speed * phi_T[2, 1] + v * gamma[1]
+                sn = xa * phi_T[0, 2] + xb * phi_T[1, 2] + speed * phi_T[2, 2] + v * gamma[2]
+                xwn[j, 2, p] = sn
+                h0[p] += x0 * (speed * j_m)
+                c0[p] += x0 * (sn * j_m)
+                h1[p] += x1 * (speed * j_m)
+                c1[p] += x1 * (sn * j_m)
+                h2[p] += x2 * (speed * j_m)
+                c2[p] += x2 * (sn * j_m)
+        for p in range(n):
+            c0[p] = -(c0[p] - h0[p]) / dt
+            c1[p] = -(c1[p] - h1[p]) / dt
+            c2[p] = -(c2[p] - h2[p]) / dt
         if k < n_steps:
-            for s, c in enumerate((0.0, half, half, dt)):
-                if s == 0:
-                    _deriv_lanes(n, q[0], q[1], q[2], q[3], w[0], w[1], w[2], h[0], h[1], h[2], J, Ji,
-                                 tc[0], tc[1], tc[2], kq[0], kw[0])
-                else:
-                    for i in range(4):
-                        for p in range(n):
-                            tq[i, p] = q[i, p] + c * kq[s - 1, i, p]
-                    for i in range(3):
-                        for p in range(n):
-                            tw[i, p] = w[i, p] + c * kw[s - 1, i, p]
-                            th[i, p] = h[i, p] + c * -tc[i, p]
-                    _deriv_lanes(n, tq[0], tq[1], tq[2], tq[3], tw[0], tw[1], tw[2], th[0], th[1], th[2], J, Ji,
-                                 tc[0], tc[1], tc[2], kq[s], kw[s])
-            for i in range(4):
-                for p in range(n):
-                    q[i, p] = q[i, p] + sixth * (kq[0, i, p] + 2.0 * (kq[1, i, p] + kq[2, i, p]) + kq[3, i, p])
-            for i in range(3):
-                for p in range(n):
-                    w[i, p] = w[i, p] + sixth * (kw[0, i, p] + 2.0 * (kw[1, i, p] + kw[2, i, p]) + kw[3, i, p])
             for p in range(n):
-                norm = np.sqrt(q[0, p] * q[0, p] + q[1, p] * q[1, p] + q[2, p] * q[2, p] + q[3, p] * q[3, p])
-                q[0, p] = q[0, p] / norm
-                q[1, p] = q[1, p] / norm
-                q[2, p] = q[2, p] / norm
-                q[3, p] = q[3, p] / norm
-        for j in range(nw):
-            for c in range(3):
-                for p in range(n):
-                    x[j, c, p] = xn[j, c, p]
+                hx = J00 * w0[p] + J01 * w1[p] + J02 * w2[p] + h0[p]
+                hy = J10 * w0[p] + J11 * w1[p] + J12 * w2[p] + h1[p]
+                hz = J20 * w0[p] + J21 * w1[p] + J22 * w2[p] + h2[p]
+                rx = -(w1[p] * hz - w2[p] * hy) + c0[p] + 0.0
+                ry = -(w2[p] * hx - w0[p] * hz) + c1[p] + 0.0
+                rz = -(w0[p] * hy - w1[p] * hx) + c2[p] + 0.0
+                aw0[p] = K00 * rx + K01 * ry + K02 * rz
+                aw1[p] = K10 * rx + K11 * ry + K12 * rz
+                aw2[p] = K20 * rx + K21 * ry + K22 * rz
+                x, y, z, s = q0[p], q1[p], q2[p], q3[p]
+                aq0[p] = 0.5 * (w2[p] * y - w1[p] * z + w0[p] * s)
+                aq1[p] = 0.5 * (-w2[p] * x + w0[p] * z + w1[p] * s)
+                aq2[p] = 0.5 * (w1[p] * x - w0[p] * y + w2[p] * s)
+                aq3[p] = 0.5 * (-w0[p] * x - w1[p] * y - w2[p] * z)
+            for p in range(n):
+                tq0[p] = q0[p] + half * aq0[p]
+                tq1[p] = q1[p] + half * aq1[p]
+                tq2[p] = q2[p] + half * aq2[p]
+                tq3[p] = q3[p] + half * aq3[p]
+                tw0[p] = w0[p] + half * aw0[p]
+                tw1[p] = w1[p] + half * aw1[p]
+                tw2[p] = w2[p] + half * aw2[p]
+                th0[p] = h0[p] + half * -c0[p]
+                th1[p] = h1[p] + half * -c1[p]
+                th2[p] = h2[p] + half * -c2[p]
+            for p in range(n):
+                hx = J00 * tw0[p] + J01 * tw1[p] + J02 * tw2[p] + th0[p]
+                hy = J10 * tw0[p] + J11 * tw1[p] + J12 * tw2[p] + th1[p]
+                hz = J20 * tw0[p] + J21 * tw1[p] + J22 * tw2[p] + th2[p]
+                rx = -(tw1[p] * hz - tw2[p] * hy) + c0[p] + 0.0
+                ry = -(tw2[p] * hx - tw0[p] * hz) + c1[p] + 0.0
+                rz = -(tw0[p] * hy - tw1[p] * hx) + c2[p] + 0.0
+                bw0[p] = K00 * rx + K01 * ry + K02 * rz
+                bw1[p] = K10 * rx + K11 * ry + K12 * rz
+                bw2[p] = K20 * rx + K21 * ry + K22 * rz
+                x, y, z, s = tq0[p], tq1[p], tq2[p], tq3[p]
+                bq0[p] = 0.5 * (tw2[p] * y - tw1[p] * z + tw0[p] * s)
+                bq1[p] = 0.5 * (-tw2[p] * x + tw0[p] * z + tw1[p] * s)
+                bq2[p] = 0.5 * (tw1[p] * x - tw0[p] * y + tw2[p] * s)
+                bq3[p] = 0.5 * (-tw0[p] * x - tw1[p] * y - tw2[p] * z)
+            for p in range(n):
+                tq0[p] = q0[p] + half * bq0[p]
+                tq1[p] = q1[p] + half * bq1[p]
+                tq2[p] = q2[p] + half * bq2[p]
+                tq3[p] = q3[p] + half * bq3[p]
+                tw0[p] = w0[p] + half * bw0[p]
+                tw1[p] = w1[p] + half * bw1[p]
+                tw2[p] = w2[p] + half * bw2[p]
+                th0[p] = h0[p] + half * -c0[p]
+                th1[p] = h1[p] + half * -c1[p]
+                th2[p] = h2[p] + half * -c2[p]
+            for p in range(n):
+                hx = J00 * tw0[p] + J01 * tw1[p] + J02 * tw2[p] + th0[p]
+                hy = J10 * tw0[p] + J11 * tw1[p] + J12 * tw2[p] + th1[p]
+                hz = J20 * tw0[p] + J21 * tw1[p] + J22 * tw2[p] + th2[p]
+                rx = -(tw1[p] * hz - tw2[p] * hy) + c0[p] + 0.0
+                ry = -(tw2[p] * hx - tw0[p] * hz) + c1[p] + 0.0
+                rz = -(tw0[p] * hy - tw1[p] * hx) + c2[p] + 0.0
+                cw0[p] = K00 * rx + K01 * ry + K02 * rz
+                cw1[p] = K10 * rx + K11 * ry + K12 * rz
+                cw2[p] = K20 * rx + K21 * ry + K22 * rz
+                x, y, z, s = tq0[p], tq1[p], tq2[p], tq3[p]
+                cq0[p] = 0.5 * (tw2[p] * y - tw1[p] * z + tw0[p] * s)
+                cq1[p] = 0.5 * (-tw2[p] * x + tw0[p] * z + tw1[p] * s)
+                cq2[p] = 0.5 * (tw1[p] * x - tw0[p] * y + tw2[p] * s)
+                cq3[p] = 0.5 * (-tw0[p] * x - tw1[p] * y - tw2[p] * z)
+            for p in range(n):
+                tq0[p] = q0[p] + dt * cq0[p]
+                tq1[p] = q1[p] + dt * cq1[p]
+                tq2[p] = q2[p] + dt * cq2[p]
+                tq3[p] = q3[p] + dt * cq3[p]
+                tw0[p] = w0[p] + dt * cw0[p]
+                tw1[p] = w1[p] + dt * cw1[p]
+                tw2[p] = w2[p] + dt * cw2[p]
+                th0[p] = h0[p] + dt * -c0[p]
+                th1[p] = h1[p] + dt * -c1[p]
+                th2[p] = h2[p] + dt * -c2[p]
+            for p in range(n):
+                hx = J00 * tw0[p] + J01 * tw1[p] + J02 * tw2[p] + th0[p]
+                hy = J10 * tw0[p] + J11 * tw1[p] + J12 * tw2[p] + th1[p]
+                hz = J20 * tw0[p] + J21 * tw1[p] + J22 * tw2[p] + th2[p]
+                rx = -(tw1[p] * hz - tw2[p] * hy) + c0[p] + 0.0
+                ry = -(tw2[p] * hx - tw0[p] * hz) + c1[p] + 0.0
+                rz = -(tw0[p] * hy - tw1[p] * hx) + c2[p] + 0.0
+                dw0[p] = K00 * rx + K01 * ry + K02 * rz
+                dw1[p] = K10 * rx + K11 * ry + K12 * rz
+                dw2[p] = K20 * rx + K21 * ry + K22 * rz
+                x, y, z, s = tq0[p], tq1[p], tq2[p], tq3[p]
+                dq0[p] = 0.5 * (tw2[p] * y - tw1[p] * z + tw0[p] * s)
+                dq1[p] = 0.5 * (-tw2[p] * x + tw0[p] * z + tw1[p] * s)
+                dq2[p] = 0.5 * (tw1[p] * x - tw0[p] * y + tw2[p] * s)
+                dq3[p] = 0.5 * (-tw0[p] * x - tw1[p] * y - tw2[p] * z)
+            for p in range(n):
+                q0[p] = q0[p] + sixth * (aq0[p] + 2.0 * (bq0[p] + cq0[p]) + dq0[p])
+            for p in range(n):
+                q1[p] = q1[p] + sixth * (aq1[p] + 2.0 * (bq1[p] + cq1[p]) + dq1[p])
+            for p in range(n):
+                q2[p] = q2[p] + sixth * (aq2[p] + 2.0 * (bq2[p] + cq2[p]) + dq2[p])
+            for p in range(n):
+                q3[p] = q3[p] + sixth * (aq3[p] + 2.0 * (bq3[p] + cq3[p]) + dq3[p])
+            for p in range(n):
+                w0[p] = w0[p] + sixth * (aw0[p] + 2.0 * (bw0[p] + cw0[p]) + dw0[p])
+            for p in range(n):
+                w1[p] = w1[p] + sixth * (aw1[p] + 2.0 * (bw1[p] + cw1[p]) + dw1[p])
+            for p in range(n):
+                w2[p] = w2[p] + sixth * (aw2[p] + 2.0 * (bw2[p] + cw2[p]) + dw2[p])
+
+            for p in range(n):
+                norm = np.sqrt(q0[p] * q0[p] + q1[p] * q1[p] + q2[p] * q2[p] + q3[p] * q3[p])
+                q0[p] = q0[p] / norm
+                q1[p] = q1[p] / norm
+                q2[p] = q2[p] / norm
+                q3[p] = q3[p] / norm
+        xw, xwn = xwn, xw
     for p in range(n):
-        for i in range(4):
-            out_q[g0 + p, i] = q[i, p]
-        for i in range(3):
-            out_w[g0 + p, i] = w[i, p]
+        out_q[g0 + p, 0], out_q[g0 + p, 1], out_q[g0 + p, 2], out_q[g0 + p, 3] = q0[p], q1[p], q2[p], q3[p]
+        out_w[g0 + p, 0], out_w[g0 + p, 1], out_w[g0 + p, 2] = w0[p], w1[p], w2[p]
 
 
 @njit(cache=True, parallel=True)
