@@ -35,7 +35,7 @@ sys.path.insert(0, str(ROOT))
 os.environ.setdefault("ROS_DOMAIN_ID", str(150 + os.getpid() % 50))
 
 from fused_reference import fused_parallel, fused_serial, fused_setup  # noqa: E402
-from numba import set_num_threads  # noqa: E402
+from numba import config, set_num_threads  # noqa: E402
 from soa_reference import LANES, lanes_args, lanes_run  # noqa: E402
 
 from attitude_sil.core.control.registry import names as law_names  # noqa: E402
@@ -173,7 +173,7 @@ def simd(scn) -> None:
             eng = _best(lambda p=p, cores=cores: simulate_summary(scn, p, threads=cores), reps)
             cells = "".join(f"{p * duration / t:13,.0f} ({f / t:4.2f})" for t in (lanes, eng))
             print(f"{p:>6} {cores:>5} {p * duration / f:12,.0f}{cells}")
-    set_num_threads(2)
+    set_num_threads(config.NUMBA_NUM_THREADS)  # numba's default again for what follows
 
 
 def controller_cost(scn, n_episodes: int, steps: int = 2000) -> dict[str, float]:

@@ -148,12 +148,13 @@ def test_paper_000_presets_fly_the_wheels_as_rated(preset):
     """
     import numpy as np
 
+    from attitude_sil.core.plant.actuators import RPM
     from attitude_sil.core.sim.engine import simulate
     from attitude_sil.core.sim.scenario import load_scenario
 
     scn = load_scenario(CONFIG / f"{preset}.yaml")
     w = scn.values["wheels"]
-    rated = 3000.0 * 2.0 * math.pi / 60.0
+    rated = 3000.0 * RPM
     assert w["motor.torque_max"] == 0.8 and w["motor.speed_max_rpm"] == 3000.0
     assert w["motor.v_max"] / w["motor.back_emf_constant"] == pytest.approx(rated, rel=1e-4)  # no-load speed
     kp, ki, kd, n = fidelity.PAPER_000_GAINS["root_locus"]

@@ -21,7 +21,7 @@ import numpy as np
 from attitude_sil.core.analysis.metrics import step_summary, summarize
 from attitude_sil.core.control import registry
 from attitude_sil.core.control.bank import ControllerBank
-from attitude_sil.core.plant.actuators import SpeedLoopWheels, TorqueActuator
+from attitude_sil.core.plant.actuators import RPM, SpeedLoopWheels, TorqueActuator
 from attitude_sil.core.plant.disturbance import DisturbanceModel, lvlh_attitude, orbit_rate
 from attitude_sil.core.plant.kernels import WheelFailure
 from attitude_sil.core.plant.linear import LinearizedPlant
@@ -53,7 +53,6 @@ __all__ = [
     "flexible_states",
 ]
 
-RPM = 2.0 * np.pi / 60.0
 
 
 def inertia_matrix(values) -> np.ndarray:
