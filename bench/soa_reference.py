@@ -11,8 +11,8 @@ block (no helper calls): rows of one 2-D array, or arrays passed to a helper,
 leave LLVM unable to prove that what a loop writes does not alias what it
 reads, and the loop stays scalar (bench/README.md has the measurements). Loops of that
 shape are what this CPU's compiler turns into packed (4-wide) instructions;
-a loop that calls a scalar step per lane is not (the probe of
-``../shared/probes`` measured 0.65-0.85x for that).
+a loop that calls a scalar step per lane is not (a probe of a toy step, made
+outside this repository, measured 0.65-0.85x for that).
 
 ``bench_engine.py simd`` checks the lanes against the fused loop (final
 attitude and rate of every episode) before it times both, so the ratio

@@ -25,7 +25,7 @@ def test_architecture_names_every_topic_and_subcommand():
 
 
 def test_readme_and_docs_point_inside_the_repository():
-    for path in [ROOT / "README.md", *DOCS.glob("*.md")]:
+    for path in [ROOT / "README.md", *DOCS.glob("*.md"), *(ROOT / "bench").glob("*.*")]:
         text = path.read_text()
         assert "../shared" not in text and "DESIGN.md" not in text, path
 
