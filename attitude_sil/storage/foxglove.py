@@ -49,6 +49,8 @@ SUBPROTOCOL_RENAMES = {"foxglove.websocket.v1": "foxglove.sdk.v1"}
 STATUS_TOPIC = "/attitude_sil/status"
 #: sim time between two status messages, ns
 STATUS_PERIOD_NS = 100_000_000
+#: how long (s) closing waits for relayed connections to forward what the server sent before it stopped
+RELAY_DRAIN_S = 2.0
 
 _STATUS_SCHEMA = {
     "type": "object",
@@ -208,12 +210,12 @@ class FoxgloveLive:
             self._server.publish_status(text, StatusLevel.Error if error else StatusLevel.Info)
 
     def close(self) -> None:
-        """Stop the server (idempotent); clients see the connection close."""
+        """Stop the server (idempotent); clients get what was sent, then see the connection close."""
         if self._server is not None:
-            if self._relay is not None:
-                self._relay.close()
-            self._server.stop()
+            self._server.stop()  # first: the relay forwards what it sent until it closes its side
             self._server = None
+            if self._relay is not None:
+                self._relay.close(drain_s=RELAY_DRAIN_S)
         if self.parameters is not None:
             self.parameters.close()
             self.parameters = None

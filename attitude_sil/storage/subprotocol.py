@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import socket
 import threading
+import time
 
 __all__ = ["SubprotocolRelay"]
 
@@ -89,6 +90,7 @@ class SubprotocolRelay:
         self.port = self._listener.getsockname()[1]
         self._closed = threading.Event()
         self._connections: set[socket.socket] = set()
+        self._workers: list[threading.Thread] = []
         self._lock = threading.Lock()
         threading.Thread(target=self._accept, name="foxglove-relay", daemon=True).start()
 
@@ -98,7 +100,10 @@ class SubprotocolRelay:
                 client, _ = self._listener.accept()
             except OSError:
                 return  # closed
-            threading.Thread(target=self._serve, args=(client,), daemon=True).start()
+            worker = threading.Thread(target=self._serve, args=(client,), daemon=True)
+            with self._lock:
+                self._workers.append(worker)
+            worker.start()
 
     def _serve(self, client: socket.socket) -> None:
         server = None
@@ -141,10 +146,19 @@ class SubprotocolRelay:
             except OSError:
                 pass
 
-    def close(self) -> None:
-        """Stop listening and end every relayed connection (idempotent)."""
+    def close(self, drain_s: float = 0.0) -> None:
+        """Stop listening and end every relayed connection (idempotent).
+
+        ``drain_s``: how long (s) connections may take to end by themselves first, each forwarding what
+        the server sent before it closed (close the server, then the relay, and clients get it all).
+        """
         self._closed.set()
         self._listener.close()
+        deadline = time.monotonic() + drain_s
+        with self._lock:
+            workers = list(self._workers)
+        for worker in workers:
+            worker.join(timeout=max(deadline - time.monotonic(), 0.0))
         with self._lock:
             connections = list(self._connections)
         for sock in connections:
