@@ -8,8 +8,12 @@ otherwise), and :mod:`attitude_sil.core.sim.batch` runs that module's
 runs every law's compiled step on the episodes whose code is that law's (a
 loop per law, written out there by the generator), and ``law_enter`` & co. do
 the bumpless swap (:mod:`attitude_sil.core.control.law`).
-The loop runs in stages over the chunk's episodes (swaps, commands, wheels),
-each episode's arithmetic in the order of the stepwise driver.
+The loop runs in stages over the chunk's episodes (swaps, commands, wheels,
+body), each episode's arithmetic in the order of the stepwise driver. The
+plant's state lives in blocks (:mod:`attitude_sil.core.plant.lanes`: the
+episodes as the vector axis, a row per quantity), where the wheels' and the
+body's stages run as packed instructions; the laws, the swaps and the
+metrics read row-major copies (m, width) made once per step.
 Its imports are absolute because the copy lives outside the package.
 """
 
@@ -19,7 +23,9 @@ import numpy as np
 from numba import njit
 
 from attitude_sil.core.analysis.metric_rows import euler_axis, first_crossing
-from attitude_sil.core.plant.kernels import WheelFailure, measure_row, rk4_body_into, wheel_params_copy, wheel_rows
+from attitude_sil.core.plant.kernels import WheelFailure, measure_row, wheel_params_copy
+from attitude_sil.core.plant.lanes import (BODY_ROWS, H, II, IV, Q, TC, TE, U, W, lanes_to_rows, mat_to_lanes,
+                                           motor_lanes, rk4_body_lanes, rows_to_lanes, wheel_lanes, wheels_to_lanes)
 
 # >>> law dispatch stubs (replaced by the generated dispatch; see the module docstring)
 
@@ -87,20 +93,35 @@ def _keep_rows(dst, r, lo, m, src):
 
 
 @njit(cache=True, inline="always")
-def _keep_wheels(o_ws, o_wa, o_we, r, lo, m, x, k_i):
-    # the wheels' speed, angle and effort of step r (an output with no rows is not kept)
-    for p in range(m):
+def _keep_wheels(o_ws, o_wa, o_we, r, lo, xw, k_i):
+    # the wheels' speed, angle and effort of step r from the lanes xw (n, 3, m) (an output with no rows is not kept)
+    for p in range(xw.shape[2]):
         e = lo + p
-        for j in range(x.shape[1]):
+        for j in range(xw.shape[0]):
             if o_wa.shape[0] > 0:
-                o_wa[e, r, j] = x[p, j, 0]
+                o_wa[e, r, j] = xw[j, 0, p]
             if o_ws.shape[0] > 0:
-                o_ws[e, r, j] = x[p, j, 2]
+                o_ws[e, r, j] = xw[j, 2, p]
             if o_we.shape[0] > 0:
-                o_we[e, r, j] = k_i[e if k_i.shape[0] > 1 else 0] * x[p, j, 1]
+                o_we[e, r, j] = k_i[e if k_i.shape[0] > 1 else 0] * xw[j, 1, p]
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, inline="always")
+def _plant_start(sim, lo, m):
+    # the plant's blocks for episodes lo..lo+m-1 at step 0: the body block (state, inertia), the wheel states
+    # now and next (n, 3, m)
+    b = np.zeros((BODY_ROWS, m))
+    rows_to_lanes(sim.q0, lo, b, Q, m)
+    rows_to_lanes(sim.w0, lo, b, W, m)
+    mat_to_lanes(sim.inertia, lo, b, II, m)
+    mat_to_lanes(sim.inertia_inv, lo, b, IV, m)
+    nw = sim.x0.shape[1]
+    xw, xn = np.empty((nw, 3, m)), np.empty((nw, 3, m))
+    wheels_to_lanes(sim.x0, lo, xw)
+    return b, xw, xn
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
 def chunk(lo, hi, sim, pars, sts, noise, noise_lo, out, sums):
     """Episodes ``lo..hi-1`` from step 0 to K, the stepwise driver's order of calls, kept every ``stride``.
 
@@ -112,9 +133,8 @@ def chunk(lo, hi, sim, pars, sts, noise, noise_lo, out, sums):
     step ``sim.sw_k[s]`` (sorted), with the controller bank's bumpless transfer.
     """
     m = hi - lo
-    q, w, x = sim.q0[lo:hi].copy(), sim.w0[lo:hi].copy(), sim.x0[lo:hi].copy()
+    q, w = sim.q0[lo:hi].copy(), sim.w0[lo:hi].copy()  # rows (m, 4), (m, 3): what the laws and the metrics read
     qi, qf, omega_r = sim.q_initial[lo:hi].copy(), sim.q_final[lo:hi].copy(), sim.omega_ref[lo:hi].copy()
-    ii, iv = sim.inertia[lo:hi].copy(), sim.inertia_inv[lo:hi].copy()
     law = sim.law0[lo:hi].copy()
     # @laws records
     present = np.zeros(len(pars), dtype=np.bool_)  # the laws some episode of the chunk runs
@@ -129,11 +149,12 @@ def chunk(lo, hi, sim, pars, sts, noise, noise_lo, out, sums):
     sw_k, sw_law = sim.sw_k.copy(), sim.sw_law.copy()
     qm, wm, tau_e, u = np.empty((m, 4)), np.empty((m, 3)), np.zeros((m, 3)), np.empty((m, 3))
     torque = np.empty(m, dtype=np.bool_)  # the rows whose command is a torque
-    tau_c, h0, x_next = np.empty((m, 3)), np.empty((m, 3)), np.empty_like(x)
-    # arrays are taken out of their records once: inside the step loop each take would cost reference counts
-    o_q, o_w, o_qr, o_h, o_u, o_tc, o_te, o_ws, o_wa, o_we = out
-    keep = (o_q.shape[0] > 0 or o_w.shape[0] > 0 or o_qr.shape[0] > 0 or o_h.shape[0] > 0 or o_u.shape[0] > 0
-            or o_tc.shape[0] > 0 or o_te.shape[0] > 0 or o_ws.shape[0] > 0 or o_wa.shape[0] > 0 or o_we.shape[0] > 0)
+    tau_c, h0 = np.empty((m, 3)), np.empty((m, 3))
+    b, xw, xn = _plant_start(sim, lo, m)
+    mot = motor_lanes(wp, lo, m)
+    keep = False
+    for o in out:
+        keep = keep or o.shape[0] > 0
     y0, r_fin, sums_out, with_sums = sums.y0, sums.r, sums.out, sums.out.shape[0] > 0
     acc, last_out, prev = _sums_start(m)
     n_after = s_next = 0
@@ -156,31 +177,45 @@ def chunk(lo, hi, sim, pars, sts, noise, noise_lo, out, sums):
             torque[p] = sim.command_torque or law_is_torque(law[p])
             for i in range(3):
                 u_last[p, i] = u[p, i]
-        wheel_rows(x, u, lo, k, torque, wp, fail, x_next, tau_c, h0)
+        rows_to_lanes(u, 0, b, U, m)
+        wheel_lanes(m, lo, k, xw, xn, b, mot, torque, wp, fail)
+        lanes_to_rows(b, TC, tau_c)
+        lanes_to_rows(b, H, h0)
         if keep and k % sim.stride == 0:
-            r = k // sim.stride
-            _keep_rows(o_q, r, lo, m, q)
-            _keep_rows(o_qr, r, lo, m, q_r)
-            _keep_rows(o_w, r, lo, m, w)
-            _keep_rows(o_h, r, lo, m, h0)
-            _keep_rows(o_u, r, lo, m, u)
-            _keep_rows(o_tc, r, lo, m, tau_c)
-            _keep_rows(o_te, r, lo, m, tau_e)
-            _keep_wheels(o_ws, o_wa, o_we, r, lo, m, x, wp.k_i)
+            _keep_all(out, k // sim.stride, lo, (q, q_r, w, h0, u, tau_c, tau_e), xw, wp.k_i)
         if with_sums:
             t = k * sim.dt
             after = t >= sim.step_time - 1e-12
             for p in range(m):
-                _accumulate_checks(acc, p, k, t, sim.n_steps, sim.dt, w, u, tau_c, x)
+                _accumulate_checks(acc, p, k, t, sim.n_steps, sim.dt, w, u, tau_c, xw)
                 if after:
                     _accumulate_response(acc, last_out, prev, p, t - sim.step_time, n_after, q, sums.axis,
                                          sums.band, y0[lo + p], r_fin[lo + p])
             n_after += after
-        if k < sim.n_steps:  # h0 (the wheel momentum at t_k, kept above) becomes the body's h at t_k+1
-            rk4_body_into(q, w, h0, ii, iv, tau_c, tau_e, sim.dt, sim.substeps)
-        x, x_next = x_next, x
+        if k < sim.n_steps:  # h (the wheel momentum at t_k, kept above) becomes the body's h at t_k+1
+            rows_to_lanes(tau_e, 0, b, TE, m)
+            rk4_body_lanes(m, b, sim.dt, sim.substeps)
+            lanes_to_rows(b, Q, q)
+            lanes_to_rows(b, W, w)
+        xw[:] = xn  # copied, not swapped: a loop over a swapped pair of arrays stays scalar (bench/README.md)
     if with_sums:
         _sums_end(acc, last_out, prev, n_after, sums_out, lo)
+
+
+@njit(cache=True, inline="always")
+def _keep_all(out, r, lo, rows, xw, k_i):
+    # step r of every kept output: the rows (q, q_r, w, h, u, tau_c, tau_e) (m, width) and the wheels' lanes
+    o_q, o_w, o_qr, o_h, o_u, o_tc, o_te, o_ws, o_wa, o_we = out
+    q, q_r, w, h0, u, tau_c, tau_e = rows
+    m = q.shape[0]
+    _keep_rows(o_q, r, lo, m, q)
+    _keep_rows(o_qr, r, lo, m, q_r)
+    _keep_rows(o_w, r, lo, m, w)
+    _keep_rows(o_h, r, lo, m, h0)
+    _keep_rows(o_u, r, lo, m, u)
+    _keep_rows(o_tc, r, lo, m, tau_c)
+    _keep_rows(o_te, r, lo, m, tau_e)
+    _keep_wheels(o_ws, o_wa, o_we, r, lo, xw, k_i)
 
 
 @njit(cache=True, inline="always")
@@ -208,14 +243,15 @@ def _sums_end(acc, last_out, prev, n_after, sums_out, lo):
 
 
 @njit(cache=True, inline="always")
-def _accumulate_checks(acc, p, k, t, n_steps, dt, w, u, tau_c, x):
-    # one step of row p's finiteness, peaks and control effort (SUMMARY_COLUMNS), as metrics.summarize computes
+def _accumulate_checks(acc, p, k, t, n_steps, dt, w, u, tau_c, xw):
+    # one step of row p's finiteness, peaks and control effort (SUMMARY_COLUMNS), as metrics.summarize computes;
+    # xw: the wheel lanes (n, 3, m)
     for i in range(3):
         if not (np.isfinite(w[p, i]) and np.isfinite(u[p, i])):
             acc[p, 10] = 0.0
         acc[p, 11] = max(acc[p, 11], abs(u[p, i])) if not np.isnan(u[p, i]) else np.inf
-    for j in range(x.shape[1]):
-        acc[p, 12] = max(acc[p, 12], abs(x[p, j, 2])) if not np.isnan(x[p, j, 2]) else np.inf
+    for j in range(xw.shape[0]):
+        acc[p, 12] = max(acc[p, 12], abs(xw[j, 2, p])) if not np.isnan(xw[j, 2, p]) else np.inf
     if k < n_steps:
         acc[p, 9] += np.sqrt(tau_c[p, 0] ** 2 + tau_c[p, 1] ** 2 + tau_c[p, 2] ** 2) * ((k + 1) * dt - t)
 
