@@ -107,6 +107,15 @@ def _keep_wheels(o_ws, o_wa, o_we, r, lo, xw, k_i):
 
 
 @njit(cache=True, inline="always")
+def _copy_wheels(src, dst):
+    # the wheel states (n, 3, m), in plain loops (a slice assignment takes numpy's general path)
+    for j in range(src.shape[0]):
+        for r in range(3):
+            for p in range(src.shape[2]):
+                dst[j, r, p] = src[j, r, p]
+
+
+@njit(cache=True, inline="always")
 def _plant_start(sim, lo, m):
     # the plant's blocks for episodes lo..lo+m-1 at step 0: the body block (state, inertia), the wheel states
     # now and next (n, 3, m)
@@ -197,7 +206,7 @@ def chunk(lo, hi, sim, pars, sts, noise, noise_lo, out, sums):
             rk4_body_lanes(m, b, sim.dt, sim.substeps)
             lanes_to_rows(b, Q, q)
             lanes_to_rows(b, W, w)
-        xw[:] = xn  # copied, not swapped: a loop over a swapped pair of arrays stays scalar (bench/README.md)
+        _copy_wheels(xn, xw)  # copied, not swapped: a loop over a swapped pair of arrays stays scalar (bench/README.md)
     if with_sums:
         _sums_end(acc, last_out, prev, n_after, sums_out, lo)
 
