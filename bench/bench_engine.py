@@ -22,6 +22,7 @@ quote ratios. Run with ``make bench``.
 
 from __future__ import annotations
 
+import contextlib
 import os
 import sys
 import tempfile
@@ -34,7 +35,9 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 os.environ.setdefault("ROS_DOMAIN_ID", str(150 + os.getpid() % 50))
 
+from bench_cluster import _spec as mc_spec  # noqa: E402
 from fused_reference import fused_parallel, fused_serial, fused_setup  # noqa: E402
+from limits import count_step_ops, peak_fma_flops  # noqa: E402
 from numba import config, set_num_threads  # noqa: E402
 from soa_reference import LANES, lanes_args, lanes_run  # noqa: E402
 
@@ -43,12 +46,17 @@ from attitude_sil.core.plant.quaternion import quat_from_euler  # noqa: E402
 from attitude_sil.core.sim.engine import build_controller, simulate, simulate_summary  # noqa: E402
 from attitude_sil.core.sim.scenario import load_scenario  # noqa: E402
 from attitude_sil.graph.session import run_graph  # noqa: E402
+from attitude_sil.tuning.evaluate import evaluate  # noqa: E402
+from attitude_sil.tuning.executor import LocalProcesses  # noqa: E402
+from attitude_sil.tuning.montecarlo import run_campaign  # noqa: E402
+from attitude_sil.tuning.spec import load_spec  # noqa: E402
 
 
 def main() -> None:
     scn = load_scenario(ROOT / "config" / "hst_roll_step.yaml")
     if sys.argv[1:] == ["simd"]:
         simd(scn)
+        targets(scn)
         return
     duration = scn.duration
     simulate(scn, 2, duration=0.1)  # compile / load the kernels once
@@ -64,6 +72,7 @@ def main() -> None:
     newly_compiled(scn)
     costs = {p: controller_cost(scn, p) for p in (1, 50)}
     simd(scn)
+    targets(scn)
     print("controller cost, us per step per episode (ratio to pid at the same P):")
     for kind in law_names():
         cells = "   ".join(f"P={p:<3} {costs[p][kind]:7.2f} ({costs[p][kind] / costs[p]['pid']:4.1f}x)" for p in costs)
@@ -146,10 +155,12 @@ def ceiling(scn) -> None:
 
 
 def simd(scn) -> None:
-    """The fused episode with episodes as the vector axis, against the fused loop and the engine's summaries.
+    """Issue 25's table: the engine with the episodes as the vector axis against the fused scalar loop, the
+    lanes reference and the machine's physical limit, at P = 1 ... 16,384 on one core and on both.
 
-    Both fused variants keep only the final state (the fused loop: its first and last step), so what is
-    timed is the step; the engine column is ``simulate_summary`` (running sums, what tuning uses).
+    The fused loop and the lanes reference keep only the final state (the fused loop: its first and last
+    step), so what is timed is the step; the engine column is ``simulate_summary`` (running sums of every
+    metric, what tuning and Monte Carlo use), which does more than either.
     """
     duration = scn.duration
     args, out = fused_setup(scn, 256, np.linspace(30.0, 60.0, 3 * 256).reshape(256, 3))
@@ -157,10 +168,20 @@ def simd(scn) -> None:
     la = lanes_args(args)
     lanes_run(*la)
     diff = max(np.max(np.abs(out[0][:, -1] - la[-2])), np.max(np.abs(out[1][:, -1] - la[-1])))
-    print(f"episodes as the vector axis ({LANES} lanes a block) == fused loop: max |final state difference| "
-          f"{diff:.1e} over 256 designs")
-    print("simulated s per wall s (ratio to the fused loop on the same cores):")
-    print(f"{'P':>6} {'cores':>5} {'fused loop':>12} {'lanes':>20} {'engine, sums only':>20}")
+    print(f"lanes reference ({LANES} lanes a block) == fused loop: max |final state difference| {diff:.1e} "
+          "over 256 designs")
+    ops = count_step_ops(scn)
+    steps_per_s = 1.0 / scn.dt
+    print(f"one episode step (PID, 4 wheels, RK4 body), counted from the kernels: {ops['flops']} flops "
+          f"(add {ops['add']}, mul {ops['mul']}, div {ops['div']}, sqrt {ops['sqrt']}) and {ops['other']} "
+          "other operations (negation, abs, comparisons)")
+    peak = {cores: peak_fma_flops(cores) for cores in (1, 2)}
+    limit = {c: peak[c] / (ops["flops"] * steps_per_s) for c in peak}
+    for c in peak:
+        print(f"measured peak FMA rate, {c} core(s): {peak[c] / 1e9:.1f} Gflop/s -> physical limit "
+              f"{limit[c]:,.0f} simulated s per wall s")
+    print("simulated s per wall s (ratio to the fused loop on the same cores; share of the physical limit):")
+    print(f"{'P':>6} {'cores':>5} {'fused loop':>12} {'lanes reference':>22} {'engine, sums':>26}")
     for p in (1, 64, 1024, 16384):
         reps = 5 if p <= 64 else 2
         args, _ = fused_setup(scn, p, stride=scn.steps())  # keeps step 0 and the last: the step is what is timed
@@ -171,9 +192,49 @@ def simd(scn) -> None:
             f = _best(lambda fused=fused, args=args: fused(*args), reps)
             lanes = _best(lambda la=la: lanes_run(*la), reps)
             eng = _best(lambda p=p, cores=cores: simulate_summary(scn, p, threads=cores), reps)
-            cells = "".join(f"{p * duration / t:13,.0f} ({f / t:4.2f})" for t in (lanes, eng))
+            cells = "".join(f"{p * duration / t:11,.0f} ({f / t:4.2f}; {p * duration / t / limit[cores]:5.1%})"
+                            for t in (lanes, eng))
             print(f"{p:>6} {cores:>5} {p * duration / f:12,.0f}{cells}")
     set_num_threads(config.NUMBA_NUM_THREADS)  # numba's default again for what follows
+
+
+def targets(scn) -> None:
+    """Issue 25's wall times: the README's tuning example's evaluations and a 10,000-run Monte Carlo
+    campaign of the HST roll step (summaries only), locally and on a Dask cluster, with the same numbers."""
+    spec = load_spec(ROOT / "config" / "tune_hst_pid_ga.yaml")
+    rng = np.random.default_rng(0)
+    lo = np.array([g.low for g in spec.genome for _ in range(g.count)])
+    hi = np.array([g.high for g in spec.genome for _ in range(g.count)])
+    evaluate(spec, rng.uniform(lo, hi, (2, lo.size)))  # load the kernels
+    t0 = time.perf_counter()
+    for _ in range(40):  # 40 generations of 50: the GA's evaluations (pymoo's own work not counted)
+        evaluate(spec, rng.uniform(lo, hi, (50, lo.size)))
+    print(f"tuning example (config/tune_hst_pid_ga.yaml), 40 x 50 evaluations: {time.perf_counter() - t0:.2f} s")
+    with tempfile.TemporaryDirectory() as tmp:
+        tables = {}
+        with LocalProcesses(1) as ex:
+            run_campaign(mc_spec(Path(tmp), "warm", 4, 4), ex)
+        for label, make in (("2 local worker processes", lambda: LocalProcesses(2)),
+                            ("Dask LocalCluster, 2 workers", _dask_executor)):
+            with make() as ex:
+                spec = mc_spec(Path(tmp), label.split()[0], 10_000, 2_500)
+                t0 = time.perf_counter()
+                tables[label] = run_campaign(spec, ex).table
+                print(f"Monte Carlo, 10,000 runs of config/mc_hst_roll_step.yaml (summaries), {label}: "
+                      f"{time.perf_counter() - t0:.1f} s")
+        a, b = tables.values()
+        same = all(np.array_equal(a[k], b[k], equal_nan=a[k].dtype.kind == "f") for k in a)
+        print(f"  the two campaigns' tables are {'identical' if same else 'DIFFERENT'} ({len(a)} columns)")
+
+
+@contextlib.contextmanager
+def _dask_executor():
+    from distributed import Client, LocalCluster
+
+    from attitude_sil.tuning.executor import DaskCluster
+    with LocalCluster(n_workers=2, threads_per_worker=1, host="127.0.0.1", dashboard_address=None,
+                      processes=True) as cluster, Client(cluster) as client, DaskCluster(client=client) as ex:
+        yield ex
 
 
 def controller_cost(scn, n_episodes: int, steps: int = 2000) -> dict[str, float]:
