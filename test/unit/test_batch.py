@@ -65,6 +65,27 @@ def test_any_thread_count_and_chunking_gives_the_same_numbers(hst):
     _assert_same(one, two)
 
 
+def test_an_episode_gives_the_same_numbers_in_any_lane(hst):
+    # the plant runs with the episodes as the vector axis (core/plant/lanes.py): in a chunk of 64, an episode
+    # goes through the packed loops; alone, or among the last few of a run, through the loops' scalar
+    # remainder. Both must compute the same bits (no reassociation, no contraction into FMAs)
+    n = 70
+    rng = np.random.default_rng(11)
+    inertia = np.array([[31.046, 77.217, 78.754]]) * rng.uniform(0.8, 1.2, (n, 3))
+    values = {"plant.inertia": inertia, "disturbance.inertia": inertia,
+              "wheels.motor.torque_constant": rng.uniform(0.02, 0.04, n)}
+    gains = {"pid.kp": rng.uniform(20, 80, (n, 3))}
+    batch = simulate(hst, n, duration=1.5, driver="compiled", threads=1, controller_params=gains,
+                     episode_values=values)
+    for p in (0, 5, 63, 64, 69):
+        alone = simulate(hst, 1, duration=1.5, driver="compiled", controller_params={k: v[p:p + 1] for k, v in
+                                                                                      gains.items()},
+                         episode_values={k: v[p:p + 1] for k, v in values.items()})
+        for f in FIELDS:
+            assert np.array_equal(getattr(batch, f)[p:p + 1], getattr(alone, f)), (p, f)
+    assert np.ptp(batch.omega_BN_B[:, -1, 0]) > 0  # the episodes differ: a lane mix-up would show
+
+
 def test_every_nth_step(hst):
     full = simulate(hst, 2, duration=1.0, driver="compiled")
     thin = simulate(hst, 2, duration=1.0, driver="compiled", stride=7)

@@ -105,10 +105,21 @@ def _stage_lines(laws: list[Law], names: dict[str, str]) -> list[str]:
     """
     n = {k: names.get(k, k) for k in _STAGE_NAMES}
     inp = f"{n['q']}, {n['w']}, {n['q_r']}, {n['w_r']}, p"
-    out = []
+    # the common case first: every row runs one law with no transfer offset pending; then the law's step runs
+    # in a loop of its own with no test per row (a test per row kept the PID's loop from being optimised:
+    # bench/README.md)
+    out = ["only = " + n["law"] + "[0] if " + n["law"] + ".shape[0] > 0 else -1",
+           f"for p in range({n['law']}.shape[0]):",
+           f"    if {n['law']}[p] != only or {n['has_off']}[p]:",
+           "        only = -1",
+           "        break"]
     for i, law in enumerate(laws):
         clip = ["for j in range(3):", f"    {n['u']}[p, j] = min(max({n['u']}[p, j], -par_{i}.u_max), par_{i}.u_max)"]
-        out += [f"if {n['present']}[{i}]:", f"    for p in range({n['law']}.shape[0]):",
+        out += [f"if only == {i}:", f"    for p in range({n['law']}.shape[0]):",
+                f"        _step_{i}({inp}, par_{i}, st_{i}, {n['dt']}, {n['u']})"]
+        if not law.saturated:
+            out += [f"    for p in range({n['law']}.shape[0]):", *("        " + c for c in clip)]
+        out += [f"elif only < 0 and {n['present']}[{i}]:", f"    for p in range({n['law']}.shape[0]):",
                 f"        if {n['law']}[p] == {i}:",
                 f"            _step_{i}({inp}, par_{i}, st_{i}, {n['dt']}, {n['u']})",
                 f"            if {n['has_off']}[p]:",
