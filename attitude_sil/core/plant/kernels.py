@@ -25,9 +25,25 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit
 
-from attitude_sil.core.plant.lanes import (BODY_ROWS, TC, TE, II, IV, H, Q, U, W, lanes_to_rows, lanes_to_wheels,
-                                           mat_to_lanes, motor_lanes, rk4_body_lanes, rows_to_lanes, wheel_lanes,
-                                           wheels_to_lanes)
+from attitude_sil.core.plant.lanes import (
+    BODY_ROWS,
+    II,
+    IV,
+    TC,
+    TE,
+    H,
+    Q,
+    U,
+    W,
+    lanes_to_rows,
+    lanes_to_wheels,
+    mat_to_lanes,
+    motor_lanes,
+    rk4_body_lanes,
+    rows_to_lanes,
+    wheel_lanes,
+    wheels_to_lanes,
+)
 
 __all__ = ["rk4_body", "wheel_step", "WheelParams", "WheelFailure", "measure", "expm_small"]
 

@@ -24,8 +24,24 @@ from numba import njit
 
 from attitude_sil.core.analysis.metric_rows import euler_axis, first_crossing
 from attitude_sil.core.plant.kernels import WheelFailure, measure_row, wheel_params_copy
-from attitude_sil.core.plant.lanes import (BODY_ROWS, H, II, IV, Q, TC, TE, U, W, lanes_to_rows, mat_to_lanes,
-                                           motor_lanes, rk4_body_lanes, rows_to_lanes, wheel_lanes, wheels_to_lanes)
+from attitude_sil.core.plant.lanes import (
+    BODY_ROWS,
+    II,
+    IV,
+    TC,
+    TE,
+    H,
+    Q,
+    U,
+    W,
+    lanes_to_rows,
+    mat_to_lanes,
+    motor_lanes,
+    rk4_body_lanes,
+    rows_to_lanes,
+    wheel_lanes,
+    wheels_to_lanes,
+)
 
 # >>> law dispatch stubs (replaced by the generated dispatch; see the module docstring)
 
@@ -164,8 +180,8 @@ def chunk(lo, hi, sim, pars, sts, noise, noise_lo, out, sums):
     keep = False
     for o in out:
         keep = keep or o.shape[0] > 0
-    y0, r_fin, sums_out, with_sums = sums.y0, sums.r, sums.out, sums.out.shape[0] > 0
-    acc, last_out, prev = _sums_start(m)
+    sums_out, with_sums = sums.out, sums.out.shape[0] > 0
+    sums_state = _sums_start(m)
     n_after = s_next = 0
     for k in range(sim.n_steps + 1):
         t_ns = k * sim.dt_ns
@@ -188,19 +204,16 @@ def chunk(lo, hi, sim, pars, sts, noise, noise_lo, out, sums):
                 u_last[p, i] = u[p, i]
         rows_to_lanes(u, 0, b, U, m)
         wheel_lanes(m, lo, k, xw, xn, b, mot, torque, wp, fail)
-        lanes_to_rows(b, TC, tau_c)
-        lanes_to_rows(b, H, h0)
         if keep and k % sim.stride == 0:
+            lanes_to_rows(b, TC, tau_c)
+            lanes_to_rows(b, H, h0)
             _keep_all(out, k // sim.stride, lo, (q, q_r, w, h0, u, tau_c, tau_e), xw, wp.k_i)
         if with_sums:
             t = k * sim.dt
-            after = t >= sim.step_time - 1e-12
-            for p in range(m):
-                _accumulate_checks(acc, p, k, t, sim.n_steps, sim.dt, w, u, tau_c, xw)
-                if after:
-                    _accumulate_response(acc, last_out, prev, p, t - sim.step_time, n_after, q, sums.axis,
-                                         sums.band, y0[lo + p], r_fin[lo + p])
-            n_after += after
+            _accumulate_checks(sums_state[0], m, k, t, sim.n_steps, sim.dt, b, xw)
+            if t >= sim.step_time - 1e-12:
+                _accumulate_response(sums_state, m, t - sim.step_time, n_after, b, sums, lo)
+                n_after += 1
         if k < sim.n_steps:  # h (the wheel momentum at t_k, kept above) becomes the body's h at t_k+1
             rows_to_lanes(tau_e, 0, b, TE, m)
             rk4_body_lanes(m, b, sim.dt, sim.substeps)
@@ -208,7 +221,7 @@ def chunk(lo, hi, sim, pars, sts, noise, noise_lo, out, sums):
             lanes_to_rows(b, W, w)
         _copy_wheels(xn, xw)  # copied, not swapped: a loop over a swapped pair of arrays stays scalar (bench/README.md)
     if with_sums:
-        _sums_end(acc, last_out, prev, n_after, sums_out, lo)
+        _sums_end(sums_state, n_after, sums_out, lo)
 
 
 @njit(cache=True, inline="always")
@@ -229,62 +242,74 @@ def _keep_all(out, r, lo, rows, xw, k_i):
 
 @njit(cache=True, inline="always")
 def _sums_start(m):
-    # the running sums (SUMMARY_COLUMNS) before step 0, the last step outside the band, and the previous sample
-    # (fraction of the step, time after it, error)
-    acc = np.zeros((m, N_SUMS))
-    acc[:, 0:3] = np.nan
-    acc[:, 3] = -np.inf
-    acc[:, 10] = 1.0
-    return acc, np.full(m, -1), np.zeros((m, 3))
+    # the running sums (SUMMARY_COLUMNS, m), episodes last, before step 0; the last step outside the band; the
+    # previous sample (fraction of the step, time after it, error) (3, m); the sample's angle (m,)
+    acc = np.zeros((N_SUMS, m))
+    for p in range(m):
+        acc[0, p] = acc[1, p] = acc[2, p] = np.nan
+        acc[3, p] = -np.inf
+        acc[10, p] = 1.0
+    return acc, np.full(m, -1), np.zeros((3, m)), np.empty(m)
 
 
 @njit(cache=True, inline="always")
-def _sums_end(acc, last_out, prev, n_after, sums_out, lo):
+def _sums_end(state, n_after, sums_out, lo):
     # settling (never left the band: 0; outside at the end: never settled) and the final error, into the output
-    for p in range(acc.shape[0]):
+    acc, last_out, prev, _ = state
+    for p in range(acc.shape[1]):
         if last_out[p] < 0:
-            acc[p, 4] = 0.0
+            acc[4, p] = 0.0
         elif last_out[p] == n_after - 1:
-            acc[p, 4] = np.nan
-        acc[p, 5] = abs(prev[p, 2])
+            acc[4, p] = np.nan
+        acc[5, p] = abs(prev[2, p])
         for c in range(N_SUMS):
-            sums_out[lo + p, c] = acc[p, c]
+            sums_out[lo + p, c] = acc[c, p]
 
 
 @njit(cache=True, inline="always")
-def _accumulate_checks(acc, p, k, t, n_steps, dt, w, u, tau_c, xw):
-    # one step of row p's finiteness, peaks and control effort (SUMMARY_COLUMNS), as metrics.summarize computes;
-    # xw: the wheel lanes (n, 3, m)
-    for i in range(3):
-        if not (np.isfinite(w[p, i]) and np.isfinite(u[p, i])):
-            acc[p, 10] = 0.0
-        acc[p, 11] = max(acc[p, 11], abs(u[p, i])) if not np.isnan(u[p, i]) else np.inf
+def _accumulate_checks(acc, m, k, t, n_steps, dt, b, xw):
+    # one step's finiteness, peaks and control effort (SUMMARY_COLUMNS), as metrics.summarize computes them, from
+    # the body block b (rate, command, wheel torque) and the wheel states xw (n, 3, m); a loop over the episodes
+    for p in range(m):
+        for i in range(3):
+            w_i, u_i = b[W + i, p], b[U + i, p]
+            if not (np.isfinite(w_i) and np.isfinite(u_i)):
+                acc[10, p] = 0.0
+            acc[11, p] = max(acc[11, p], abs(u_i)) if not np.isnan(u_i) else np.inf
     for j in range(xw.shape[0]):
-        acc[p, 12] = max(acc[p, 12], abs(xw[j, 2, p])) if not np.isnan(xw[j, 2, p]) else np.inf
+        for p in range(m):
+            acc[12, p] = max(acc[12, p], abs(xw[j, 2, p])) if not np.isnan(xw[j, 2, p]) else np.inf
     if k < n_steps:
-        acc[p, 9] += np.sqrt(tau_c[p, 0] ** 2 + tau_c[p, 1] ** 2 + tau_c[p, 2] ** 2) * ((k + 1) * dt - t)
+        for p in range(m):
+            tc0, tc1, tc2 = b[TC, p], b[TC + 1, p], b[TC + 2, p]
+            acc[9, p] += np.sqrt(tc0 ** 2 + tc1 ** 2 + tc2 ** 2) * ((k + 1) * dt - t)
 
 
 @njit(cache=True, inline="always")
-def _accumulate_response(acc, last_out, prev, p, ta, n_after, q, axis, band, y0, r_fin):
-    # one sample (time ta after the step) of row p's step response sums, as metrics.summarize computes them
-    span = r_fin - y0
-    y = euler_axis(q[p, 0], q[p, 1], q[p, 2], q[p, 3], axis)
-    f = (y - y0) / (1.0 if span == 0.0 else span)
+def _accumulate_response(state, m, ta, n_after, b, sums, lo):
+    # one sample (time ta after the step) of the step response sums, as metrics.summarize computes them: the
+    # angle of every episode first (a libm call each), then the sums in a loop of plain arithmetic
+    acc, last_out, prev, y = state
+    axis, band, y0, r_fin = sums.axis, sums.band, sums.y0, sums.r
+    for p in range(m):
+        y[p] = euler_axis(b[Q, p], b[Q + 1, p], b[Q + 2, p], b[Q + 3, p], axis)
     first = n_after == 0
-    f_prev, ta_prev, err_prev = prev[p, 0], prev[p, 1], prev[p, 2]
-    acc[p, 0] = first_crossing(acc[p, 0], 0.632, f, f_prev, ta, ta_prev, first)
-    acc[p, 1] = first_crossing(acc[p, 1], 0.1, f, f_prev, ta, ta_prev, first)
-    acc[p, 2] = first_crossing(acc[p, 2], 0.9, f, f_prev, ta, ta_prev, first)
-    acc[p, 3] = max(acc[p, 3], f)
-    if abs(y - r_fin) > band * abs(span):
-        last_out[p] = n_after
-    elif last_out[p] == n_after - 1 and last_out[p] >= 0:
-        acc[p, 4] = ta  # settled: the first sample after the last one outside the band, unless it leaves again
-    err = r_fin - y
-    if not first:
-        d = ta - ta_prev
-        acc[p, 6] += 0.5 * (abs(err) + abs(err_prev)) * d
-        acc[p, 7] += 0.5 * (err ** 2 + err_prev ** 2) * d
-        acc[p, 8] += 0.5 * (ta * abs(err) + ta_prev * abs(err_prev)) * d
-    prev[p, 0], prev[p, 1], prev[p, 2] = f, ta, err
+    for p in range(m):
+        span = r_fin[lo + p] - y0[lo + p]
+        f = (y[p] - y0[lo + p]) / (1.0 if span == 0.0 else span)
+        f_prev, ta_prev, err_prev = prev[0, p], prev[1, p], prev[2, p]
+        acc[0, p] = first_crossing(acc[0, p], 0.632, f, f_prev, ta, ta_prev, first)
+        acc[1, p] = first_crossing(acc[1, p], 0.1, f, f_prev, ta, ta_prev, first)
+        acc[2, p] = first_crossing(acc[2, p], 0.9, f, f_prev, ta, ta_prev, first)
+        acc[3, p] = max(acc[3, p], f)
+        if abs(y[p] - r_fin[lo + p]) > band * abs(span):
+            last_out[p] = n_after
+        elif last_out[p] == n_after - 1 and last_out[p] >= 0:
+            acc[4, p] = ta  # settled: the first sample after the last one outside the band, unless it leaves again
+        err = r_fin[lo + p] - y[p]
+        if not first:
+            d = ta - ta_prev
+            acc[6, p] += 0.5 * (abs(err) + abs(err_prev)) * d
+            acc[7, p] += 0.5 * (err ** 2 + err_prev ** 2) * d
+            acc[8, p] += 0.5 * (ta * abs(err) + ta_prev * abs(err_prev)) * d
+        prev[0, p], prev[1, p], prev[2, p] = f, ta, err
