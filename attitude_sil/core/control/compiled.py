@@ -97,29 +97,36 @@ def _record_lines(laws: list[Law]) -> list[str]:
     return [f"par_{i}, st_{i} = pars[{i}], sts[{i}]" for i in range(len(laws))]
 
 
-def _stage_lines(laws: list[Law], names: dict[str, str]) -> list[str]:
+def _stage_lines(laws: list[Law], names: dict[str, str], fast: bool = True) -> list[str]:
     """Every row's command: a loop per law present over its rows, the law's step called directly.
 
     Then the transfer offset and, for a law that does not saturate, the clip.
-    ``names`` renames the loop's variables (:data:`_STAGE_NAMES`).
+    ``names`` renames the loop's variables (:data:`_STAGE_NAMES`). ``fast``
+    adds the one-law loop first (the batch engine's); without it each law's
+    step is compiled once, not twice (the bank's stage: one row in a node).
     """
     n = {k: names.get(k, k) for k in _STAGE_NAMES}
     inp = f"{n['q']}, {n['w']}, {n['q_r']}, {n['w_r']}, p"
     # the common case first: every row runs one law with no transfer offset pending; then the law's step runs
     # in a loop of its own with no test per row (a test per row kept the PID's loop from being optimised:
     # bench/README.md)
-    out = ["only = " + n["law"] + "[0] if " + n["law"] + ".shape[0] > 0 else -1",
-           f"for p in range({n['law']}.shape[0]):",
-           f"    if {n['law']}[p] != only or {n['has_off']}[p]:",
-           "        only = -1",
-           "        break"]
+    if not fast:
+        out = ["only = -1"]
+    else:
+        out = ["only = " + n["law"] + "[0] if " + n["law"] + ".shape[0] > 0 else -1",
+               f"for p in range({n['law']}.shape[0]):",
+               f"    if {n['law']}[p] != only or {n['has_off']}[p]:",
+               "        only = -1",
+               "        break"]
     for i, law in enumerate(laws):
         clip = ["for j in range(3):", f"    {n['u']}[p, j] = min(max({n['u']}[p, j], -par_{i}.u_max), par_{i}.u_max)"]
-        out += [f"if only == {i}:", f"    for p in range({n['law']}.shape[0]):",
-                f"        _step_{i}({inp}, par_{i}, st_{i}, {n['dt']}, {n['u']})"]
-        if not law.saturated:
-            out += [f"    for p in range({n['law']}.shape[0]):", *("        " + c for c in clip)]
-        out += [f"elif only < 0 and {n['present']}[{i}]:", f"    for p in range({n['law']}.shape[0]):",
+        if fast:
+            out += [f"if only == {i}:", f"    for p in range({n['law']}.shape[0]):",
+                    f"        _step_{i}({inp}, par_{i}, st_{i}, {n['dt']}, {n['u']})"]
+            if not law.saturated:
+                out += [f"    for p in range({n['law']}.shape[0]):", *("        " + c for c in clip)]
+        out += [f"{'elif' if fast else 'if'} only < 0 and {n['present']}[{i}]:",
+                f"    for p in range({n['law']}.shape[0]):",
                 f"        if {n['law']}[p] == {i}:",
                 f"            _step_{i}({inp}, par_{i}, st_{i}, {n['dt']}, {n['u']})",
                 f"            if {n['has_off']}[p]:",
@@ -171,7 +178,7 @@ def _dispatch_source(laws: list[Law]) -> str:
 
     jit = "@njit(cache=True, inline='always')"
     torque = " or ".join(f"code == {i}" for i, x in enumerate(laws) if x.output == "torque") or "False"
-    stages = ["    " + x for x in _record_lines(laws) + _stage_lines(laws, {})]
+    stages = ["    " + x for x in _record_lines(laws) + _stage_lines(laws, {}, fast=False)]
     lines += ["", "", jit, "def law_stage(law, present, view, pars, sts, dt, u, offset, has_off, decay):",
               "    # every row's command: one loop per law present over the rows that run it (each law's step",
               "    # called directly, so its loop compiles as if it were alone; an absent law costs one test);",
