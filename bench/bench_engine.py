@@ -11,10 +11,13 @@ Prints, for the HST roll step at 100 Hz control:
   only the running sums of the metrics; and the stepwise driver (the first
   engine) where it is not too slow;
 * the cost of each control law per step and episode;
-* issue 25's question, ``simd``: the same fused episode with the episodes as
-  the vector axis (``soa_reference.py``), checked equal to the fused loop, at
-  P = 1, 64, 1,024 and 16,384 on one core and on both, against the fused loop
-  and the engine's summaries. ``python bench/bench_engine.py simd`` runs it alone.
+* issue 25's table, ``simd``: the engine's summaries (the plant with the
+  episodes as the vector axis) at P = 1, 64, 1,024 and 16,384 on one core and
+  on both, against the fused loop, a hand-written lanes reference
+  (``soa_reference.py``, checked equal to the fused loop) and the physical
+  limit (``limits.py``); then the tuning example's evaluations and a
+  10,000-run Monte Carlo campaign, locally and on a Dask cluster.
+  ``python bench/bench_engine.py simd`` runs it alone.
 
 Figures from one run are comparable with each other (the machine is shared);
 quote ratios. Run with ``make bench``.
