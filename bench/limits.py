@@ -133,13 +133,11 @@ def count_step_ops(scn) -> dict[str, int]:
     nw = wheels.assembly.n_wheels
     xw = counted(np.full((nw, 3, 1), 1.0))
     xn = counted(np.zeros((nw, 3, 1)))
-    OPS.clear()
     with python_kernels(lanes, control_kernels, pid):
-        pid.step(q, w, q_r, q_r, 0, par, state, Counted(scn.dt), u)
-        b[lanes.U:lanes.U + 3, 0] = u[0]
         mot = counted(lanes.motor_lanes(wp, 0, 1))
         OPS.clear()  # the motor block is made once per episode, not per step
         pid.step(q, w, q_r, q_r, 0, par, state, Counted(scn.dt), u)
+        b[lanes.U:lanes.U + 3, 0] = u[0]
         lanes.wheel_lanes(1, 0, 5, xw, xn, b, mot, np.zeros(1, dtype=bool), wp, fail)
         lanes.rk4_body_lanes(1, b, Counted(scn.dt), int(plant.substeps))
     out = dict(OPS)

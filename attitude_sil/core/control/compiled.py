@@ -110,9 +110,8 @@ def _stage_lines(laws: list[Law], names: dict[str, str], fast: bool = True) -> l
     # the common case first: every row runs one law with no transfer offset pending; then the law's step runs
     # in a loop of its own with no test per row (a test per row kept the PID's loop from being optimised:
     # bench/README.md)
-    if not fast:
-        out = ["only = -1"]
-    else:
+    out = []
+    if fast:
         out = ["only = " + n["law"] + "[0] if " + n["law"] + ".shape[0] > 0 else -1",
                f"for p in range({n['law']}.shape[0]):",
                f"    if {n['law']}[p] != only or {n['has_off']}[p]:",
@@ -125,7 +124,7 @@ def _stage_lines(laws: list[Law], names: dict[str, str], fast: bool = True) -> l
                     f"        _step_{i}({inp}, par_{i}, st_{i}, {n['dt']}, {n['u']})"]
             if not law.saturated:
                 out += [f"    for p in range({n['law']}.shape[0]):", *("        " + c for c in clip)]
-        out += [f"{'elif' if fast else 'if'} only < 0 and {n['present']}[{i}]:",
+        out += [f"elif only < 0 and {n['present']}[{i}]:" if fast else f"if {n['present']}[{i}]:",
                 f"    for p in range({n['law']}.shape[0]):",
                 f"        if {n['law']}[p] == {i}:",
                 f"            _step_{i}({inp}, par_{i}, st_{i}, {n['dt']}, {n['u']})",

@@ -27,17 +27,15 @@ from numba import njit
 
 from attitude_sil.core.plant.lanes import (
     BODY_ROWS,
-    II,
-    IV,
     TC,
     TE,
     H,
     Q,
     U,
     W,
+    body_block,
     lanes_to_rows,
     lanes_to_wheels,
-    mat_to_lanes,
     motor_lanes,
     rk4_body_lanes,
     rows_to_lanes,
@@ -58,11 +56,10 @@ def rk4_body(q, w, h, inertia, inertia_inv, tau_c, tau_e, dt, substeps):
     the batch engine's own code.
     """
     m = q.shape[0]
-    b = np.zeros((BODY_ROWS, m))
-    for a, row in ((q, Q), (w, W), (h, H), (tau_c, TC), (tau_e, TE)):
-        rows_to_lanes(a, 0, b, row, m)
-    mat_to_lanes(inertia, 0, b, II, m)
-    mat_to_lanes(inertia_inv, 0, b, IV, m)
+    b = body_block(q, w, inertia, inertia_inv, 0, m)
+    rows_to_lanes(h, 0, b, H, m)
+    rows_to_lanes(tau_c, 0, b, TC, m)
+    rows_to_lanes(tau_e, 0, b, TE, m)
     rk4_body_lanes(m, b, dt, substeps)
     qo, wo, ho = np.empty_like(q), np.empty_like(w), np.empty_like(h)
     lanes_to_rows(b, Q, qo)

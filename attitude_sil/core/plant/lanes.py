@@ -39,7 +39,8 @@ import numpy as np
 from numba import njit
 
 __all__ = ["BODY_ROWS", "MOTOR_ROWS", "Q", "W", "H", "TC", "TE", "II", "IV", "U", "rk4_body_lanes", "wheel_lanes",
-           "motor_lanes", "rows_to_lanes", "lanes_to_rows", "mat_to_lanes", "wheels_to_lanes", "lanes_to_wheels"]
+           "motor_lanes", "body_block", "rows_to_lanes", "lanes_to_rows", "mat_to_lanes", "wheels_to_lanes",
+           "lanes_to_wheels", "copy_wheels"]
 
 # ---------------------------------------------------------------- the body block's rows
 #: q_BN (x, y, z, w), omega_BN_B (rad/s), h_wheels_B (N m s), tau_c_B and tau_ext_B (N m)
@@ -100,6 +101,27 @@ def lanes_to_wheels(xw, x):
         for j in range(xw.shape[0]):
             for r in range(3):
                 x[p, j, r] = xw[j, r, p]
+
+
+@njit(cache=True, inline="always")
+def copy_wheels(src, dst):
+    """The wheel states src (n, 3, m) into dst, in plain loops (a slice assignment takes numpy's general path)."""
+    for j in range(src.shape[0]):
+        for r in range(3):
+            for p in range(src.shape[2]):
+                dst[j, r, p] = src[j, r, p]
+
+
+@njit(cache=True, inline="always")
+def body_block(q, w, inertia, inertia_inv, lo, m):
+    """A new body block (BODY_ROWS, m) holding rows lo..lo+m-1 of q_BN (P, 4), omega_BN_B (P, 3) and the
+    inertia and its inverse (P, 3, 3); every other row zero."""
+    b = np.zeros((BODY_ROWS, m))
+    rows_to_lanes(q, lo, b, Q, m)
+    rows_to_lanes(w, lo, b, W, m)
+    mat_to_lanes(inertia, lo, b, II, m)
+    mat_to_lanes(inertia_inv, lo, b, IV, m)
+    return b
 
 
 @njit(cache=True, inline="always")

@@ -25,17 +25,15 @@ from numba import njit
 from attitude_sil.core.analysis.metric_rows import euler_axis, first_crossing
 from attitude_sil.core.plant.kernels import WheelFailure, measure_row, wheel_params_copy
 from attitude_sil.core.plant.lanes import (
-    BODY_ROWS,
-    II,
-    IV,
     TC,
     TE,
     H,
     Q,
     U,
     W,
+    body_block,
+    copy_wheels,
     lanes_to_rows,
-    mat_to_lanes,
     motor_lanes,
     rk4_body_lanes,
     rows_to_lanes,
@@ -123,23 +121,10 @@ def _keep_wheels(o_ws, o_wa, o_we, r, lo, xw, k_i):
 
 
 @njit(cache=True, inline="always")
-def _copy_wheels(src, dst):
-    # the wheel states (n, 3, m), in plain loops (a slice assignment takes numpy's general path)
-    for j in range(src.shape[0]):
-        for r in range(3):
-            for p in range(src.shape[2]):
-                dst[j, r, p] = src[j, r, p]
-
-
-@njit(cache=True, inline="always")
 def _plant_start(sim, lo, m):
     # the plant's blocks for episodes lo..lo+m-1 at step 0: the body block (state, inertia), the wheel states
     # now and next (n, 3, m)
-    b = np.zeros((BODY_ROWS, m))
-    rows_to_lanes(sim.q0, lo, b, Q, m)
-    rows_to_lanes(sim.w0, lo, b, W, m)
-    mat_to_lanes(sim.inertia, lo, b, II, m)
-    mat_to_lanes(sim.inertia_inv, lo, b, IV, m)
+    b = body_block(sim.q0, sim.w0, sim.inertia, sim.inertia_inv, lo, m)
     nw = sim.x0.shape[1]
     xw, xn = np.empty((nw, 3, m)), np.empty((nw, 3, m))
     wheels_to_lanes(sim.x0, lo, xw)
@@ -181,6 +166,7 @@ def chunk(lo, hi, sim, pars, sts, noise, noise_lo, out, sums):
     for o in out:
         keep = keep or o.shape[0] > 0
     sums_out, with_sums = sums.out, sums.out.shape[0] > 0
+    response = (sums.axis, sums.band, sums.y0, sums.r)  # out of the record once (a take per step costs refcounts)
     sums_state = _sums_start(m)
     n_after = s_next = 0
     for k in range(sim.n_steps + 1):
@@ -212,14 +198,14 @@ def chunk(lo, hi, sim, pars, sts, noise, noise_lo, out, sums):
             t = k * sim.dt
             _accumulate_checks(sums_state[0], m, k, t, sim.n_steps, sim.dt, b, xw)
             if t >= sim.step_time - 1e-12:
-                _accumulate_response(sums_state, m, t - sim.step_time, n_after, b, sums, lo)
+                _accumulate_response(sums_state, m, t - sim.step_time, n_after, b, response, lo)
                 n_after += 1
         if k < sim.n_steps:  # h (the wheel momentum at t_k, kept above) becomes the body's h at t_k+1
             rows_to_lanes(tau_e, 0, b, TE, m)
             rk4_body_lanes(m, b, sim.dt, sim.substeps)
             lanes_to_rows(b, Q, q)
             lanes_to_rows(b, W, w)
-        _copy_wheels(xn, xw)  # copied, not swapped: a loop over a swapped pair of arrays stays scalar (bench/README.md)
+        copy_wheels(xn, xw)  # copied, not swapped: a loop over a swapped pair of arrays stays scalar (bench/README.md)
     if with_sums:
         _sums_end(sums_state, n_after, sums_out, lo)
 
@@ -286,11 +272,11 @@ def _accumulate_checks(acc, m, k, t, n_steps, dt, b, xw):
 
 
 @njit(cache=True, inline="always")
-def _accumulate_response(state, m, ta, n_after, b, sums, lo):
+def _accumulate_response(state, m, ta, n_after, b, response, lo):
     # one sample (time ta after the step) of the step response sums, as metrics.summarize computes them: the
     # angle of every episode first (a libm call each), then the sums in a loop of plain arithmetic
     acc, last_out, prev, y = state
-    axis, band, y0, r_fin = sums.axis, sums.band, sums.y0, sums.r
+    axis, band, y0, r_fin = response
     for p in range(m):
         y[p] = euler_axis(b[Q, p], b[Q + 1, p], b[Q + 2, p], b[Q + 3, p], axis)
     first = n_after == 0
