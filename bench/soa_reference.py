@@ -6,10 +6,12 @@ episode's three axes. Here the same arithmetic, in the same order, runs on a
 block of ``LANES`` episodes held as separate 1-D arrays (structure of arrays),
 each stage of the step its own short loop over the lanes: the PID, each wheel,
 each RK4 stage's derivatives and sums, the renormalisation. Every lane
-quantity is its own 1-D allocation and every stage is written out in the
-block (no helper calls): rows of one 2-D array, or arrays passed to a helper,
-leave LLVM unable to prove that what a loop writes does not alias what it
-reads, and the loop stays scalar (bench/README.md has the measurements). Loops of that
+quantity is its own 1-D allocation, allocated in the block: the four
+derivative evaluations share one inlined helper that takes its arrays in
+tuples (measured as fast as the loops written out four times, bit for bit the
+same); a helper that is not inlined leaves LLVM unable to prove that what a
+loop writes does not alias what it reads, and the loop stays scalar
+(bench/README.md has the measurements). Loops of that
 shape are what this CPU's compiler turns into packed (4-wide) instructions;
 a loop that calls a scalar step per lane is not (a probe of a toy step, made
 outside this repository, measured 0.65-0.85x for that).
@@ -29,6 +31,36 @@ from numba import njit, prange
 
 #: episodes per block: the block's ~80 lane arrays of 64 doubles stay in L1 (40 KiB)
 LANES = 64
+
+
+
+@njit(cache=True, inline="always")
+def _deriv(n, q, w, h, c, jm, km, dq, dw):
+    # the body's derivatives on the lanes: q, dq 4-tuples, w, h, c (tau_c), dw 3-tuples of lane arrays; jm, km
+    # the inertia and its inverse, 9-tuples of scalars (row-major)
+    q0, q1, q2, q3 = q
+    w0, w1, w2 = w
+    h0, h1, h2 = h
+    c0, c1, c2 = c
+    J00, J01, J02, J10, J11, J12, J20, J21, J22 = jm
+    K00, K01, K02, K10, K11, K12, K20, K21, K22 = km
+    a0, a1, a2, a3 = dq
+    b0, b1, b2 = dw
+    for p in range(n):
+        hx = J00 * w0[p] + J01 * w1[p] + J02 * w2[p] + h0[p]
+        hy = J10 * w0[p] + J11 * w1[p] + J12 * w2[p] + h1[p]
+        hz = J20 * w0[p] + J21 * w1[p] + J22 * w2[p] + h2[p]
+        rx = -(w1[p] * hz - w2[p] * hy) + c0[p] + 0.0
+        ry = -(w2[p] * hx - w0[p] * hz) + c1[p] + 0.0
+        rz = -(w0[p] * hy - w1[p] * hx) + c2[p] + 0.0
+        b0[p] = K00 * rx + K01 * ry + K02 * rz
+        b1[p] = K10 * rx + K11 * ry + K12 * rz
+        b2[p] = K20 * rx + K21 * ry + K22 * rz
+        x, y, z, s = q0[p], q1[p], q2[p], q3[p]
+        a0[p] = 0.5 * (w2[p] * y - w1[p] * z + w0[p] * s)
+        a1[p] = 0.5 * (-w2[p] * x + w0[p] * z + w1[p] * s)
+        a2[p] = 0.5 * (w1[p] * x - w0[p] * y + w2[p] * s)
+        a3[p] = 0.5 * (-w0[p] * x - w1[p] * y - w2[p] * z)
 
 
 @njit(cache=True, error_model="numpy")
@@ -120,6 +152,8 @@ def _block(g0, n, n_steps, dt, q_init, q_r, J, Ji, kp, ki, kd, af, u_max, alloc,
     K00, K01, K02 = Ji[0, 0], Ji[0, 1], Ji[0, 2]  # J^-1
     K10, K11, K12 = Ji[1, 0], Ji[1, 1], Ji[1, 2]
     K20, K21, K22 = Ji[2, 0], Ji[2, 1], Ji[2, 2]
+    Jm = (J00, J01, J02, J10, J11, J12, J20, J21, J22)
+    Km = (K00, K01, K02, K10, K11, K12, K20, K21, K22)
     for p in range(n):
         q0[p], q1[p], q2[p], q3[p] = q_init[g0 + p, 0], q_init[g0 + p, 1], q_init[g0 + p, 2], q_init[g0 + p, 3]
         r0[p], r1[p], r2[p], r3[p] = q_r[g0 + p, 0], q_r[g0 + p, 1], q_r[g0 + p, 2], q_r[g0 + p, 3]
@@ -207,21 +241,8 @@ def _block(g0, n, n_steps, dt, q_init, q_r, J, Ji, kp, ki, kd, af, u_max, alloc,
             c1[p] = -(c1[p] - h1[p]) / dt
             c2[p] = -(c2[p] - h2[p]) / dt
         if k < n_steps:
-            for p in range(n):
-                hx = J00 * w0[p] + J01 * w1[p] + J02 * w2[p] + h0[p]
-                hy = J10 * w0[p] + J11 * w1[p] + J12 * w2[p] + h1[p]
-                hz = J20 * w0[p] + J21 * w1[p] + J22 * w2[p] + h2[p]
-                rx = -(w1[p] * hz - w2[p] * hy) + c0[p] + 0.0
-                ry = -(w2[p] * hx - w0[p] * hz) + c1[p] + 0.0
-                rz = -(w0[p] * hy - w1[p] * hx) + c2[p] + 0.0
-                aw0[p] = K00 * rx + K01 * ry + K02 * rz
-                aw1[p] = K10 * rx + K11 * ry + K12 * rz
-                aw2[p] = K20 * rx + K21 * ry + K22 * rz
-                x, y, z, s = q0[p], q1[p], q2[p], q3[p]
-                aq0[p] = 0.5 * (w2[p] * y - w1[p] * z + w0[p] * s)
-                aq1[p] = 0.5 * (-w2[p] * x + w0[p] * z + w1[p] * s)
-                aq2[p] = 0.5 * (w1[p] * x - w0[p] * y + w2[p] * s)
-                aq3[p] = 0.5 * (-w0[p] * x - w1[p] * y - w2[p] * z)
+            _deriv(n, (q0, q1, q2, q3), (w0, w1, w2), (h0, h1, h2), (c0, c1, c2), Jm, Km,
+                   (aq0, aq1, aq2, aq3), (aw0, aw1, aw2))
             for p in range(n):
                 tq0[p] = q0[p] + half * aq0[p]
                 tq1[p] = q1[p] + half * aq1[p]
@@ -233,21 +254,8 @@ def _block(g0, n, n_steps, dt, q_init, q_r, J, Ji, kp, ki, kd, af, u_max, alloc,
                 th0[p] = h0[p] + half * -c0[p]
                 th1[p] = h1[p] + half * -c1[p]
                 th2[p] = h2[p] + half * -c2[p]
-            for p in range(n):
-                hx = J00 * tw0[p] + J01 * tw1[p] + J02 * tw2[p] + th0[p]
-                hy = J10 * tw0[p] + J11 * tw1[p] + J12 * tw2[p] + th1[p]
-                hz = J20 * tw0[p] + J21 * tw1[p] + J22 * tw2[p] + th2[p]
-                rx = -(tw1[p] * hz - tw2[p] * hy) + c0[p] + 0.0
-                ry = -(tw2[p] * hx - tw0[p] * hz) + c1[p] + 0.0
-                rz = -(tw0[p] * hy - tw1[p] * hx) + c2[p] + 0.0
-                bw0[p] = K00 * rx + K01 * ry + K02 * rz
-                bw1[p] = K10 * rx + K11 * ry + K12 * rz
-                bw2[p] = K20 * rx + K21 * ry + K22 * rz
-                x, y, z, s = tq0[p], tq1[p], tq2[p], tq3[p]
-                bq0[p] = 0.5 * (tw2[p] * y - tw1[p] * z + tw0[p] * s)
-                bq1[p] = 0.5 * (-tw2[p] * x + tw0[p] * z + tw1[p] * s)
-                bq2[p] = 0.5 * (tw1[p] * x - tw0[p] * y + tw2[p] * s)
-                bq3[p] = 0.5 * (-tw0[p] * x - tw1[p] * y - tw2[p] * z)
+            _deriv(n, (tq0, tq1, tq2, tq3), (tw0, tw1, tw2), (th0, th1, th2), (c0, c1, c2), Jm, Km,
+                   (bq0, bq1, bq2, bq3), (bw0, bw1, bw2))
             for p in range(n):
                 tq0[p] = q0[p] + half * bq0[p]
                 tq1[p] = q1[p] + half * bq1[p]
@@ -259,21 +267,8 @@ def _block(g0, n, n_steps, dt, q_init, q_r, J, Ji, kp, ki, kd, af, u_max, alloc,
                 th0[p] = h0[p] + half * -c0[p]
                 th1[p] = h1[p] + half * -c1[p]
                 th2[p] = h2[p] + half * -c2[p]
-            for p in range(n):
-                hx = J00 * tw0[p] + J01 * tw1[p] + J02 * tw2[p] + th0[p]
-                hy = J10 * tw0[p] + J11 * tw1[p] + J12 * tw2[p] + th1[p]
-                hz = J20 * tw0[p] + J21 * tw1[p] + J22 * tw2[p] + th2[p]
-                rx = -(tw1[p] * hz - tw2[p] * hy) + c0[p] + 0.0
-                ry = -(tw2[p] * hx - tw0[p] * hz) + c1[p] + 0.0
-                rz = -(tw0[p] * hy - tw1[p] * hx) + c2[p] + 0.0
-                cw0[p] = K00 * rx + K01 * ry + K02 * rz
-                cw1[p] = K10 * rx + K11 * ry + K12 * rz
-                cw2[p] = K20 * rx + K21 * ry + K22 * rz
-                x, y, z, s = tq0[p], tq1[p], tq2[p], tq3[p]
-                cq0[p] = 0.5 * (tw2[p] * y - tw1[p] * z + tw0[p] * s)
-                cq1[p] = 0.5 * (-tw2[p] * x + tw0[p] * z + tw1[p] * s)
-                cq2[p] = 0.5 * (tw1[p] * x - tw0[p] * y + tw2[p] * s)
-                cq3[p] = 0.5 * (-tw0[p] * x - tw1[p] * y - tw2[p] * z)
+            _deriv(n, (tq0, tq1, tq2, tq3), (tw0, tw1, tw2), (th0, th1, th2), (c0, c1, c2), Jm, Km,
+                   (cq0, cq1, cq2, cq3), (cw0, cw1, cw2))
             for p in range(n):
                 tq0[p] = q0[p] + dt * cq0[p]
                 tq1[p] = q1[p] + dt * cq1[p]
@@ -285,21 +280,8 @@ def _block(g0, n, n_steps, dt, q_init, q_r, J, Ji, kp, ki, kd, af, u_max, alloc,
                 th0[p] = h0[p] + dt * -c0[p]
                 th1[p] = h1[p] + dt * -c1[p]
                 th2[p] = h2[p] + dt * -c2[p]
-            for p in range(n):
-                hx = J00 * tw0[p] + J01 * tw1[p] + J02 * tw2[p] + th0[p]
-                hy = J10 * tw0[p] + J11 * tw1[p] + J12 * tw2[p] + th1[p]
-                hz = J20 * tw0[p] + J21 * tw1[p] + J22 * tw2[p] + th2[p]
-                rx = -(tw1[p] * hz - tw2[p] * hy) + c0[p] + 0.0
-                ry = -(tw2[p] * hx - tw0[p] * hz) + c1[p] + 0.0
-                rz = -(tw0[p] * hy - tw1[p] * hx) + c2[p] + 0.0
-                dw0[p] = K00 * rx + K01 * ry + K02 * rz
-                dw1[p] = K10 * rx + K11 * ry + K12 * rz
-                dw2[p] = K20 * rx + K21 * ry + K22 * rz
-                x, y, z, s = tq0[p], tq1[p], tq2[p], tq3[p]
-                dq0[p] = 0.5 * (tw2[p] * y - tw1[p] * z + tw0[p] * s)
-                dq1[p] = 0.5 * (-tw2[p] * x + tw0[p] * z + tw1[p] * s)
-                dq2[p] = 0.5 * (tw1[p] * x - tw0[p] * y + tw2[p] * s)
-                dq3[p] = 0.5 * (-tw0[p] * x - tw1[p] * y - tw2[p] * z)
+            _deriv(n, (tq0, tq1, tq2, tq3), (tw0, tw1, tw2), (th0, th1, th2), (c0, c1, c2), Jm, Km,
+                   (dq0, dq1, dq2, dq3), (dw0, dw1, dw2))
             for p in range(n):
                 q0[p] = q0[p] + sixth * (aq0[p] + 2.0 * (bq0[p] + cq0[p]) + dq0[p])
             for p in range(n):
