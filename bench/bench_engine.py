@@ -256,9 +256,10 @@ def jax_table(scn) -> None:
     set_num_threads(config.NUMBA_NUM_THREADS)
 
 
-def law_lanes(scn, n_episodes: int = 1024, steps: int = 200) -> None:
+def law_lanes(scn, n_episodes: int = 64, steps: int = 2000) -> None:
     """Each law on the episode axis: ns per episode and step of its ``vector_<code>`` loop (the batch
-    engine's one-law case, column-major arrays) against the same step in the controller bank's row loop
+    engine's one-law case, column-major arrays, on a block of the engine's 64 episodes) against the same step
+    in the controller bank's row loop
     (row-major, a law test per row), on the same inputs; and how much of the vector loop's arithmetic LLVM
     packed (ymm instructions among the double-precision ones). A law whose branches LLVM cannot turn into
     selects stays scalar: its speed-up near 1 and its packed share near 0 are what it loses to them."""
