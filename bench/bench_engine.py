@@ -17,7 +17,12 @@ Prints, for the HST roll step at 100 Hz control:
   (``soa_reference.py``, checked equal to the fused loop) and the physical
   limit (``limits.py``); then the tuning example's evaluations and a
   10,000-run Monte Carlo campaign, locally and on a Dask cluster.
-  ``python bench/bench_engine.py simd`` runs it alone.
+  ``python bench/bench_engine.py simd`` runs it alone, after ``laws``;
+* ``laws``: each registered law's step in the controller bank's row loop
+  against its loop on the episode axis (``vector_<code>``), and how much of it
+  LLVM packed;
+* ``jax``: the same episode in JAX on the CPU (``jax_reference.py``, run by
+  ``$JAX_PYTHON``; not a dependency), the measurement behind the choice of tool.
 
 Figures from one run are comparable with each other (the machine is shared);
 quote ratios. Run with ``make bench``.

@@ -670,11 +670,16 @@ def test_a_stopped_tune_prints_one_line_and_keeps_its_results(tmp_path, sig, cod
         stdin=subprocess.DEVNULL, preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     log = out / "evaluations.jsonl"
     deadline = time.monotonic() + 120
-    while not (log.exists() and log.read_text().count("\n") >= 8):  # two generations are in
-        assert proc.poll() is None and time.monotonic() < deadline, proc.communicate()
-        time.sleep(0.05)
-    proc.send_signal(sig)
-    stdout, stderr = proc.communicate(timeout=60)
+    try:
+        while not (log.exists() and log.read_text().count("\n") >= 8):  # two generations are in
+            assert proc.poll() is None and time.monotonic() < deadline, "no two generations within 120 s"
+            time.sleep(0.05)
+        proc.send_signal(sig)
+        stdout, stderr = proc.communicate(timeout=60)
+    finally:  # a tune of 100,000 generations must not outlive a failed test
+        if proc.poll() is None:
+            proc.kill()
+            proc.communicate()
     assert proc.returncode == code, stderr
     assert "Traceback" not in stderr
     assert stderr.strip().splitlines() == [f"{signal.Signals(sig).name}: stopping after this generation "
