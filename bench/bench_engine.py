@@ -242,7 +242,8 @@ def jax_table(scn) -> None:
                 run = subprocess.run([*pin, python, str(ROOT / "bench" / "jax_reference.py"), str(Path(tmp) / "in.npz"),
                                       str(Path(tmp) / "out.npz")], capture_output=True, text=True)
                 if run.returncode != 0:
-                    print(f"jax_reference.py failed: {run.stderr.strip().splitlines()[-1:]}")
+                    print("jax_reference.py failed: " + (run.stderr.strip().splitlines() or ["no message"])[-1])
+                    set_num_threads(config.NUMBA_NUM_THREADS)
                     return
                 res = np.load(Path(tmp) / "out.npz")
                 diff = max(np.max(np.abs(res["q"] - out[0][:, -1])), np.max(np.abs(res["w"] - out[1][:, -1])))

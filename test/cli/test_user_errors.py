@@ -672,7 +672,8 @@ def test_a_stopped_tune_prints_one_line_and_keeps_its_results(tmp_path, sig, cod
     deadline = time.monotonic() + 120
     try:
         while not (log.exists() and log.read_text().count("\n") >= 8):  # two generations are in
-            assert proc.poll() is None and time.monotonic() < deadline, "no two generations within 120 s"
+            assert proc.poll() is None and time.monotonic() < deadline, (
+                proc.communicate() if proc.poll() is not None else "no two generations within 120 s")
             time.sleep(0.05)
         proc.send_signal(sig)
         stdout, stderr = proc.communicate(timeout=60)
