@@ -66,6 +66,15 @@ class Trajectory:
     wheel_angle: np.ndarray | None = None
     wheel_effort: np.ndarray | None = None
     omega_RN_R: np.ndarray | None = None
+    #: the sensing loop's arrays (docs/sensors.md), None without it: the estimate of q_BN (P, K+1, 4), of
+    #: omega_BN_B (P, K+1, 3) rad/s and of the gyro bias (P, K+1, 3) rad/s, the filter's 1-sigma attitude
+    #: error per body axis (P, K+1, 3) rad, the gyro's reading (P, K+1, 3) rad/s and its true bias then
+    q_BN_est: np.ndarray | None = None
+    omega_BN_B_est: np.ndarray | None = None
+    gyro_bias_est: np.ndarray | None = None
+    attitude_sigma: np.ndarray | None = None
+    omega_BN_B_meas: np.ndarray | None = None
+    gyro_bias_true: np.ndarray | None = None
 
     def every(self, stride: int) -> Trajectory:
         """Every ``stride``-th step (k = 0, stride, 2 stride, ...), as views."""
@@ -78,7 +87,10 @@ class Trajectory:
                           h_wheels_B=cut(self.h_wheels_B), u_cmd=cut(self.u_cmd), tau_c_B=cut(self.tau_c_B),
                           tau_ext_B=cut(self.tau_ext_B), wheel_speed=cut(self.wheel_speed), kind=self.kind[keep],
                           wheel_angle=cut(self.wheel_angle), wheel_effort=cut(self.wheel_effort),
-                          omega_RN_R=cut(self.omega_RN_R))
+                          omega_RN_R=cut(self.omega_RN_R), q_BN_est=cut(self.q_BN_est),
+                          omega_BN_B_est=cut(self.omega_BN_B_est), gyro_bias_est=cut(self.gyro_bias_est),
+                          attitude_sigma=cut(self.attitude_sigma), omega_BN_B_meas=cut(self.omega_BN_B_meas),
+                          gyro_bias_true=cut(self.gyro_bias_true))
 
 
 @dataclass

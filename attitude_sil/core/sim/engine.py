@@ -29,6 +29,8 @@ from attitude_sil.core.plant.plants import FLEXIBLE_CASES, FlexibleAxisPlant, Pi
 from attitude_sil.core.plant.quaternion import euler_from_quat, quat_from_euler, quat_multiply
 from attitude_sil.core.plant.rigid_body import BodyState, rk4_step
 from attitude_sil.core.plant.wheels import GEOMETRIES, MotorParams, WheelAssembly
+from attitude_sil.core.sensing.mekf import Mekf, MekfSettings
+from attitude_sil.core.sensing.models import SensorSuite
 from attitude_sil.core.sim.batch import COMPILED_DISTURBANCES, TRAJECTORY_FIELDS, run_compiled
 from attitude_sil.core.sim.params import NODE_PARAMS
 from attitude_sil.core.sim.scenario import Scenario
@@ -51,6 +53,9 @@ __all__ = [
     "EpisodeSummary",
     "check_episode",
     "flexible_states",
+    "build_sensing",
+    "Sensing",
+    "SENSING_FIELDS",
 ]
 
 
@@ -345,6 +350,57 @@ def build_guidance(scn: Scenario, n_episodes: int = 1, setpoints_rpy_deg=None) -
                     orbit_rate_rad_s=orbit_rate(g["orbit.mu"], g["orbit.radius"]))
 
 
+class Sensing:
+    """The sensing loop of P episodes: the sensors and the estimator, stepped together (docs/sensors.md).
+
+    ``step(k, q_BN, omega_BN_B)`` samples the sensors on the truth at t_k and
+    runs the filter on what they report, as the ``sensors`` and ``estimator``
+    nodes do for one episode; it returns the filter's estimate at t_k.
+    """
+
+    def __init__(self, suite: SensorSuite, mekf: Mekf, feedback: str) -> None:
+        self.suite = suite
+        self.mekf = mekf
+        self.feedback = feedback
+        self.last = None
+
+    def reset(self) -> None:
+        self.suite.reset()
+        self.mekf.reset()
+
+    def step(self, k: int, q_BN: np.ndarray, omega_BN_B: np.ndarray):
+        """The estimate at step ``k`` (a :class:`~attitude_sil.core.sensing.mekf.Estimate`) and the gyro reading."""
+        sample = self.suite.sample(q_BN, omega_BN_B, k)
+        return self.mekf.step(k, sample.omega_meas_B, sample.star_tracker), sample.omega_meas_B
+
+
+def estimator_initial_rpy_deg(scn: Scenario) -> list:
+    """The estimator's initial attitude: its own ``initial_attitude_rpy_deg`` if the scenario sets it, else the
+    plant's (what the mission knows at the start; the filter's initial sigma covers the rest)."""
+    if "initial_attitude_rpy_deg" in scn.explicit.get("estimator", {}):
+        return list(scn.values["estimator"]["initial_attitude_rpy_deg"])
+    return list(scn.values["plant"]["initial_attitude_rpy_deg"])
+
+
+def build_sensing(scn: Scenario, n_episodes: int = 1, seeds=None) -> Sensing | None:
+    """The scenario's sensors and estimator for P episodes (None if it runs without them).
+
+    ``seeds`` (P,) gives each episode its sensor seed (default: ``sensors.seed`` for all).
+    """
+    if not scn.has_sensors:
+        return None
+    suite = SensorSuite(scn.values["sensors"], scn.dt, n_episodes, seeds)
+    settings = MekfSettings.from_values(scn.values["estimator"], suite.gyro.errors.arw,
+                                        suite.star_tracker.errors.sigma_B, estimator_initial_rpy_deg(scn))
+    mekf = Mekf(settings, scn.dt, n_episodes, suite.star_tracker.latency_steps)
+    return Sensing(suite, mekf, scn.feedback)
+
+
+#: the arrays a run with the sensing loop adds to its trajectory (:class:`~attitude_sil.core.trajectory.Trajectory`)
+SENSING_FIELDS = ("q_BN_est", "omega_BN_B_est", "gyro_bias_est", "attitude_sigma", "omega_BN_B_meas",
+                  "gyro_bias_true")
+
+
 def law_bank(name: str, n_episodes: int = 1, dt: float = 0.01, values: dict | None = None) -> ControllerBank:
     """A controller bank running law ``name`` with the controller's defaults and ``values`` on top.
 
@@ -552,6 +608,7 @@ EPISODE_VALUES = {
     "guidance": ("setpoint_rpy_deg",),
     "disturbance": ("inertia", "noise.seed", "noise.power"),
     "wheels": EPISODE_MOTOR + EPISODE_FAILURE,
+    "sensors": ("seed",),
 }
 
 
@@ -609,10 +666,11 @@ class _Run:
         if controller is not None:
             ctrl.active = controller
         self.models = (plant, wheels, dist, guide, ctrl)
+        self.sensing = build_sensing(scn, P, ev["sensors"].get("seed"))
         self.swaps = dict(schedule_from_scenario(scn) if schedule is None else schedule)
         self.compiled = False
         if driver != "stepwise":
-            why = compiled_plan(*self.models)
+            why = "the sensors and estimator run in the stepwise driver" if self.sensing else compiled_plan(*self.models)
             if driver == "compiled" and why:
                 raise ScenarioError(f"the compiled driver does not run this scenario ({why}); use driver='auto'")
             self.compiled = not why
@@ -627,15 +685,20 @@ class _Run:
             tr, _ = run_compiled(self.models, self.K, self.dt, stride=stride, threads=threads, keep=keep,
                                  swaps=self.swaps, laws=self.laws)
             return tr
-        tr = _simulate_stepwise(*self.models, self.swaps, self.K, self.dt)
+        tr = _simulate_stepwise(*self.models, self.swaps, self.K, self.dt, self.sensing)
         tr = tr if stride == 1 else tr.every(stride)
         for name in set(KEEPABLE) - set(keep):
             setattr(tr, name, None)
         return tr
 
 
-def _simulate_stepwise(plant, wheels, dist, guide, ctrl, swaps: dict, K: int, dt: float) -> Trajectory:
-    """The stepwise driver: the step objects called from Python, step by step, as the nodes call them."""
+def _simulate_stepwise(plant, wheels, dist, guide, ctrl, swaps: dict, K: int, dt: float,
+                       sensing: Sensing | None = None) -> Trajectory:
+    """The stepwise driver: the step objects called from Python, step by step, as the nodes call them.
+
+    With ``sensing`` the sensors sample the truth and the estimator runs on them each step; the controller
+    reads the estimate when ``sensing.feedback`` is ``estimate`` (the graph's remap), else the truth.
+    """
     P = plant.n_episodes
     nw = len(wheels.names)
     tr = Trajectory(
@@ -653,6 +716,10 @@ def _simulate_stepwise(plant, wheels, dist, guide, ctrl, swaps: dict, K: int, dt
         wheel_effort=np.empty((P, K + 1, nw)),
         omega_RN_R=np.empty((P, K + 1, 3)),
     )
+    if sensing is not None:
+        for name, width in zip(SENSING_FIELDS, (4, 3, 3, 3, 3, 3), strict=True):
+            setattr(tr, name, np.empty((P, K + 1, width)))
+    estimate = sensing is not None and sensing.feedback == "estimate"
     dt_ns = int(round(dt * 1e9))
     for k in range(K + 1):
         t = k * dt_ns * 1e-9
@@ -661,7 +728,18 @@ def _simulate_stepwise(plant, wheels, dist, guide, ctrl, swaps: dict, K: int, dt
         tau_ext = dist.torque(s.q_BN, k * dt_ns)
         if k in swaps:
             ctrl.request(swaps[k])
-        u = ctrl.compute(s.q_BN, s.omega_BN_B, q_RN, w_RN, k)
+        q_fb, w_fb = s.q_BN, s.omega_BN_B
+        if sensing is not None:
+            tr.gyro_bias_true[:, k] = sensing.suite.gyro.drift
+            est, w_meas = sensing.step(k, s.q_BN, s.omega_BN_B)
+            tr.q_BN_est[:, k] = est.q_BN
+            tr.omega_BN_B_est[:, k] = est.omega_BN_B
+            tr.gyro_bias_est[:, k] = est.gyro_bias
+            tr.attitude_sigma[:, k] = est.attitude_sigma
+            tr.omega_BN_B_meas[:, k] = w_meas
+            if estimate:
+                q_fb, w_fb = est.q_BN, est.omega_BN_B
+        u = ctrl.compute(q_fb, w_fb, q_RN, w_RN, k)
         tr.kind.append(ctrl.kind)
         ws = wheels.advance(u, ctrl.kind == "torque")
         tr.q_BN[:, k] = s.q_BN

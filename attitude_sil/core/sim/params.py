@@ -223,6 +223,51 @@ NODE_PARAMS: dict[str, list[ParamSpec]] = {
         *_ORBIT,
         *_AERO,
     ],
+    "sensors": [
+        # The defaults are a generic navigation-grade gyro and a mid-class star tracker (assumed); the presets
+        # config/*_sensors.yaml name the datasheet class they take their numbers from (docs/sensors.md).
+        _d("control_period", 0.01, "control step dt, s (shared by every node)", min=0.0, min_exclusive=True, max=1.0),
+        ParamSpec("seed", "integer", 0, "sensor noise seed: a draw depends only on (seed, error source, step, "
+                  "axis), so the graph and the batch engine draw the same numbers", min=0, max=2**40 - 1),
+        _d("gyro.arw_deg_rt_h", 0.01, "gyro angle random walk N, deg/sqrt(h) (white rate noise; 0: none)",
+           min=0.0),
+        _d("gyro.bias_instability_deg_h", 0.05, "gyro bias instability B: steady-state 1-sigma of the "
+           "Gauss-Markov bias, deg/h (0: none)", min=0.0),
+        _d("gyro.bias_correlation_time_s", 300.0, "correlation time of the Gauss-Markov bias, s", min=0.0,
+           min_exclusive=True),
+        _d("gyro.rrw_deg_h_rt_h", 0.0, "gyro rate random walk K, deg/h/sqrt(h) (0: none)", min=0.0),
+        _da("gyro.bias_deg_h", [0.0, 0.0, 0.0], "gyro constant bias per body axis, deg/h", lengths=(3,)),
+        _da("gyro.scale_factor_ppm", [0.0, 0.0, 0.0], "gyro scale-factor error per axis, ppm", lengths=(3,)),
+        _da("gyro.misalignment_urad", [0.0, 0.0, 0.0], "small rotation of the gyro axes from the body axes, "
+            "urad", lengths=(3,)),
+        _d("gyro.resolution_deg_s", 0.0, "gyro quantisation step, deg/s (0: none)", min=0.0),
+        _d("gyro.range_deg_s", 400.0, "gyro saturation, deg/s", min=0.0, min_exclusive=True),
+        _d("star_tracker.rate_hz", 4.0, "star tracker exposures per second (1 / rate a whole number of control "
+           "steps)", min=0.0, min_exclusive=True),
+        _d("star_tracker.latency_s", 0.0, "star tracker delay from exposure to report, s (a whole number of "
+           "control steps); the report is stamped with the exposure time", min=0.0, max=10.0),
+        _d("star_tracker.cross_boresight_arcsec", 5.0, "star tracker 1-sigma noise about each axis across the "
+           "boresight, arcsec", min=0.0),
+        _d("star_tracker.about_boresight_arcsec", 40.0, "star tracker 1-sigma noise about the boresight, arcsec",
+           min=0.0),
+        ParamSpec("star_tracker.boresight_axis", "integer", 2, "body axis of the star tracker boresight: 0, 1, 2",
+                  min=0, max=2),
+        _da("star_tracker.outages_s", [], "scheduled outages: (start, end) pairs of exposure times, s; an "
+            "exposure inside one reports no attitude", min=0.0),
+        ParamSpec("wheel_speed.counts_per_rev", "integer", 24, "wheel tachometer Hall-sensor edges per "
+                  "revolution (quantises wheel_speed)", min=1),
+    ],
+    "estimator": [
+        _d("control_period", 0.01, "control step dt, s (shared by every node)", min=0.0, min_exclusive=True, max=1.0),
+        _d("bias_walk_deg_h_rt_h", 0.01, "the filter's gyro bias random walk sigma_u, deg/h/sqrt(h) (covers "
+           "bias instability: about B sqrt(2 / tau))", min=0.0),
+        _da("initial_attitude_rpy_deg", [0, 0, 0], "initial attitude estimate, roll/pitch/yaw deg (the runner "
+            "copies the plant's initial attitude unless set)", lengths=(3,), min=-360.0, max=360.0),
+        _d("initial_attitude_sigma_deg", 1.0, "1-sigma of the initial attitude error per axis, deg", min=0.0,
+           min_exclusive=True),
+        _d("initial_bias_sigma_deg_h", 1.0, "1-sigma of the initial gyro bias error per axis, deg/h", min=0.0,
+           min_exclusive=True),
+    ],
     SCENARIO_NODE: [
         ParamSpec("name", "string", "", "scenario name (read by the runner, not a node)"),
         ParamSpec("description", "string", "", "one-line description"),
@@ -240,6 +285,12 @@ NODE_PARAMS: dict[str, list[ParamSpec]] = {
            "tracking: settled once the principal error angle stays below this, deg (negative: the angle of "
            "R1(0.1 deg) R2(0.1 deg) R3(0.1 deg), paper 001)"),
         _d("metrics.beta", 1.0, "weight beta of paper 001's fitness f = -(Ts + beta Ce)", min=0.0),
+        ParamSpec("feedback", "string", "truth", "what the controller reads: truth (the plant's attitude and "
+                  "rate) or estimate (the estimator's, fed by the sensors node)", choices=("truth", "estimate")),
+        ParamSpec("sensors", "bool", False, "run the sensors and estimator in the loop (on by itself with "
+                  "feedback: estimate or a sensors / estimator section)"),
+        _d("metrics.pointing_after_s", -1.0, "APE and AKE are taken from this sim time on, s (negative: from "
+           "the settling time of a step, else from 0)"),
         _da("schedule.times", [], "sim times of scheduled controller swaps, s (runner applies them as "
             "parameter sets)", min=0.0),
         ParamSpec("schedule.controller_types", "string_array", [], "controller_type to swap to at each time",

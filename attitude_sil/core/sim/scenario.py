@@ -28,12 +28,13 @@ from typing import Any
 import yaml
 
 from attitude_sil.core import yaml12
+from attitude_sil.core.sensing.models import SensorSuite
 from attitude_sil.core.sim.paramfile import node_key, section_node
 from attitude_sil.core.sim.params import GLOBAL_NODE, NODE_PARAMS, SCENARIO_NODE
 from attitude_sil.errors import ScenarioError
 
 __all__ = ["ScenarioError", "Scenario", "load_scenario", "scenario_from_dict", "with_parameter_file", "yaml_problem",
-           "GRAPH_NODES", "PRESETS", "default_config_dir"]
+           "GRAPH_NODES", "SENSOR_NODES", "ALL_NODES", "PRESETS", "default_config_dir"]
 
 #: the preset scenarios of the five papers (``config/<name>.yaml``)
 PRESETS = ("hst_roll_step", "hawaiisat_lvlh", "flexible_axis", "cubesat_1u", "pitch_axis")
@@ -49,6 +50,13 @@ def default_config_dir() -> Path:
 
 #: nodes of the graph, in the order the runner starts them
 GRAPH_NODES = ("plant", "wheels", "disturbance", "guidance", "controller")
+
+#: the nodes of the sensing loop (docs/sensors.md), started after the others when a scenario runs them
+#: (:attr:`Scenario.has_sensors`)
+SENSOR_NODES = ("sensors", "estimator")
+
+#: every node a scenario configures
+ALL_NODES = GRAPH_NODES + SENSOR_NODES
 
 
 def _suggest(name: str, options) -> str:
@@ -91,6 +99,24 @@ class Scenario:
     def duration(self) -> float:
         return self.values["plant"]["duration"]
 
+    @property
+    def feedback(self) -> str:
+        """What the controller reads: ``truth`` or ``estimate`` (``scenario.feedback``)."""
+        return self.values[SCENARIO_NODE]["feedback"]
+
+    @property
+    def has_sensors(self) -> bool:
+        """Whether the sensors and the estimator run: ``scenario.sensors``, estimate feedback, or a section of
+        either node in the file."""
+        shared = {"control_period"}  # what a /** section gives every node
+        return bool(self.values[SCENARIO_NODE]["sensors"] or self.feedback == "estimate"
+                    or any(set(self.explicit.get(n, {})) - shared for n in SENSOR_NODES))
+
+    @property
+    def nodes(self) -> tuple[str, ...]:
+        """The nodes this scenario's graph runs, in start order."""
+        return ALL_NODES if self.has_sensors else GRAPH_NODES
+
     def steps(self, duration: float | None = None) -> int:
         """Number of control steps K in the episode (states at k = 0..K)."""
         d = self.duration if duration is None else duration
@@ -112,7 +138,7 @@ class Scenario:
                 v = specs[name].validate(value, node)
             except ValueError as exc:
                 raise ScenarioError(str(exc)) from None
-            targets = [n for n in GRAPH_NODES if any(sp.name == name for sp in NODE_PARAMS[n])] \
+            targets = [n for n in ALL_NODES if any(sp.name == name for sp in NODE_PARAMS[n])] \
                 if node == GLOBAL_NODE else [node]
             for target in targets:
                 new.values[target][name] = copy.deepcopy(v)
@@ -146,12 +172,12 @@ class Scenario:
         return {
             node_key(node): {"ros__parameters": dict(vals)}
             for node, vals in self.explicit.items()
-            if node in GRAPH_NODES and vals
+            if node in ALL_NODES and vals
         }
 
 
 def _check_consistency(scn: Scenario) -> None:
-    periods = {n: scn.values[n]["control_period"] for n in GRAPH_NODES}
+    periods = {n: scn.values[n]["control_period"] for n in ALL_NODES}
     if len(set(periods.values())) > 1:
         listing = ", ".join(f"{n}={p}" for n, p in periods.items())
         raise ScenarioError(f"{scn.source}: control_period differs between nodes ({listing}); set it under /**")
@@ -169,6 +195,11 @@ def _check_consistency(scn: Scenario) -> None:
     dt_ns = dt * 1e9
     if abs(dt_ns - round(dt_ns)) > 1e-3:
         raise ScenarioError(f"{scn.source}: control_period {dt} s is not a whole number of nanoseconds")
+    if scn.has_sensors:
+        try:
+            SensorSuite(scn.values["sensors"], dt)  # the tracker's period and latency in whole steps, the outages
+        except ScenarioError as exc:
+            raise ScenarioError(f"{scn.source}: {exc}") from None
 
 
 def scenario_from_dict(data: Any, source: str = "<dict>", check: bool = True) -> Scenario:
@@ -208,7 +239,7 @@ def scenario_from_dict(data: Any, source: str = "<dict>", check: bool = True) ->
                 v = specs[name].validate(value, node)
             except ValueError as exc:
                 raise ScenarioError(f"{source}: {exc}") from None
-            targets = [n for n in GRAPH_NODES if any(s.name == name for s in NODE_PARAMS[n])] \
+            targets = [n for n in ALL_NODES if any(s.name == name for s in NODE_PARAMS[n])] \
                 if node == GLOBAL_NODE else [node]
             for target in targets:
                 values[target][name] = copy.deepcopy(v)
