@@ -20,7 +20,9 @@ __all__ = ["CLOCK", "ATTITUDE", "BODY_RATE", "ATTITUDE_SETPOINT", "RATE_SETPOINT
            "STEP_TOPICS", "COMMAND_TOPICS", "COMMAND_TOPIC", "CONTROLLER_INPUTS", "MODEL_TOPICS", "RECORDED_TOPICS",
            "graph_subscribers", "PRODUCERS", "PARAMETER_EVENTS", "message_class", "check_namespace", "check_node_name",
            "check_parameter_name", "ROLE_OUTPUTS", "OPTIONAL_TOPICS", "ROLE_INPUTS", "episode_topics", "EXTERNAL",
-           "UNKNOWN_NODE"]
+           "UNKNOWN_NODE", "IMU", "STAR_TRACKER", "WHEEL_SPEED", "ESTIMATE_ATTITUDE", "ESTIMATE_BODY_RATE",
+           "ESTIMATE_GYRO_BIAS", "ESTIMATE_ATTITUDE_SIGMA", "SENSING_TOPICS", "SENSING_STEP_TOPICS", "FEEDBACK_REMAP",
+           "feedback_remap"]
 
 # -- name rules (ROS 2: a token is a letter or _ then letters, digits, _) -----------------
 _TOKEN = re.compile(r"[A-Za-z_][A-Za-z0-9_]*")
@@ -71,6 +73,14 @@ DISTURBANCE_TORQUE = "disturbance_torque"
 ATTITUDE_ERROR = "attitude_error"
 FLEXIBLE_MODE = "flexible_mode"
 PARAMETER_EVENTS = "/parameter_events"
+# the sensing loop (docs/sensors.md): the sensors node's and the estimator's
+IMU = "imu"
+STAR_TRACKER = "star_tracker"
+WHEEL_SPEED = "wheel_speed"
+ESTIMATE_ATTITUDE = "estimate/attitude"
+ESTIMATE_BODY_RATE = "estimate/body_rate"
+ESTIMATE_GYRO_BIAS = "estimate/gyro_bias"
+ESTIMATE_ATTITUDE_SIGMA = "estimate/attitude_sigma"
 
 #: topics of the lockstep (relative names, except /clock); one message per step each,
 #: except the command topics, of which exactly one carries each step
@@ -101,12 +111,41 @@ PLANT_INPUTS = (WHEEL_TORQUE, WHEEL_MOMENTUM, DISTURBANCE_TORQUE)
 #: what the controller needs, all stamped t_k, before it computes step k's command
 CONTROLLER_INPUTS = (ATTITUDE, BODY_RATE, ATTITUDE_SETPOINT, RATE_SETPOINT)
 
+#: the sensing loop's topics, published when a scenario runs the sensors and the estimator: the gyro (every
+#: step, orientation absent), the star tracker (at its rate, stamped with its exposure, angular velocity absent;
+#: REP 145: an absent field has element 0 of its covariance -1), the wheel tachometers, and the estimate
+SENSING_TOPICS: dict[str, str] = {
+    IMU: "sensor_msgs/msg/Imu",
+    STAR_TRACKER: "sensor_msgs/msg/Imu",
+    WHEEL_SPEED: "sensor_msgs/msg/JointState",
+    ESTIMATE_ATTITUDE: "geometry_msgs/msg/QuaternionStamped",
+    ESTIMATE_BODY_RATE: "geometry_msgs/msg/Vector3Stamped",
+    ESTIMATE_GYRO_BIAS: "geometry_msgs/msg/Vector3Stamped",
+    ESTIMATE_ATTITUDE_SIGMA: "geometry_msgs/msg/Vector3Stamped",
+}
+
+#: the sensing topics with one message per step (the star tracker has its own rate)
+SENSING_STEP_TOPICS = (IMU, WHEEL_SPEED, ESTIMATE_ATTITUDE, ESTIMATE_BODY_RATE, ESTIMATE_GYRO_BIAS,
+                       ESTIMATE_ATTITUDE_SIGMA)
+
+#: ``feedback: estimate``: the controller's state inputs remapped to the estimator's outputs
+FEEDBACK_REMAP = {ATTITUDE: ESTIMATE_ATTITUDE, BODY_RATE: ESTIMATE_BODY_RATE}
+
+
+def feedback_remap(feedback: str) -> list[str]:
+    """``--ros-args`` remap rules that make the controller read ``feedback`` (``truth``: none)."""
+    if feedback != "estimate":
+        return []
+    return [arg for src, dst in FEEDBACK_REMAP.items() for arg in ("-r", f"{src}:={dst}")]
+
 
 #: the one node of the graph that publishes each step topic (docs/architecture.md, "ROS contract")
 PRODUCERS = {
     CLOCK: "plant", ATTITUDE: "plant", BODY_RATE: "plant", ATTITUDE_SETPOINT: "guidance", RATE_SETPOINT: "guidance",
     VOLTAGE_CMD: "controller", TORQUE_CMD: "controller", WHEEL_TORQUE: "wheels", WHEEL_MOMENTUM: "wheels",
     WHEEL_STATE: "wheels", DISTURBANCE_TORQUE: "disturbance", ATTITUDE_ERROR: "controller",
+    IMU: "sensors", STAR_TRACKER: "sensors", WHEEL_SPEED: "sensors", ESTIMATE_ATTITUDE: "estimator",
+    ESTIMATE_BODY_RATE: "estimator", ESTIMATE_GYRO_BIAS: "estimator", ESTIMATE_ATTITUDE_SIGMA: "estimator",
 }
 
 #: what each node of the graph must publish for the others, every step: a tuple of alternatives each (the
@@ -118,22 +157,31 @@ ROLE_OUTPUTS: dict[str, tuple[tuple[str, ...], ...]] = {
     "disturbance": ((DISTURBANCE_TORQUE,),),
     "guidance": ((ATTITUDE_SETPOINT,), (RATE_SETPOINT,)),
     "controller": (COMMAND_TOPICS,),
+    "sensors": ((IMU,), (STAR_TRACKER,)),
+    "estimator": ((ESTIMATE_ATTITUDE,), (ESTIMATE_BODY_RATE,)),
 }
 
 #: what each node may read, all stamped t_k, for step k
 ROLE_INPUTS: dict[str, tuple[str, ...]] = {
     "plant": PLANT_INPUTS, "wheels": COMMAND_TOPICS, "disturbance": (ATTITUDE,), "guidance": (CLOCK,),
     "controller": CONTROLLER_INPUTS,
+    "sensors": (ATTITUDE, BODY_RATE, WHEEL_STATE),
+    "estimator": (IMU, STAR_TRACKER),
 }
 
-def graph_subscribers(external=()) -> dict[str, int]:
+
+def graph_subscribers(external=(), feedback: str | None = None) -> dict[str, int]:
     """How many of the package's graph nodes subscribe to each topic (the recorder comes on top), the nodes
-    named in ``external`` (played from outside) left out."""
+    named in ``external`` (played from outside) left out; ``feedback`` (``truth`` or ``estimate``) when the
+    sensing loop runs, else None."""
     out: dict[str, int] = {}
     for role, inputs in ROLE_INPUTS.items():
-        if role not in external:
-            for topic in inputs:
-                out[topic] = out.get(topic, 0) + 1
+        if role in external or (feedback is None and role in ("sensors", "estimator")):
+            continue
+        for topic in inputs:
+            if role == "controller" and feedback == "estimate":
+                topic = FEEDBACK_REMAP.get(topic, topic)
+            out[topic] = out.get(topic, 0) + 1
     return out
 
 
@@ -159,7 +207,7 @@ def episode_topics(external=()) -> list[str]:
 MODEL_TOPICS: dict[str, str] = {FLEXIBLE_MODE: "geometry_msgs/msg/Vector3Stamped"}
 
 #: everything a run records
-RECORDED_TOPICS: dict[str, str] = {**STEP_TOPICS, **MODEL_TOPICS,
+RECORDED_TOPICS: dict[str, str] = {**STEP_TOPICS, **MODEL_TOPICS, **SENSING_TOPICS,
                                    PARAMETER_EVENTS: "rcl_interfaces/msg/ParameterEvent"}
 
 

@@ -17,7 +17,7 @@ import numpy as np
 from builtin_interfaces.msg import Time
 from geometry_msgs.msg import QuaternionStamped, Vector3Stamped
 from rclpy.serialization import deserialize_message
-from sensor_msgs.msg import JointState
+from sensor_msgs.msg import Imu, JointState
 
 from attitude_sil.ros.contract import STEP_TOPICS, message_class
 
@@ -31,7 +31,15 @@ __all__ = [
     "vector_msg",
     "joint_state_msg",
     "decode_step_messages",
+    "imu_msg",
+    "star_tracker_msg",
+    "imu_rate",
+    "imu_orientation",
+    "ABSENT",
 ]
+
+#: REP 145: a field a sensor does not measure has element 0 of its covariance set to this
+ABSENT = -1.0
 
 
 def stamp_to_ns(stamp) -> int:
@@ -114,3 +122,59 @@ def decode_step_messages(topic: str, items: Iterable[tuple[int, bytes]]) -> tupl
     width = 4 if STEP_TOPICS[topic].endswith("QuaternionStamped") else 3
     values = np.array(rows, dtype=float) if rows else np.empty((0, width))
     return np.array(times, dtype=np.int64), values
+
+
+def _diag(values) -> list[float]:
+    v = [float(x) for x in values]
+    return [v[0], 0.0, 0.0, 0.0, v[1], 0.0, 0.0, 0.0, v[2]]
+
+
+def _absent() -> list[float]:
+    return [ABSENT] + [0.0] * 8
+
+
+def imu_msg(omega_B: Iterable[float], variance: Iterable[float], t_ns: int, frame_id: str = "body") -> Imu:
+    """A gyro reading as ``sensor_msgs/Imu``: angular velocity (3,) rad/s with its per-sample white-noise
+    variance (3,) (rad/s)^2 on the diagonal; orientation and linear acceleration absent (REP 145)."""
+    m = Imu()
+    m.header.stamp = ns_to_stamp(t_ns)
+    m.header.frame_id = frame_id
+    m.angular_velocity.x, m.angular_velocity.y, m.angular_velocity.z = (float(v) for v in omega_B)
+    m.angular_velocity_covariance = _diag(variance)
+    m.orientation_covariance = _absent()
+    m.linear_acceleration_covariance = _absent()
+    return m
+
+
+def star_tracker_msg(q: Iterable[float], variance: Iterable[float] | None, t_ns: int, frame_id: str = "body") -> Imu:
+    """A star tracker report as ``sensor_msgs/Imu``: orientation (x, y, z, w) with its noise variance (3,)
+    rad^2 per body axis on the diagonal, stamped with the exposure time; ``variance=None``: no attitude (an
+    outage: orientation absent too); angular velocity and linear acceleration absent (REP 145)."""
+    m = Imu()
+    m.header.stamp = ns_to_stamp(t_ns)
+    m.header.frame_id = frame_id
+    if variance is None:
+        m.orientation.w = 1.0
+        m.orientation_covariance = _absent()
+    else:
+        m.orientation.x, m.orientation.y, m.orientation.z, m.orientation.w = (float(v) for v in q)
+        m.orientation_covariance = _diag(variance)
+    m.angular_velocity_covariance = _absent()
+    m.linear_acceleration_covariance = _absent()
+    return m
+
+
+def imu_rate(msg) -> tuple[np.ndarray, np.ndarray]:
+    """An ``Imu``'s angular velocity (3,) rad/s and the diagonal (3,) of its covariance."""
+    w = msg.angular_velocity
+    c = np.asarray(msg.angular_velocity_covariance, dtype=float)
+    return np.array([w.x, w.y, w.z], dtype=float), c[[0, 4, 8]]
+
+
+def imu_orientation(msg) -> tuple[np.ndarray, np.ndarray] | None:
+    """An ``Imu``'s orientation (4,) and the diagonal (3,) of its covariance, or None where it is absent."""
+    c = np.asarray(msg.orientation_covariance, dtype=float)
+    if c[0] == ABSENT:
+        return None
+    o = msg.orientation
+    return np.array([o.x, o.y, o.z, o.w], dtype=float), c[[0, 4, 8]]

@@ -32,7 +32,8 @@ CORE_ALLOWED = {
     "plant": {"root", "plant"},
     "control": {"root", "plant", "control"},
     "analysis": {"root", "plant", "analysis"},
-    "sim": {"root", "plant", "control", "analysis", "sim"},
+    "sensing": {"root", "plant", "sensing"},
+    "sim": {"root", "plant", "control", "analysis", "sensing", "sim"},
 }
 ROS_PACKAGES = ("rclpy", "rcl_interfaces", "builtin_interfaces", "geometry_msgs", "sensor_msgs", "std_msgs",
                 "std_srvs", "rosgraph_msgs", "diagnostic_msgs", "rosidl_runtime_py")

@@ -33,7 +33,7 @@ from attitude_sil.core.sensing.mekf import Mekf, MekfSettings
 from attitude_sil.core.sensing.models import SensorSuite
 from attitude_sil.core.sim.batch import COMPILED_DISTURBANCES, TRAJECTORY_FIELDS, run_compiled
 from attitude_sil.core.sim.params import NODE_PARAMS
-from attitude_sil.core.sim.scenario import Scenario
+from attitude_sil.core.sim.scenario import Scenario, derived_values
 from attitude_sil.core.trajectory import EpisodeSummary, Trajectory, WheelStep
 from attitude_sil.errors import ScenarioError
 
@@ -374,14 +374,6 @@ class Sensing:
         return self.mekf.step(k, sample.omega_meas_B, sample.star_tracker), sample.omega_meas_B
 
 
-def estimator_initial_rpy_deg(scn: Scenario) -> list:
-    """The estimator's initial attitude: its own ``initial_attitude_rpy_deg`` if the scenario sets it, else the
-    plant's (what the mission knows at the start; the filter's initial sigma covers the rest)."""
-    if "initial_attitude_rpy_deg" in scn.explicit.get("estimator", {}):
-        return list(scn.values["estimator"]["initial_attitude_rpy_deg"])
-    return list(scn.values["plant"]["initial_attitude_rpy_deg"])
-
-
 def build_sensing(scn: Scenario, n_episodes: int = 1, seeds=None) -> Sensing | None:
     """The scenario's sensors and estimator for P episodes (None if it runs without them).
 
@@ -390,8 +382,8 @@ def build_sensing(scn: Scenario, n_episodes: int = 1, seeds=None) -> Sensing | N
     if not scn.has_sensors:
         return None
     suite = SensorSuite(scn.values["sensors"], scn.dt, n_episodes, seeds)
-    settings = MekfSettings.from_values(scn.values["estimator"], suite.gyro.errors.arw,
-                                        suite.star_tracker.errors.sigma_B, estimator_initial_rpy_deg(scn))
+    estimator = {**scn.values["estimator"], **derived_values(scn, "estimator")}
+    settings = MekfSettings.from_values(estimator, suite.gyro.errors.arw, suite.star_tracker.errors.sigma_B)
     mekf = Mekf(settings, scn.dt, n_episodes, suite.star_tracker.latency_steps)
     return Sensing(suite, mekf, scn.feedback)
 

@@ -267,6 +267,10 @@ NODE_PARAMS: dict[str, list[ParamSpec]] = {
            min_exclusive=True),
         _d("initial_bias_sigma_deg_h", 1.0, "1-sigma of the initial gyro bias error per axis, deg/h", min=0.0,
            min_exclusive=True),
+        _d("star_tracker.rate_hz", 4.0, "the star tracker's report rate the filter waits for, per s (the runner "
+           "copies the sensors' unless set)", min=0.0, min_exclusive=True),
+        _d("star_tracker.latency_s", 0.0, "the star tracker's latency the filter expects, s (the runner copies "
+           "the sensors' unless set)", min=0.0, max=10.0),
     ],
     SCENARIO_NODE: [
         ParamSpec("name", "string", "", "scenario name (read by the runner, not a node)"),

@@ -34,7 +34,7 @@ from attitude_sil.core.sim.params import GLOBAL_NODE, NODE_PARAMS, SCENARIO_NODE
 from attitude_sil.errors import ScenarioError
 
 __all__ = ["ScenarioError", "Scenario", "load_scenario", "scenario_from_dict", "with_parameter_file", "yaml_problem",
-           "GRAPH_NODES", "SENSOR_NODES", "ALL_NODES", "PRESETS", "default_config_dir"]
+           "GRAPH_NODES", "SENSOR_NODES", "ALL_NODES", "PRESETS", "default_config_dir", "derived_values"]
 
 #: the preset scenarios of the five papers (``config/<name>.yaml``)
 PRESETS = ("hst_roll_step", "hawaiisat_lvlh", "flexible_axis", "cubesat_1u", "pitch_axis")
@@ -176,6 +176,20 @@ class Scenario:
         }
 
 
+#: what a node takes from another node's parameters unless the scenario sets it: node -> name -> (node, name)
+DERIVED = {"estimator": {"initial_attitude_rpy_deg": ("plant", "initial_attitude_rpy_deg"),
+                         "star_tracker.rate_hz": ("sensors", "star_tracker.rate_hz"),
+                         "star_tracker.latency_s": ("sensors", "star_tracker.latency_s")}}
+
+
+def derived_values(scn: Scenario, node: str) -> dict[str, Any]:
+    """The values ``node`` takes from another node's unless the scenario sets them (:data:`DERIVED`): the
+    estimator starts from the plant's initial attitude and expects the sensors' star tracker schedule."""
+    mine = scn.explicit.get(node, {})
+    return {name: copy.deepcopy(scn.values[src][src_name]) for name, (src, src_name) in DERIVED.get(node, {}).items()
+            if name not in mine}
+
+
 def _check_consistency(scn: Scenario) -> None:
     periods = {n: scn.values[n]["control_period"] for n in ALL_NODES}
     if len(set(periods.values())) > 1:
@@ -200,6 +214,11 @@ def _check_consistency(scn: Scenario) -> None:
             SensorSuite(scn.values["sensors"], dt)  # the tracker's period and latency in whole steps, the outages
         except ScenarioError as exc:
             raise ScenarioError(f"{scn.source}: {exc}") from None
+        for name in ("star_tracker.rate_hz", "star_tracker.latency_s"):
+            mine, theirs = scn.values["estimator"][name], scn.values["sensors"][name]
+            if name in scn.explicit.get("estimator", {}) and mine != theirs:
+                raise ScenarioError(f"{scn.source}: estimator.{name} = {mine:g} but the sensors' is {theirs:g}: the "
+                                    "filter would wait for reports that do not come (leave it unset to follow them)")
 
 
 def scenario_from_dict(data: Any, source: str = "<dict>", check: bool = True) -> Scenario:
