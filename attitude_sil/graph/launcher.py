@@ -29,15 +29,24 @@ from rclpy.parameter import Parameter
 
 from attitude_sil.core.sim.paramfile import node_key
 from attitude_sil.core.sim.params import spec_for
-from attitude_sil.core.sim.scenario import GRAPH_NODES, Scenario
+from attitude_sil.core.sim.scenario import Scenario, derived_values
 from attitude_sil.errors import RunError
 from attitude_sil.nodes.controller_node import ControllerNode
 from attitude_sil.nodes.disturbance_node import DisturbanceNode
+from attitude_sil.nodes.estimator_node import EstimatorNode
 from attitude_sil.nodes.guidance_node import GuidanceNode
 from attitude_sil.nodes.plant_node import PlantNode
 from attitude_sil.nodes.recorder_node import Recorder
+from attitude_sil.nodes.sensors_node import SensorsNode
 from attitude_sil.nodes.wheels_node import WheelsNode
-from attitude_sil.ros.contract import PRODUCERS, ROLE_OUTPUTS, STEP_TOPICS, clock_remap, graph_subscribers
+from attitude_sil.ros.contract import (
+    PRODUCERS,
+    ROLE_OUTPUTS,
+    STEP_TOPICS,
+    clock_remap,
+    feedback_remap,
+    graph_subscribers,
+)
 from attitude_sil.ros.parameters import typed_parameter
 
 __all__ = ["NODE_CLASSES", "namespace_kwargs", "node_overrides", "start_nodes", "start_processes", "stop_processes",
@@ -45,7 +54,8 @@ __all__ = ["NODE_CLASSES", "namespace_kwargs", "node_overrides", "start_nodes", 
 
 #: the node class of each graph node name
 NODE_CLASSES = {"plant": PlantNode, "wheels": WheelsNode, "disturbance": DisturbanceNode,
-                "guidance": GuidanceNode, "controller": ControllerNode}
+                "guidance": GuidanceNode, "controller": ControllerNode, "sensors": SensorsNode,
+                "estimator": EstimatorNode}
 
 
 def namespace_kwargs(namespace: str | None) -> dict:
@@ -56,8 +66,9 @@ def namespace_kwargs(namespace: str | None) -> dict:
 
 
 def node_overrides(scn: Scenario, node: str, extra: dict[str, Any]) -> dict[str, Any]:
-    """What node ``node`` is given: the scenario's explicit values, then ``extra`` where it declares them."""
-    values = dict(scn.explicit.get(node, {}))
+    """What node ``node`` is given: the scenario's explicit values and those it derives from other nodes
+    (:func:`~attitude_sil.core.sim.scenario.derived_values`), then ``extra`` where it declares them."""
+    values = {**scn.explicit.get(node, {}), **derived_values(scn, node)}
     values.update({k: v for k, v in extra.items() if k in scn.values[node]})
     return values
 
@@ -75,13 +86,17 @@ def start_nodes(scn: Scenario, extra: dict[str, Any], context, executor, nodes: 
         A node refused its parameters.
     """
     plant = None
-    for name in (n for n in GRAPH_NODES if n not in skip):
+    for name in (n for n in scn.nodes if n not in skip):
         values = node_overrides(scn, name, extra)
         # an empty list cannot be typed through an override; every empty value is a default here
         overrides = [typed_parameter(spec_for(name, k), v) for k, v in values.items() if v != []]
         overrides.append(Parameter("use_sim_time", Parameter.Type.BOOL, True))
+        kwargs = dict(node_kwargs or {})
+        if name == "controller" and feedback_remap(scn.feedback):  # it reads the estimate
+            args = kwargs.get("cli_args") or ["--ros-args"]
+            kwargs["cli_args"] = [*args, *feedback_remap(scn.feedback)]
         try:
-            node = NODE_CLASSES[name](context=context, parameter_overrides=overrides, **(node_kwargs or {}))
+            node = NODE_CLASSES[name](context=context, parameter_overrides=overrides, **kwargs)
         except ValueError as exc:
             raise RunError(str(exc)) from None
         if quiet:
@@ -98,7 +113,7 @@ def start_processes(scn: Scenario, extra: dict[str, Any], tmp: Path,
     """Start one process per node but those in ``skip``, each with a parameter file written to ``tmp``;
     ``quiet`` processes log warnings and errors only."""
     children = []
-    for name in (n for n in GRAPH_NODES if n not in skip):
+    for name in (n for n in scn.nodes if n not in skip):
         values = {k: v for k, v in node_overrides(scn, name, extra).items() if v != []}
         values["use_sim_time"] = True
         path = tmp / f"{name}.yaml"
@@ -109,6 +124,8 @@ def start_processes(scn: Scenario, extra: dict[str, Any], tmp: Path,
             cmd += ["-r", f"__ns:=/{namespace}", *clock_remap(namespace)]
         if quiet:
             cmd += ["--log-level", "warn"]
+        if name == "controller":
+            cmd += feedback_remap(scn.feedback)
         children.append(subprocess.Popen(cmd, stdin=subprocess.DEVNULL))
     return children
 
@@ -140,11 +157,12 @@ def check_children(children: list[subprocess.Popen], when: str = "") -> None:
 
 
 def wait_connected(recorder: Recorder, spin: Callable[[float], None], nodes: list[Node],
-                   children: list[subprocess.Popen], timeout: float, external=()) -> None:
+                   children: list[subprocess.Popen], timeout: float, external=(), feedback: str | None = None) -> None:
     """Spin until every publisher has met every subscriber it should (matched, not merely seen).
 
     ``external``: the graph nodes not started here, whose topics and
-    subscriptions are not waited for (:func:`wait_external` waits for them).
+    subscriptions are not waited for (:func:`wait_external` waits for them);
+    ``feedback``: ``truth`` or ``estimate`` when the sensing loop runs, else None.
 
     Raises
     ------
@@ -175,7 +193,7 @@ def wait_connected(recorder: Recorder, spin: Callable[[float], None], nodes: lis
         for name, sub in recorder.subs.items():
             if name in STEP_TOPICS and PRODUCERS[name] not in external and sub.get_publisher_count() < 1:
                 return False
-        for name, n in graph_subscribers(external).items():
+        for name, n in graph_subscribers(external, feedback).items():
             if recorder.count_subscribers(recorder.resolved[name]) < n + 1:
                 return False
         return True

@@ -34,7 +34,7 @@ from attitude_sil.core.analysis.running_metrics import EpisodeAccumulator
 from attitude_sil.core.control import registry
 from attitude_sil.core.sim.engine import check_episode, schedule_from_scenario, simulate
 from attitude_sil.core.sim.params import spec_for
-from attitude_sil.core.sim.scenario import GRAPH_NODES, Scenario
+from attitude_sil.core.sim.scenario import Scenario
 from attitude_sil.core.trajectory import Trajectory
 from attitude_sil.errors import AttitudeSilError, BagWriteError, RunError
 from attitude_sil.graph.launcher import (
@@ -53,6 +53,7 @@ from attitude_sil.ros.contract import (
     COMMAND_TOPICS,
     EXTERNAL,
     PRODUCERS,
+    SENSING_STEP_TOPICS,
     UNKNOWN_NODE,
     WHEEL_TORQUE,
     check_namespace,
@@ -237,7 +238,7 @@ class GraphSession:
                 self.plant = start_nodes(self.scn, self.extra, self.context, self.executor, self.nodes, kw,
                                          skip=self.external, quiet=self.quiet)
             wait_connected(self.recorder, self.spin, self.nodes, self.children, self.connect_timeout,
-                           external=self.external)
+                           external=self.external, feedback=self.scn.feedback if self.scn.has_sensors else None)
             if self.external:
                 wait_external(self.recorder, self.spin, self.nodes, self.children, self.external,
                               self.external_timeout)
@@ -279,7 +280,7 @@ class GraphSession:
         schedule = _schedule(self.scn, self.duration)
         accumulator = EpisodeAccumulator(self.scn.values["scenario"], self.scn.param("guidance", "step_time"),
                                          self.controller, schedule or None)
-        assembler = StepAssembler(accumulator)
+        assembler = StepAssembler(accumulator, estimate=self.scn.has_sensors)
         self.recorder.on_controller = _live_swaps(accumulator, schedule, int(round(self.scn.dt * 1e9)))
         self.recorder.start_episode(writer, keeping=keep_trajectory,
                                     sink=None if keep_trajectory else assembler.add)
@@ -294,7 +295,7 @@ class GraphSession:
             if self.recorder.latency is not None:
                 self.recorder.latency.clear()
             spin_episode(self.recorder, self.spin, self.plant, self.children, self.scn.steps(self.duration),
-                         self.scn, prog, schedule, self.foreign, episode_topics(self.external),
+                         self.scn, prog, schedule, self.foreign, self.episode_topics(),
                          lambda: call_reset(self.recorder, self.spin, self.connect_timeout))
             wall = time.monotonic() - wall0
             prog.update(self.duration, force=True)
@@ -323,12 +324,20 @@ class GraphSession:
         metrics["bag"] = None if bag is None else str(bag)
         return RunResult(metrics=metrics, bag=bag, counts=dict(self.recorder.counts), trajectory=traj)
 
+    def episode_topics(self) -> list[str]:
+        """The topics an episode fills, one message per step each: the lockstep's, and the sensing loop's
+        where it runs (its nodes not external)."""
+        topics = episode_topics(self.external)
+        if self.scn.has_sensors:
+            topics += [t for t in SENSING_STEP_TOPICS if PRODUCERS[t] not in self.external]
+        return topics
+
     def _bag_writer(self, record_dir: str | Path, controller_params: dict | None) -> BagWriter:
         """The episode's bag, with the parameters of the nodes the runner started and the scenario section."""
         extra = dict(self.extra)
         if controller_params:
             extra.update(controller_params)
-        own = [n for n in GRAPH_NODES if n not in self.external]  # what it knows of the nodes it ran
+        own = [n for n in self.scn.nodes if n not in self.external]  # what it knows of the nodes it ran
         try:
             return BagWriter(record_dir, custom_data={PARAMETERS_KEY: self.scn.parameters_yaml(extra, own),
                                                       SCENARIO_KEY: self.scn.scenario_yaml()})
@@ -438,9 +447,9 @@ def check_external(external, controller: str | None, scn: Scenario) -> tuple[str
         A name that is not a graph node, or an external controller asked for a law or a swap.
     """
     names = tuple(dict.fromkeys(external or ()))
-    unknown = [n for n in names if n not in GRAPH_NODES]
+    unknown = [n for n in names if n not in scn.nodes]
     if unknown:
-        raise RunError(f"--external: {unknown[0]!r} is not a node of the graph (one of: {', '.join(GRAPH_NODES)})")
+        raise RunError(f"--external: {unknown[0]!r} is not a node of the graph (one of: {', '.join(scn.nodes)})")
     if "controller" in names:
         if controller is not None:
             raise RunError("--external controller: the controller is not attitude-sil's, so --controller "

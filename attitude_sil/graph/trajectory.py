@@ -18,6 +18,10 @@ from attitude_sil.ros.contract import (
     BODY_RATE,
     COMMAND_TOPIC,
     DISTURBANCE_TORQUE,
+    ESTIMATE_ATTITUDE,
+    ESTIMATE_ATTITUDE_SIGMA,
+    ESTIMATE_BODY_RATE,
+    ESTIMATE_GYRO_BIAS,
     RATE_SETPOINT,
     STEP_TOPICS,
     WHEEL_MOMENTUM,
@@ -32,7 +36,12 @@ __all__ = ["KEPT_TOPICS", "StepAssembler", "trajectory_from_messages"]
 
 #: the topics an episode keeps in memory to build its trajectory
 KEPT_TOPICS = (ATTITUDE, BODY_RATE, ATTITUDE_SETPOINT, RATE_SETPOINT, WHEEL_TORQUE, WHEEL_MOMENTUM,
-               DISTURBANCE_TORQUE, WHEEL_STATE, *COMMAND_TOPIC.values())
+               DISTURBANCE_TORQUE, WHEEL_STATE, *COMMAND_TOPIC.values(), ESTIMATE_ATTITUDE, ESTIMATE_BODY_RATE,
+               ESTIMATE_GYRO_BIAS, ESTIMATE_ATTITUDE_SIGMA)
+
+#: Trajectory field <- topic of the sensing loop (absent without it)
+_ESTIMATE_FIELDS = {"q_BN_est": ESTIMATE_ATTITUDE, "omega_BN_B_est": ESTIMATE_BODY_RATE,
+                    "gyro_bias_est": ESTIMATE_GYRO_BIAS, "attitude_sigma": ESTIMATE_ATTITUDE_SIGMA}
 
 #: Trajectory field <- topic
 _FIELDS = {"q_BN": ATTITUDE, "omega_BN_B": BODY_RATE, "q_RN": ATTITUDE_SETPOINT, "tau_c_B": WHEEL_TORQUE,
@@ -80,10 +89,13 @@ def trajectory_from_messages(kept: dict[str, list[tuple[int, bytes]]]) -> Trajec
         for t, v in zip(times, values, strict=True):
             commands.setdefault(int(t), (kind, v))
     wheel_t, (angle, speed, effort) = _wheel_states(kept.get(WHEEL_STATE, []))
-    n = min([len(t) for t, _ in arrays.values()] + [len(commands), len(wheel_t)])
+    estimates = {name: decode_step_messages(topic, kept[topic]) for name, topic in _ESTIMATE_FIELDS.items()
+                 if kept.get(topic)}
+    n = min([len(t) for t, _ in (*arrays.values(), *estimates.values())] + [len(commands), len(wheel_t)])
     times = arrays["q_BN"][0][:n]
     cmd_times = sorted(commands)[:n]
     return Trajectory(
+        **{name: values[None, :n] for name, (_, values) in estimates.items()},
         t=times * 1e-9,
         q_BN=arrays["q_BN"][1][None, :n],
         omega_BN_B=arrays["omega_BN_B"][1][None, :n],
@@ -104,16 +116,18 @@ class StepAssembler:
     """Hands an :class:`EpisodeAccumulator` each step of a live episode once its messages are all in.
 
     A step needs ``attitude``, ``attitude_setpoint``, ``wheel_torque`` and its
-    command (``voltage_cmd`` or ``torque_cmd``); steps go to the accumulator in
+    command (``voltage_cmd`` or ``torque_cmd``), and ``estimate/attitude`` with
+    ``estimate=True`` (the sensing loop runs); steps go to the accumulator in
     stamp order, the first copy of a message counting (as
     :func:`trajectory_from_messages` takes them). Only the steps not yet
     complete are held: a few in a lockstep run.
     """
 
-    _WIDTH = {ATTITUDE: 4, ATTITUDE_SETPOINT: 4, WHEEL_TORQUE: 3}
+    _WIDTH = {ATTITUDE: 4, ATTITUDE_SETPOINT: 4, WHEEL_TORQUE: 3, ESTIMATE_ATTITUDE: 4}
 
-    def __init__(self, accumulator: EpisodeAccumulator) -> None:
+    def __init__(self, accumulator: EpisodeAccumulator, estimate: bool = False) -> None:
         self.accumulator = accumulator
+        self.parts = 5 if estimate else 4  # with the sensing loop, a step waits for its estimate too
         self.pending: dict[int, dict[str, np.ndarray]] = {}
         self.done = -1  # stamp of the last step handed on, ns
         self.steps = 0
@@ -123,7 +137,7 @@ class StepAssembler:
         if topic in COMMAND_TOPIC.values():
             part = "command"
             width = 3
-        elif topic in self._WIDTH:
+        elif topic in self._WIDTH and (topic != ESTIMATE_ATTITUDE or self.parts == 5):
             part, width = topic, self._WIDTH[topic]
         else:
             return
@@ -136,10 +150,10 @@ class StepAssembler:
         while self.pending:
             first = min(self.pending)
             parts = self.pending[first]
-            if len(parts) < 4:
+            if len(parts) < self.parts:
                 return
             del self.pending[first]
             self.accumulator.add(first * 1e-9, parts[ATTITUDE], parts[ATTITUDE_SETPOINT], parts[WHEEL_TORQUE],
-                                 parts["command"])
+                                 parts["command"], parts.get(ESTIMATE_ATTITUDE))
             self.done = first
             self.steps += 1

@@ -20,7 +20,7 @@ import numpy as np
 
 from attitude_sil.core.plant.quaternion import euler_from_quat, quat_conjugate, quat_error, unit_or_none
 from attitude_sil.core.sim.engine import build_controller
-from attitude_sil.core.sim.lockstep import StepSequencer
+from attitude_sil.core.sim.lockstep import StepInputs, StepSequencer
 from attitude_sil.ros.contract import ATTITUDE, ATTITUDE_ERROR, ATTITUDE_SETPOINT, COMMAND_TOPIC, CONTROLLER_INPUTS
 from attitude_sil.ros.convert import message_to_array, stamp_to_ns, vector_msg
 from attitude_sil.ros.node import SchemaNode, run_node
@@ -40,7 +40,7 @@ class ControllerNode(SchemaNode):
         for name in INPUTS:
             self.step_subscription(name, lambda m, n=name: self._on_input(n, message_to_array(m)[None], m))
         self.seq = StepSequencer()
-        self._pending: dict[int, dict[str, np.ndarray]] = {}
+        self.inputs = StepInputs(INPUTS)
         self._rebuild()
 
     def _rebuild(self) -> None:
@@ -68,11 +68,9 @@ class ControllerNode(SchemaNode):
                                         f"{np.linalg.norm(value):.6g}); ignored", throttle_duration_sec=1.0)
                 return
             value = unit
-        slot = self._pending.setdefault(t, {})
-        slot.setdefault(name, value)  # the first valid message of a step counts, as in the plant
-        if len(slot) < len(INPUTS):
+        slot = self.inputs.add(name, t, value)  # the first valid message of a step counts, as in the plant
+        if slot is None:
             return
-        del self._pending[t]
         kind = self.seq.classify(t, self.dt_ns)
         if kind == StepSequencer.NEW:
             self._rebuild()
@@ -80,9 +78,7 @@ class ControllerNode(SchemaNode):
             self.get_logger().error(f"inputs stamped {t * 1e-9:.6f} s out of sequence ({kind}); ignored",
                                     throttle_duration_sec=1.0)
             return
-        # a step went through: anything older can never complete (a stray stamp completes nothing here)
-        for stale in [s for s in self._pending if s < t]:
-            del self._pending[stale]
+        self.inputs.taken(t)
         u = self.core.compute(*(slot[name] for name in INPUTS), t // self.dt_ns)
         err = euler_from_quat(quat_conjugate(quat_error(slot[ATTITUDE], slot[ATTITUDE_SETPOINT])))
         self.pub_cmd[self.core.kind].publish(vector_msg(u[0], t, "body"))

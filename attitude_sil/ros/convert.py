@@ -19,7 +19,7 @@ from geometry_msgs.msg import QuaternionStamped, Vector3Stamped
 from rclpy.serialization import deserialize_message
 from sensor_msgs.msg import Imu, JointState
 
-from attitude_sil.ros.contract import STEP_TOPICS, message_class
+from attitude_sil.ros.contract import RECORDED_TOPICS, message_class
 
 __all__ = [
     "stamp_to_ns",
@@ -108,18 +108,18 @@ def decode_step_messages(topic: str, items: Iterable[tuple[int, bytes]]) -> tupl
     Parameters
     ----------
     topic : str
-        A relative step topic name of :data:`~attitude_sil.ros.contract.STEP_TOPICS`
-        carrying a stamped quaternion or vector.
+        A relative topic name of :data:`~attitude_sil.ros.contract.RECORDED_TOPICS`
+        carrying a stamped quaternion or vector (a step topic, or the estimator's).
     items : iterable of (int, bytes)
         ``(stamp ns, CDR bytes)``.
     """
     by_t: dict[int, bytes] = {}
     for t, data in items:
         by_t.setdefault(t, data)
-    cls = message_class(STEP_TOPICS[topic])
+    cls = message_class(RECORDED_TOPICS[topic])
     times = sorted(by_t)
     rows = [message_to_array(deserialize_message(by_t[t], cls)) for t in times]
-    width = 4 if STEP_TOPICS[topic].endswith("QuaternionStamped") else 3
+    width = 4 if RECORDED_TOPICS[topic].endswith("QuaternionStamped") else 3
     values = np.array(rows, dtype=float) if rows else np.empty((0, width))
     return np.array(times, dtype=np.int64), values
 

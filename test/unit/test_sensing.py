@@ -16,9 +16,18 @@ import pytest
 from scipy import stats
 from scipy.optimize import nnls
 
-from attitude_sil.core.sensing.mekf import Mekf, MekfSettings, attitude_error_B, rotation_quaternion, transition
-from attitude_sil.core.sensing.models import (ARCSEC, DEG, Gyro, GyroErrors, StarTracker, StarTrackerErrors,
-                                              Tachometer, allan_variance_model)
+from attitude_sil.core.plant.quaternion import attitude_error_B
+from attitude_sil.core.sensing.mekf import Mekf, MekfSettings, rotation_quaternion, transition
+from attitude_sil.core.sensing.models import (
+    ARCSEC,
+    DEG,
+    Gyro,
+    GyroErrors,
+    StarTracker,
+    StarTrackerErrors,
+    Tachometer,
+    allan_variance_model,
+)
 from attitude_sil.core.sim.engine import build_sensing, simulate
 from attitude_sil.core.sim.scenario import load_scenario
 from attitude_sil.errors import ScenarioError

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from attitude_sil.core.analysis.pointing import pointing_errors, pointing_metrics, pointing_start
 from attitude_sil.core.plant.quaternion import euler_from_quat, quat_error, quat_multiply
 from attitude_sil.core.trajectory import EpisodeSummary, Trajectory
 
@@ -385,6 +386,9 @@ def episode_report(scn, tr, controller_type: str, duration_s: float, wall_s: flo
     for key in _EXTRA_KEYS:
         if key in m:
             out[key] = _finite_or_none(float(m[key][0]))
+    ape, ake = pointing_errors(tr.q_BN[0], tr.q_RN[0], None if tr.q_BN_est is None else tr.q_BN_est[0])
+    settle = float(m["settling_time_s"][0]) if "settling_time_s" in m else None
+    out.update(pointing_metrics(tr.t, ape, ake, pointing_start(s, settle)))
     if schedule:
         bounds = [0] + [k for _, k, _ in schedule] + [n]
         kinds = [controller_type] + [kind for _, _, kind in schedule]

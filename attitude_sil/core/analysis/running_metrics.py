@@ -28,8 +28,11 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
+
 from attitude_sil.core.analysis.metric_rows import euler_axis, first_crossing
 from attitude_sil.core.analysis.metrics import _EXTRA_KEYS, METRIC_KEYS, PAPER_001_SETTLING_ANGLE, _finite_or_none
+from attitude_sil.core.analysis.pointing import pointing_errors, pointing_metrics, pointing_start
 
 __all__ = ["EpisodeAccumulator"]
 
@@ -138,12 +141,17 @@ class EpisodeAccumulator:
         self.z_settle = _NAN
         self.z_final = _NAN
         self.segments: list[_Segment] = []
+        # pointing (APE, AKE): every step's quaternions, for percentiles after a start known only at the end
+        self.scenario_values = s
+        self._pointing: list[tuple] = []  # (t, q_BN, q_RN, q_BN_est or None)
         self._bounds = [k for _, k, _ in self.schedule]
         self._kinds = [kind for _, _, kind in self.schedule]
 
     # -- feeding --------------------------------------------------------------
-    def add(self, t: float, q_BN, q_RN, tau_c_B, u_cmd) -> None:
-        """One step: time (s), q_BN and q_RN (4,), tau_c_B (3,) N m over the step, u_cmd (3,)."""
+    def add(self, t: float, q_BN, q_RN, tau_c_B, u_cmd, q_BN_est=None) -> None:
+        """One step: time (s), q_BN and q_RN (4,), tau_c_B (3,) N m over the step, u_cmd (3,), and the
+        estimator's q_BN (4,) where the sensing loop runs."""
+        self._pointing.append((t, q_BN, q_RN, q_BN_est))
         q_BN = tuple(float(v) for v in q_BN)
         q_RN = tuple(float(v) for v in q_RN)
         tau_norm = math.sqrt(float(tau_c_B[0]) ** 2 + float(tau_c_B[1]) ** 2 + float(tau_c_B[2]) ** 2)
@@ -326,6 +334,17 @@ class EpisodeAccumulator:
         for key in _EXTRA_KEYS:
             if key in m:
                 out[key] = _finite_or_none(m[key])
+        out.update(self.pointing(m.get("settling_time_s")))
         if self.schedule or len(self.segments) > 1:
             out["segments"] = [seg.report(seg.t_end) for seg in self.segments]
         return out
+
+    def pointing(self, settling_time_s: float | None) -> dict:
+        """APE and AKE per body axis (:func:`~attitude_sil.core.analysis.pointing.pointing_metrics`)."""
+        if not self._pointing:
+            return pointing_metrics(np.zeros(0), np.zeros((0, 3)), None, 0.0)
+        t = np.array([p[0] for p in self._pointing])
+        q_BN, q_RN = (np.array([p[i] for p in self._pointing], dtype=float) for i in (1, 2))
+        q_est = None if self._pointing[0][3] is None else np.array([p[3] for p in self._pointing], dtype=float)
+        ape, ake = pointing_errors(q_BN, q_RN, q_est)
+        return pointing_metrics(t, ape, ake, pointing_start(self.scenario_values, settling_time_s))

@@ -24,6 +24,7 @@ __all__ = [
     "quat_error",
     "error_vector",
     "quat_derivative",
+    "attitude_error_B",
 ]
 
 
@@ -169,6 +170,16 @@ def error_vector(q_BN: np.ndarray, q_RN: np.ndarray) -> np.ndarray:
     quaternion error vector ... used as input to the controller").
     """
     return -quat_error(q_BN, q_RN)[..., :3]
+
+
+def attitude_error_B(q_ref: np.ndarray, q: np.ndarray) -> np.ndarray:
+    """The small rotation (..., 3) rad taking ``q_ref`` to ``q`` in the body frame: 2 vec(q_ref* ⊗ q), short way.
+
+    Per body axis, about ``q - q_ref`` for small angles: with q_ref the setpoint and q the attitude it is the
+    pointing error (APE), with q_ref the truth and q the estimate the knowledge error (AKE).
+    """
+    d = quat_multiply(quat_conjugate(q_ref), q)
+    return 2.0 * np.where(d[..., 3:4] < 0.0, -d[..., :3], d[..., :3])
 
 
 def quat_derivative(q: np.ndarray, omega_B: np.ndarray) -> np.ndarray:

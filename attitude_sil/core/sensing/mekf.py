@@ -37,11 +37,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from attitude_sil.core.plant.quaternion import quat_conjugate, quat_from_euler, quat_multiply, quat_normalize
+from attitude_sil.core.plant.quaternion import attitude_error_B, quat_from_euler, quat_multiply, quat_normalize
 from attitude_sil.core.sensing.models import DEG, small_rotation
 from attitude_sil.errors import ScenarioError
 
-__all__ = ["MekfSettings", "Mekf", "Estimate", "rotation_quaternion", "attitude_error_B"]
+__all__ = ["MekfSettings", "Mekf", "Estimate", "rotation_quaternion"]
 
 #: smallest star-tracker noise the update assumes, rad (a perfect tracker would make the update singular)
 R_FLOOR = 1e-9
@@ -57,12 +57,6 @@ def rotation_quaternion(theta: np.ndarray) -> np.ndarray:
     safe = np.where(small, 1.0, angle)
     s = np.where(small, 0.5 - angle * angle / 48.0, np.sin(half) / safe)
     return np.concatenate([theta * s, np.cos(half)], axis=-1)
-
-
-def attitude_error_B(q_ref: np.ndarray, q: np.ndarray) -> np.ndarray:
-    """The small rotation (..., 3) rad taking q_ref to q in the body frame: 2 vec(q_ref* ⊗ q), short way."""
-    d = quat_multiply(quat_conjugate(q_ref), q)
-    return 2.0 * np.where(d[..., 3:4] < 0.0, -d[..., :3], d[..., :3])
 
 
 def _skew(w: np.ndarray) -> np.ndarray:
@@ -177,8 +171,13 @@ class Mekf:
         q[:3, 3:] = q[3:, :3] = -(su**2 * dt**2 / 2.0) * np.eye(3)
         q[3:, 3:] = su**2 * dt * np.eye(3)
         self.Q = q
-        self.R = np.diag(np.maximum(np.asarray(settings.star_tracker_sigma, dtype=float), R_FLOOR) ** 2)
+        self.set_star_tracker_variance(np.asarray(settings.star_tracker_sigma, dtype=float) ** 2)
         self.reset()
+
+    def set_star_tracker_variance(self, variance) -> None:
+        """The tracker's noise variance (3,) rad^2 per body axis, as its message reports it (the R of the update)."""
+        sigma = np.sqrt(np.asarray(variance, dtype=float))
+        self.R = np.diag(np.maximum(sigma, R_FLOOR) ** 2)
 
     def reset(self) -> None:
         """Step 0: the initial estimate and covariance, no history."""

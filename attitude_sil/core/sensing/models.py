@@ -378,7 +378,7 @@ class SensorSuite:
         if seeds.shape != (n_episodes,):
             raise ScenarioError(f"sensors: {seeds.size} seeds for {n_episodes} episodes")
         flat = list(values["star_tracker.outages_s"])
-        if len(flat) % 2 or any(b <= a for a, b in zip(flat[0::2], flat[1::2])):
+        if len(flat) % 2 or any(b <= a for a, b in zip(flat[0::2], flat[1::2], strict=False)):
             raise ScenarioError("sensors.star_tracker.outages_s must hold (start, end) pairs with end > start, s")
         self.gyro = Gyro(GyroErrors.from_values(values), dt, seeds)
         self.star_tracker = StarTracker(StarTrackerErrors.from_values(values), dt, seeds)

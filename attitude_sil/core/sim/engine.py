@@ -662,7 +662,9 @@ class _Run:
         self.swaps = dict(schedule_from_scenario(scn) if schedule is None else schedule)
         self.compiled = False
         if driver != "stepwise":
-            why = "the sensors and estimator run in the stepwise driver" if self.sensing else compiled_plan(*self.models)
+            why = compiled_plan(*self.models)
+            if self.sensing:
+                why = "the sensors and estimator run in the stepwise driver"
             if driver == "compiled" and why:
                 raise ScenarioError(f"the compiled driver does not run this scenario ({why}); use driver='auto'")
             self.compiled = not why

@@ -10,6 +10,8 @@ so the rules are unit-tested directly and the nodes only carry them out.
 
 * :class:`StepSequencer` - what a downstream node does with a stamp
   (new episode, next step, duplicate, mismatch).
+* :class:`StepInputs` - a node's inputs gathered by stamp until a step has
+  them all.
 * :class:`PlantLockstep` - the plant's episode: which input completes a step,
   when to publish, hold (``hold_at``), pace (``real_time_factor``), time out
   (``input_timeout``) and autostart.
@@ -22,7 +24,7 @@ from enum import Enum
 
 import numpy as np
 
-__all__ = ["StepSequencer", "PlantLockstep", "Action"]
+__all__ = ["StepSequencer", "StepInputs", "PlantLockstep", "Action"]
 
 
 class StepSequencer:
@@ -58,6 +60,33 @@ class StepSequencer:
             return self.MISMATCH
         self.last_ns = t_ns
         return kind
+
+
+class StepInputs:
+    """A node's inputs of each step, gathered by stamp until the step holds every one of ``names``.
+
+    The first valid message of a step counts (as in the plant); once the node
+    has taken a completed step (its stamp in sequence), :meth:`taken` drops
+    anything older, which can never complete (a stray stamp completes nothing).
+    """
+
+    def __init__(self, names: tuple[str, ...]) -> None:
+        self.names = tuple(names)
+        self.pending: dict[int, dict[str, object]] = {}
+
+    def add(self, name: str, t_ns: int, value) -> dict | None:
+        """Hold ``value`` of input ``name`` for stamp ``t_ns``; return the step's inputs once it has them all."""
+        slot = self.pending.setdefault(t_ns, {})
+        slot.setdefault(name, value)
+        if len(slot) < len(self.names):
+            return None
+        del self.pending[t_ns]
+        return slot
+
+    def taken(self, t_ns: int) -> None:
+        """The step of stamp ``t_ns`` went through: drop what is older."""
+        for stale in [s for s in self.pending if s < t_ns]:
+            del self.pending[stale]
 
 
 class Action(Enum):

@@ -1,0 +1,147 @@
+"""``estimator`` node: the attitude the flight software uses, from the gyro and the star tracker.
+
+A multiplicative extended Kalman filter on attitude and gyro bias
+(:class:`attitude_sil.core.sensing.mekf.Mekf`). For step k it waits for
+``imu`` stamped t_k and, when the star tracker's schedule
+(``star_tracker.rate_hz``, ``star_tracker.latency_s``) has a report due at
+step k, for ``star_tracker`` stamped with that report's exposure time; then it
+propagates on the gyro, updates with the report (rolling back to the exposure
+for the latency; a report with its orientation absent, an outage, is no
+update) and publishes, stamped t_k, ``estimate/attitude`` (QuaternionStamped,
+frame ``inertial``), ``estimate/body_rate`` (bias-corrected, rad/s),
+``estimate/gyro_bias`` (rad/s) and ``estimate/attitude_sigma`` (1-sigma per
+body axis, rad). The noise it assumes comes with the messages: the gyro's
+white-noise variance and the tracker's covariance (REP 145 fields).
+
+With ``feedback: estimate`` the controller's ``attitude`` and ``body_rate``
+are remapped to ``estimate/attitude`` and ``estimate/body_rate``. A node of
+the user's may take this one's place (``run --external estimator``).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from attitude_sil.core.plant.quaternion import unit_or_none
+from attitude_sil.core.sensing.mekf import Mekf, MekfSettings
+from attitude_sil.core.sensing.models import StarTrackerReport
+from attitude_sil.core.sim.lockstep import StepSequencer
+from attitude_sil.errors import ScenarioError
+from attitude_sil.ros.contract import (
+    ESTIMATE_ATTITUDE,
+    ESTIMATE_ATTITUDE_SIGMA,
+    ESTIMATE_BODY_RATE,
+    ESTIMATE_GYRO_BIAS,
+    IMU,
+    STAR_TRACKER,
+)
+from attitude_sil.ros.convert import imu_orientation, imu_rate, quaternion_msg, stamp_to_ns, vector_msg
+from attitude_sil.ros.node import SchemaNode, run_node
+
+
+class EstimatorNode(SchemaNode):
+    """The attitude filter in lockstep; see the module docstring."""
+
+    schema_name = "estimator"
+
+    def __init__(self, **kwargs) -> None:
+        super().__init__(**kwargs)
+        self.pub_q = self.step_publisher(ESTIMATE_ATTITUDE)
+        self.pub_w = self.step_publisher(ESTIMATE_BODY_RATE)
+        self.pub_b = self.step_publisher(ESTIMATE_GYRO_BIAS)
+        self.pub_s = self.step_publisher(ESTIMATE_ATTITUDE_SIGMA)
+        self.step_subscription(IMU, self._on_imu)
+        self.step_subscription(STAR_TRACKER, self._on_star_tracker)
+        self.seq = StepSequencer()
+        self.imu: dict[int, tuple[np.ndarray, np.ndarray]] = {}  # stamp -> (rate, variance)
+        self.star: dict[int, tuple[np.ndarray, np.ndarray] | None] = {}  # exposure stamp -> (q, variance) or None
+        self.filter: Mekf | None = None
+        self._schedule()
+
+    def _schedule(self) -> None:
+        dt = self.param("control_period")
+        self.dt_ns = int(round(dt * 1e9))
+        self.period_steps = max(1, int(round(1.0 / (self.param("star_tracker.rate_hz") * dt))))
+        self.latency_steps = int(round(self.param("star_tracker.latency_s") / dt))
+
+    def _due(self, k: int) -> bool:
+        j = k - self.latency_steps
+        return j >= 0 and j % self.period_steps == 0
+
+    def _start(self, variance: np.ndarray) -> None:
+        """A new episode: the filter from the parameters and the gyro's white-noise variance (rad/s)^2."""
+        self._schedule()
+        dt = self.param("control_period")
+        arw = float(np.sqrt(np.max(variance) * dt))
+        settings = MekfSettings.from_values(self.values(), arw, np.zeros(3))
+        self.filter = Mekf(settings, dt, 1, self.latency_steps)
+        self.k = 0
+
+    def _on_imu(self, msg) -> None:
+        t = stamp_to_ns(msg.header.stamp)
+        rate, variance = imu_rate(msg)
+        if not (self.finite(rate) and self.finite(variance)) or np.any(variance < 0.0):
+            self.get_logger().error(f"imu at t={t * 1e-9:.6f} s: angular velocity or its covariance not finite "
+                                    "(or negative); ignored", throttle_duration_sec=1.0)
+            return
+        kind = self.seq.classify(t, self.dt_ns)
+        if kind == StepSequencer.NEW:
+            self.imu.clear()
+            self.star = {s: v for s, v in self.star.items() if s == 0}  # what a past episode left is not ours
+            self._start(variance)
+        elif kind != StepSequencer.NEXT:
+            return
+        self.imu[t] = (rate, variance)
+        self._advance()
+
+    def _on_star_tracker(self, msg) -> None:
+        t = stamp_to_ns(msg.header.stamp)
+        got = imu_orientation(msg)
+        if got is not None:
+            q = unit_or_none(got[0][None])
+            if q is None or not self.finite(got[1]) or np.any(got[1] < 0.0):
+                self.get_logger().error(f"star_tracker at t={t * 1e-9:.6f} s: orientation not a finite unit "
+                                        "quaternion or covariance invalid; ignored", throttle_duration_sec=1.0)
+                return
+            got = (q, got[1])
+        self.star.setdefault(t, got)
+        self._advance()
+
+    def _advance(self) -> None:
+        """Run every step whose inputs are all here, in order."""
+        while self.filter is not None:
+            k = self.k
+            t = k * self.dt_ns
+            if t not in self.imu:
+                return
+            report = None
+            if self._due(k):
+                t_exp = (k - self.latency_steps) * self.dt_ns
+                if t_exp not in self.star:
+                    return
+                got = self.star.pop(t_exp)
+                if got is None:
+                    report = StarTrackerReport(k - self.latency_steps, np.array([[0.0, 0.0, 0.0, 1.0]]), False)
+                else:
+                    self.filter.set_star_tracker_variance(got[1])
+                    report = StarTrackerReport(k - self.latency_steps, got[0], True)
+            rate, _ = self.imu.pop(t)
+            try:
+                est = self.filter.step(k, rate[None], report)
+            except ScenarioError as exc:
+                self.get_logger().error(str(exc), throttle_duration_sec=1.0)
+                return
+            self.k = k + 1
+            self.pub_q.publish(quaternion_msg(est.q_BN[0], t, "inertial"))
+            self.pub_w.publish(vector_msg(est.omega_BN_B[0], t, "body"))
+            self.pub_b.publish(vector_msg(est.gyro_bias[0], t, "body"))
+            self.pub_s.publish(vector_msg(est.attitude_sigma[0], t, "body"))
+
+
+def main(args: list[str] | None = None) -> int:
+    """Console script ``estimator_node``."""
+    return run_node(EstimatorNode, args)
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,113 @@
+"""``sensors`` node: what the hardware reports of the plant's truth.
+
+Once it holds ``attitude`` and ``body_rate`` stamped t_k it samples the
+models of :class:`attitude_sil.core.sensing.models.SensorSuite` and publishes,
+stamped t_k, ``imu`` (``sensor_msgs/Imu``: the gyro's mean body rate over the
+last step with its per-sample white-noise variance; orientation and linear
+acceleration absent, REP 145) and, on the star tracker's schedule,
+``star_tracker`` (``sensor_msgs/Imu``: q_BN with its noise covariance, stamped
+with the exposure time; during an outage the orientation is absent). On
+``wheel_state`` stamped t_k it publishes ``wheel_speed`` (``JointState``: the
+Hall-sensor tachometer readings). Every noise parameter is a ROS parameter
+(docs/parameters.md); a draw depends only on (``seed``, source, step, axis),
+so a run is repeatable and equals the batch engine's (docs/sensors.md).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from attitude_sil.core.plant.quaternion import unit_or_none
+from attitude_sil.core.sensing.models import SensorSuite, Tachometer
+from attitude_sil.core.sim.lockstep import StepInputs, StepSequencer
+from attitude_sil.ros.contract import ATTITUDE, BODY_RATE, IMU, STAR_TRACKER, WHEEL_SPEED, WHEEL_STATE
+from attitude_sil.ros.convert import imu_msg, joint_state_msg, message_to_array, stamp_to_ns, star_tracker_msg
+from attitude_sil.ros.node import SchemaNode, run_node
+
+INPUTS = (ATTITUDE, BODY_RATE)
+
+
+class SensorsNode(SchemaNode):
+    """The gyro, the star tracker and the wheel tachometers in lockstep; see the module docstring."""
+
+    schema_name = "sensors"
+
+    def __init__(self, **kwargs) -> None:
+        super().__init__(**kwargs)
+        self.pub_imu = self.step_publisher(IMU)
+        self.pub_star = self.step_publisher(STAR_TRACKER)
+        self.pub_speed = self.step_publisher(WHEEL_SPEED)
+        for name in INPUTS:
+            self.step_subscription(name, lambda m, n=name: self._on_input(n, m))
+        self.step_subscription(WHEEL_STATE, self._on_wheel_state)
+        self.inputs = StepInputs(INPUTS)
+        self.seq = StepSequencer()
+        self.wheel_seq = StepSequencer()
+        self._rebuild()
+        self.tachometer = Tachometer(self.param("wheel_speed.counts_per_rev"), self.param("control_period"))
+
+    def _rebuild(self) -> None:
+        self.dt_ns = int(round(self.param("control_period") * 1e9))
+        self.core = SensorSuite(self.values(), self.param("control_period"))
+        self.gyro_variance = np.full(3, self.core.gyro.errors.white_std(self.core.gyro.dt) ** 2)
+        self.star_variance = self.core.star_tracker.errors.sigma_B ** 2
+
+    def check_parameters(self, pending: dict) -> str:
+        try:
+            SensorSuite({**self.values(), **pending}, self.param("control_period"))
+        except ValueError as exc:
+            return str(exc)
+        return ""
+
+    def _on_input(self, name: str, msg) -> None:
+        t = stamp_to_ns(msg.header.stamp)
+        value = message_to_array(msg)[None]
+        if value.shape[-1] == 4:
+            value = unit_or_none(value)  # None for a non-finite or non-unit quaternion
+        if value is None or not self.finite(value):
+            self.get_logger().error(f"{name} at t={t * 1e-9:.6f} s is not finite (or not a unit quaternion); "
+                                    "ignored", throttle_duration_sec=1.0)
+            return
+        slot = self.inputs.add(name, t, value)
+        if slot is None:
+            return
+        kind = self.seq.classify(t, self.dt_ns)
+        if kind == StepSequencer.NEW:
+            self._rebuild()
+        elif kind != StepSequencer.NEXT:
+            self.get_logger().error(f"state stamped {t * 1e-9:.6f} s out of sequence ({kind}); ignored",
+                                    throttle_duration_sec=1.0)
+            return
+        self.inputs.taken(t)
+        sample = self.core.sample(slot[ATTITUDE], slot[BODY_RATE], t // self.dt_ns)
+        report = sample.star_tracker
+        if report is not None:  # first, so the estimator holds it when the step's gyro reading comes
+            t_exp = report.exposure_step * self.dt_ns
+            self.pub_star.publish(star_tracker_msg(report.q_BN[0], self.star_variance if report.valid else None,
+                                                   t_exp))
+        self.pub_imu.publish(imu_msg(sample.omega_meas_B[0], self.gyro_variance, t))
+
+    def _on_wheel_state(self, msg) -> None:
+        t = stamp_to_ns(msg.header.stamp)
+        kind = self.wheel_seq.classify(t, self.dt_ns)
+        if kind == StepSequencer.NEW:
+            self.tachometer = Tachometer(self.param("wheel_speed.counts_per_rev"), self.param("control_period"))
+        elif kind != StepSequencer.NEXT:
+            return
+        angle = np.asarray(msg.position, dtype=float)
+        speed = np.asarray(msg.velocity, dtype=float)
+        if not (self.finite(angle) and self.finite(speed)) or angle.shape != speed.shape:
+            self.get_logger().error(f"wheel_state at t={t * 1e-9:.6f} s is not finite; ignored",
+                                    throttle_duration_sec=1.0)
+            return
+        reading = self.tachometer.sample(angle, speed)
+        self.pub_speed.publish(joint_state_msg(list(msg.name), np.zeros(0), reading, np.zeros(0), t))
+
+
+def main(args: list[str] | None = None) -> int:
+    """Console script ``sensors_node``."""
+    return run_node(SensorsNode, args)
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
