@@ -15,6 +15,16 @@ Launch arguments:
   scenario or parameter file, e.g. ``config/hawaiisat_lvlh.yaml``.
 * ``controller_type`` (default: the file's): ``pid``, ``fuzzy_pid``,
   ``ga_flc`` or ``geometric`` (as ``run --controller``).
+* ``feedback`` (default ``truth``): ``estimate`` also starts the ``sensors``
+  and ``estimator`` nodes (:data:`attitude_sil.core.sim.scenario.SENSOR_NODES`)
+  and remaps the controller's ``attitude`` and ``body_rate`` to
+  ``estimate/attitude`` and ``estimate/body_rate`` (as ``run --feedback``).
+* ``sensors`` (default ``false``): ``true`` starts the sensing nodes with
+  truth feedback (the estimate is published and recorded, the loop reads the
+  truth). The file's ``estimator`` section must give ``initial_attitude_rpy_deg``
+  and the star tracker's schedule where they differ from the defaults (the
+  runner copies them from the plant and the sensors; ``/**`` sets the schedule
+  for both, as ``config/hst_roll_step_sensors.yaml`` does).
 
 Unlike ``attitude-sil run``, nothing starts the episode: the nodes wait for
 ``plant/reset`` (``autostart`` is off by default; ``attitude-sil episode`` or
@@ -30,14 +40,16 @@ from launch.substitutions import LaunchConfiguration, PathJoinSubstitution, Pyth
 from launch_ros.actions import Node
 from launch_ros.substitutions import FindPackageShare
 
-from attitude_sil.core.sim.scenario import GRAPH_NODES
+from attitude_sil.core.sim.scenario import GRAPH_NODES, SENSOR_NODES
+from attitude_sil.ros.contract import FEEDBACK_REMAP
 
 PACKAGE = "attitude_sil"
 DEFAULT_PARAMS = ("config", "hst_roll_step.yaml")
 
 
 def generate_launch_description() -> LaunchDescription:
-    """The graph's five nodes and the launch arguments ``namespace``, ``params_file``, ``controller_type``."""
+    """The graph's nodes and the launch arguments ``namespace``, ``params_file``, ``controller_type``,
+    ``feedback`` and ``sensors``."""
     namespace = LaunchConfiguration("namespace")
     params_file = LaunchConfiguration("params_file")
     controller_type = LaunchConfiguration("controller_type")
@@ -45,6 +57,10 @@ def generate_launch_description() -> LaunchDescription:
     clock = PythonExpression(["'/' + '", namespace, "'.strip('/') + '/clock' if '", namespace,
                               "'.strip('/') else '/clock'"])
     chosen = PythonExpression(["'", controller_type, "' != ''"])
+    feedback = LaunchConfiguration("feedback")
+    estimate = PythonExpression(["'", feedback, "' == 'estimate'"])
+    sensing = PythonExpression(["'", feedback, "' == 'estimate' or '", LaunchConfiguration("sensors"),
+                                "'.lower() == 'true'"])
     actions = [
         DeclareLaunchArgument("namespace", default_value="", description="namespace of the whole graph"),
         DeclareLaunchArgument("params_file",
@@ -52,15 +68,27 @@ def generate_launch_description() -> LaunchDescription:
                               description="scenario / parameter YAML given to every node"),
         DeclareLaunchArgument("controller_type", default_value="",
                               description="pid, fuzzy_pid, ga_flc or geometric (default: the file's)"),
+        DeclareLaunchArgument("feedback", default_value="truth", choices=["truth", "estimate"],
+                              description="what the controller reads: truth or the estimator's output"),
+        DeclareLaunchArgument("sensors", default_value="false", choices=["true", "false"],
+                              description="run the sensors and the estimator with truth feedback too"),
     ]
     for name in GRAPH_NODES:
         common = dict(package=PACKAGE, executable=f"{name}_node", name=name, namespace=namespace,
                       remappings=[("/clock", clock)], output="screen", emulate_tty=True)
         parameters = [params_file, {"use_sim_time": True}]
         if name == "controller":
+            # with feedback:=estimate it reads the estimator's outputs (remapped onto themselves otherwise)
+            common["remappings"] = [*common["remappings"], *(
+                (src, PythonExpression(["'", dst, "' if ", estimate, " else '", src, "'"]))
+                for src, dst in FEEDBACK_REMAP.items())]
             actions.append(Node(**common, parameters=parameters, condition=UnlessCondition(chosen)))
             actions.append(Node(**common, parameters=[*parameters, {"controller_type": controller_type}],
                                 condition=IfCondition(chosen)))
         else:
             actions.append(Node(**common, parameters=parameters))
+    for name in SENSOR_NODES:
+        actions.append(Node(package=PACKAGE, executable=f"{name}_node", name=name, namespace=namespace,
+                            remappings=[("/clock", clock)], output="screen", emulate_tty=True,
+                            parameters=[params_file, {"use_sim_time": True}], condition=IfCondition(sensing)))
     return LaunchDescription(actions)

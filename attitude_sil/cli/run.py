@@ -35,6 +35,9 @@ def add(sub: argparse._SubParsersAction) -> None:
     rec.add_argument("--record", metavar="DIR", help="bag directory (default bags/<scenario>_<time>)")
     rec.add_argument("--no-record", action="store_true", help="do not record a bag")
     run.add_argument("--json", action="store_true", help="print the metrics as one JSON object, last line")
+    run.add_argument("--feedback", choices=("truth", "estimate"),
+                     help="what the controller reads: the plant's truth, or the estimator's output fed by the "
+                          "sensors node (default: the scenario's scenario.feedback, truth); docs/sensors.md")
     run.add_argument("--processes", action="store_true", help="one process per node (over DDS)")
     run.add_argument("--real-time", action="store_true", help="pace the plant at real time")
     run.add_argument("--quiet", action="store_true", help="no progress line, and the nodes log warnings and errors "
@@ -69,7 +72,6 @@ def execute(args: argparse.Namespace) -> int:
 
     from attitude_sil.cli.common import announce_domain, load_with_params
     from attitude_sil.cli.format import format_segments, format_table
-    from attitude_sil.core.sim.scenario import GRAPH_NODES
     from attitude_sil.errors import AttitudeSilError
     from attitude_sil.graph.session import run_graph
     from attitude_sil.storage.foxglove import FoxgloveLive, check_port
@@ -96,6 +98,8 @@ def execute(args: argparse.Namespace) -> int:
                                                  "schedule.controller_types": [kinds[i] for i in order]})
         except AttitudeSilError as exc:
             raise AttitudeSilError(f"--swap: {exc}") from None
+    if args.feedback is not None:
+        scn = scn.with_values("scenario", feedback=args.feedback)
     if not (math.isfinite(args.external_timeout) and args.external_timeout > 0):
         raise AttitudeSilError(f"--external-timeout must be a finite number of seconds > 0, got "
                                f"{args.external_timeout}")
@@ -116,7 +120,7 @@ def execute(args: argparse.Namespace) -> int:
         if args.foxglove is not None:
             live = FoxgloveLive(args.foxglove, host)
             # the Parameters panel: the package's nodes of the graph, through their parameter services
-            own = [n for n in GRAPH_NODES if n not in (args.external or ())]
+            own = [n for n in scn.nodes if n not in (args.external or ())]
             live.parameters = GraphParameters(args.namespace, own)
             pace = "as fast as it runs" if args.foxglove_fast else "at real time"
             print(f"Foxglove: open connection {live.url} (layout config/foxglove/attitude.json); the run is "

@@ -19,7 +19,8 @@ import xml.etree.ElementTree as ET
 import pytest
 import setuptools
 
-from attitude_sil.core.sim.scenario import GRAPH_NODES
+from attitude_sil.core.sim.scenario import GRAPH_NODES, SENSOR_NODES
+from attitude_sil.ros.contract import FEEDBACK_REMAP
 from conftest import LAUNCH_FILE, ROOT, launch_actions
 
 #: import name -> (package.xml key, or None where only a comment can say it is pip-only;
@@ -158,7 +159,7 @@ def test_the_tuner_dependencies_are_an_extra_the_default_test_install_includes(s
 
 def test_node_executables_import_without_the_tuner_dependencies():
     block = f"import sys\nfor m in {TUNER_ONLY!r}: sys.modules[m] = None\n"
-    nodes = "".join(f"import attitude_sil.nodes.{n}_node\n" for n in GRAPH_NODES)
+    nodes = "".join(f"import attitude_sil.nodes.{n}_node\n" for n in GRAPH_NODES + SENSOR_NODES)
     proc = subprocess.run([sys.executable, "-c", block + nodes], cwd=ROOT, capture_output=True, text=True,
                           timeout=300, stdin=subprocess.DEVNULL)
     assert proc.returncode == 0, proc.stderr
@@ -180,17 +181,24 @@ def test_launch_file_starts_the_runner_graph_on_sim_time(setup_kwargs, monkeypat
     assert "generate_launch_description" in {f.name for f in tree.body if isinstance(f, ast.FunctionDef)}
     actions = launch_actions(monkeypatch)
     arguments = {a.args[0]: a.kwargs["default_value"] for a in actions if type(a).__name__ == "DeclareLaunchArgument"}
-    assert set(arguments) == {"namespace", "params_file", "controller_type"}
+    assert set(arguments) == {"namespace", "params_file", "controller_type", "feedback", "sensors"}
+    assert (arguments["feedback"], arguments["sensors"]) == ("truth", "false")
     nodes = [a for a in actions if type(a).__name__ == "Node"]
     scripts = {s.split("=")[0].strip() for s in setup_kwargs["entry_points"]["console_scripts"]}
-    assert {n.kwargs["executable"] for n in nodes} == {f"{n}_node" for n in GRAPH_NODES}
+    assert {n.kwargs["executable"] for n in nodes} == {f"{n}_node" for n in GRAPH_NODES + SENSOR_NODES}
     assert {n.kwargs["executable"] for n in nodes} <= scripts
     for node in nodes:
         assert node.kwargs["package"] == "attitude_sil" and node.kwargs["name"] + "_node" == node.kwargs["executable"]
         assert {"use_sim_time": True} in node.kwargs["parameters"]
         assert node.kwargs["parameters"][0].args == ("params_file",)  # the params_file argument
         assert node.kwargs["namespace"].args == ("namespace",)
-        assert [r[0] for r in node.kwargs["remappings"]] == ["/clock"]
+        remapped = [r[0] for r in node.kwargs["remappings"]]
+        assert remapped == (["/clock", *FEEDBACK_REMAP] if node.kwargs["name"] == "controller" else ["/clock"])
+    # the sensing nodes start on a condition (feedback:=estimate or sensors:=true), the others always
+    assert {n.kwargs["name"] for n in nodes if "condition" in n.kwargs} == {"controller", *SENSOR_NODES}
+    feedback = [r[1] for n in nodes if n.kwargs["name"] == "controller" for r in n.kwargs["remappings"][1:]]
+    assert all(type(f).__name__ == "PythonExpression" for f in feedback)
+    assert any("estimate/attitude" in str(f.args) for f in feedback)
     # controller_type: when given, one controller with it; else one on the file's
     controllers = [n for n in nodes if n.kwargs["name"] == "controller"]
     assert sorted(type(c.kwargs["condition"]).__name__ for c in controllers) == ["IfCondition", "UnlessCondition"]
