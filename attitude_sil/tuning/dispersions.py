@@ -12,6 +12,8 @@ A ``dispersions`` mapping (in a Monte Carlo spec, or a tuning spec's
     noise_seeds: true                                          # noise.seed + run (default when noise is on)
     wheel_failure: {probability: 0.1, modes: [lost, stuck], time: [0, 20]}
     sensor_noise: {attitude_std_deg: 0.001, rate_std_deg_s: 0.0005}   # seed: sensor_noise.seed + run
+    gyro_bias_deg_h:      {dist: normal, scale: 1.0}           # added to sensors.gyro.bias_deg_h per axis
+    sensor_seeds: true                                         # sensors.seed + run (default with the sensors on)
 
 ``dist: normal`` draws ``scale`` x N(0, 1), ``dist: uniform`` ``scale`` x U(-1, 1);
 ``scale`` is one number or one per axis. Run i draws from its own stream,
@@ -41,13 +43,15 @@ __all__ = ["DISPERSION_KEYS", "check_dispersions", "draw", "episode_values", "ru
 
 #: numeric dispersions: key -> (width, unit)
 _NUMERIC = {"inertia_pct": 3, "initial_attitude_deg": 3, "initial_rate_deg_s": 3, "setpoint_deg": 3,
-            "motor_constant_pct": 1, "noise_level_pct": 1}
-DISPERSION_KEYS = (*_NUMERIC, "noise_seeds", "wheel_failure", "sensor_noise")
+            "motor_constant_pct": 1, "noise_level_pct": 1, "gyro_bias_deg_h": 3}
+DISPERSION_KEYS = (*_NUMERIC, "noise_seeds", "wheel_failure", "sensor_noise", "sensor_seeds")
 #: the per-run uniform slots, in draw order
 _SLOTS = {"inertia_pct": slice(0, 3), "initial_attitude_deg": slice(3, 6), "initial_rate_deg_s": slice(6, 9),
           "setpoint_deg": slice(9, 12), "motor_constant_pct": slice(12, 13), "noise_level_pct": slice(13, 14),
-          "failure_happens": 14, "failure_wheel": 15, "failure_time": 16, "failure_mode": 17}
-_N_SLOTS = 18
+          "failure_happens": 14, "failure_wheel": 15, "failure_time": 16, "failure_mode": 17,
+          "gyro_bias_deg_h": slice(18, 21)}
+#: (slots are drawn in order from each run's stream: a slot added at the end leaves the others' values as they were)
+_N_SLOTS = 21
 
 
 def _number(v: Any) -> bool:
@@ -86,7 +90,7 @@ def check_dispersions(where: str, raw: Any, scn: Scenario) -> dict:
                 raise SpecError(f"{at}.scale must be a number >= 0" + (f" or {width} of them" if width > 1 else "")
                                 + f", got {scale!r}")
             out[key] = {"dist": dist, "scale": np.broadcast_to(np.asarray(vals, dtype=float), (width,)).copy()}
-        elif key == "noise_seeds":
+        elif key in ("noise_seeds", "sensor_seeds"):
             if not isinstance(value, bool):
                 raise SpecError(f"{at} must be true or false, got {value!r}")
             out[key] = value
@@ -122,11 +126,15 @@ def check_dispersions(where: str, raw: Any, scn: Scenario) -> dict:
         raise SpecError(f"{where}: dispersions.noise_level_pct: the scenario has no noise disturbance "
                         "(set disturbance.models: [noise])")
     out.setdefault("noise_seeds", noise_on)
+    if ("gyro_bias_deg_h" in out or out.get("sensor_seeds")) and not scn.has_sensors:
+        raise SpecError(f"{where}: dispersions of the sensors need a scenario that runs them (scenario.sensors: true "
+                        "or feedback: estimate, e.g. config/hst_roll_step_sensors.yaml)")
+    out.setdefault("sensor_seeds", scn.has_sensors)
     return out
 
 
 def draw(seed: int, runs) -> np.ndarray:
-    """The uniform slots of runs ``runs``: (n, 18) in (0, 1), run i from ``default_rng([seed, i])``."""
+    """The uniform slots of runs ``runs``: (n, 21) in (0, 1), run i from ``default_rng([seed, i])``."""
     out = np.empty((len(runs), _N_SLOTS))
     for r, i in enumerate(np.asarray(runs, dtype=np.int64).tolist()):
         bits = np.random.default_rng([int(seed), i]).integers(0, 2**53, _N_SLOTS)
@@ -189,6 +197,11 @@ def episode_values(scn: Scenario, dispersions: dict, seed: int, runs) -> dict[st
         modes = np.asarray(wf["modes"])
         out["wheels.failure.mode"] = np.where(happens, modes[np.minimum((u[:, 17] * len(modes)).astype(np.int64),
                                                                          len(modes) - 1)], "lost")
+    if "gyro_bias_deg_h" in dispersions:
+        out["sensors.gyro.bias_deg_h"] = (np.asarray(v["sensors"]["gyro.bias_deg_h"], dtype=float)
+                                          + _offsets(dispersions["gyro_bias_deg_h"], u[:, _SLOTS["gyro_bias_deg_h"]]))
+    if dispersions.get("sensor_seeds"):
+        out["sensors.seed"] = v["sensors"]["seed"] + runs
     if "sensor_noise" in dispersions:
         sn = dispersions["sensor_noise"]
         out["controller.sensor_noise.attitude_std_deg"] = np.full(n, sn["attitude_std_deg"])

@@ -43,6 +43,7 @@ from typing import Any
 import numpy as np
 
 from attitude_sil.core import yaml12
+from attitude_sil.core.analysis.pointing import POINTING_COLUMNS
 from attitude_sil.core.control import registry
 from attitude_sil.core.sim.engine import check_episode, simulate_summary
 from attitude_sil.core.sim.params import NODE_PARAMS
@@ -63,7 +64,7 @@ EXTRA_KEYS = ("finite", "peak_command", "peak_wheel_speed_rad_s")
 #: metrics a requirement may name
 METRIC_KEYS = ("time_constant_s", "rise_time_s", "settling_time_s", "overshoot_pct", "steady_state_error_rad",
                "control_effort_Nms", "cost_J", "iae", "ise", "itae", "mse", "max_abs_error_rad", "fitness_f",
-               "final_error_rad", "peak_command", "peak_wheel_speed_rad_s")
+               "final_error_rad", "peak_command", "peak_wheel_speed_rad_s", *POINTING_COLUMNS)
 MAX_RUNS = 10_000_000
 
 

@@ -13,10 +13,14 @@ import numpy as np
 
 from attitude_sil.core.plant.quaternion import attitude_error_B
 
-__all__ = ["POINTING_KEYS", "pointing_errors", "pointing_metrics", "pointing_start"]
+__all__ = ["POINTING_KEYS", "POINTING_COLUMNS", "pointing_errors", "pointing_metrics", "pointing_start",
+           "pointing_columns"]
 
 #: the ``--json`` keys (each a list of 3, per body axis, rad; null where not defined)
 POINTING_KEYS = ("ape_rms_rad", "ape_p99_rad", "ake_rms_rad", "ake_p99_rad")
+
+#: the same figures as one column per axis (a Monte Carlo table's, whose percentiles the campaign reports)
+POINTING_COLUMNS = tuple(f"{key[:-4]}_{axis}_rad" for key in POINTING_KEYS for axis in "xyz")
 
 
 def pointing_errors(q_BN: np.ndarray, q_RN: np.ndarray, q_BN_est: np.ndarray | None = None):
@@ -67,3 +71,20 @@ def pointing_metrics(t: np.ndarray, ape: np.ndarray, ake: np.ndarray | None, sta
     ake_rms, ake_p99 = _summary(ake, keep)
     return {"ape_rms_rad": ape_rms, "ape_p99_rad": ape_p99, "ake_rms_rad": ake_rms, "ake_p99_rad": ake_p99,
             "pointing_from_s": float(start_s)}
+
+
+def pointing_columns(t: np.ndarray, q_BN: np.ndarray, q_RN: np.ndarray, q_BN_est: np.ndarray | None,
+                     scenario_values: dict, settling_time_s: np.ndarray) -> dict[str, np.ndarray]:
+    """:data:`POINTING_COLUMNS` of P episodes, (P,) each (NaN where not defined): their figures as
+    :func:`pointing_metrics` gives them one by one, from trajectories (P, n, 4) and settling times (P,) s."""
+    P = q_BN.shape[0]
+    out = {name: np.full(P, np.nan) for name in POINTING_COLUMNS}
+    ape, ake = pointing_errors(q_BN, q_RN, q_BN_est)
+    for p in range(P):
+        m = pointing_metrics(t, ape[p], None if ake is None else ake[p],
+                             pointing_start(scenario_values, float(settling_time_s[p])))
+        for key in POINTING_KEYS:
+            if m[key] is not None:
+                for axis, v in zip("xyz", m[key], strict=True):
+                    out[f"{key[:-4]}_{axis}_rad"][p] = v
+    return out

@@ -82,8 +82,8 @@ class GyroErrors:
         Its correlation time tau, s.
     rrw : float
         Rate random walk K, rad/s^1.5.
-    bias : (3,) rad/s
-        Constant bias b_0.
+    bias : (3,) or (P, 3) rad/s
+        Constant bias b_0 (one per episode where a Monte Carlo disperses it).
     scale_factor : (3,)
         Scale-factor errors s (dimensionless; 1e-6 per ppm).
     misalignment : (3,) rad
@@ -98,7 +98,7 @@ class GyroErrors:
     bias_instability: float = 0.0
     correlation_time: float = 300.0
     rrw: float = 0.0
-    bias: tuple = (0.0, 0.0, 0.0)
+    bias: tuple | np.ndarray = (0.0, 0.0, 0.0)
     scale_factor: tuple = (0.0, 0.0, 0.0)
     misalignment: tuple = (0.0, 0.0, 0.0)
     resolution: float = 0.0
@@ -111,7 +111,7 @@ class GyroErrors:
                    bias_instability=v["gyro.bias_instability_deg_h"] * DEG / 3600.0,
                    correlation_time=v["gyro.bias_correlation_time_s"],
                    rrw=v["gyro.rrw_deg_h_rt_h"] * DEG / 3600.0 / 60.0,
-                   bias=tuple(np.asarray(v["gyro.bias_deg_h"], dtype=float) * DEG / 3600.0),
+                   bias=np.asarray(v["gyro.bias_deg_h"], dtype=float) * DEG / 3600.0,
                    scale_factor=tuple(np.asarray(v["gyro.scale_factor_ppm"], dtype=float) * 1e-6),
                    misalignment=tuple(np.asarray(v["gyro.misalignment_urad"], dtype=float) * 1e-6),
                    resolution=v["gyro.resolution_deg_s"] * DEG,

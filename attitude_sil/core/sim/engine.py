@@ -374,14 +374,18 @@ class Sensing:
         return self.mekf.step(k, sample.omega_meas_B, sample.star_tracker), sample.omega_meas_B
 
 
-def build_sensing(scn: Scenario, n_episodes: int = 1, seeds=None) -> Sensing | None:
+def build_sensing(scn: Scenario, n_episodes: int = 1, seeds=None, gyro_bias_deg_h=None) -> Sensing | None:
     """The scenario's sensors and estimator for P episodes (None if it runs without them).
 
-    ``seeds`` (P,) gives each episode its sensor seed (default: ``sensors.seed`` for all).
+    ``seeds`` (P,) gives each episode its sensor seed (default: ``sensors.seed`` for all), ``gyro_bias_deg_h``
+    (P, 3) its gyro's constant bias (default: ``sensors.gyro.bias_deg_h``).
     """
     if not scn.has_sensors:
         return None
-    suite = SensorSuite(scn.values["sensors"], scn.dt, n_episodes, seeds)
+    values = dict(scn.values["sensors"])
+    if gyro_bias_deg_h is not None:
+        values["gyro.bias_deg_h"] = np.asarray(gyro_bias_deg_h, dtype=float).reshape(n_episodes, 3)
+    suite = SensorSuite(values, scn.dt, n_episodes, seeds)
     estimator = {**scn.values["estimator"], **derived_values(scn, "estimator")}
     settings = MekfSettings.from_values(estimator, suite.gyro.errors.arw, suite.star_tracker.errors.sigma_B)
     mekf = Mekf(settings, scn.dt, n_episodes, suite.star_tracker.latency_steps)
@@ -600,7 +604,7 @@ EPISODE_VALUES = {
     "guidance": ("setpoint_rpy_deg",),
     "disturbance": ("inertia", "noise.seed", "noise.power"),
     "wheels": EPISODE_MOTOR + EPISODE_FAILURE,
-    "sensors": ("seed",),
+    "sensors": ("seed", "gyro.bias_deg_h"),
 }
 
 
@@ -658,7 +662,7 @@ class _Run:
         if controller is not None:
             ctrl.active = controller
         self.models = (plant, wheels, dist, guide, ctrl)
-        self.sensing = build_sensing(scn, P, ev["sensors"].get("seed"))
+        self.sensing = build_sensing(scn, P, ev["sensors"].get("seed"), ev["sensors"].get("gyro.bias_deg_h"))
         self.swaps = dict(schedule_from_scenario(scn) if schedule is None else schedule)
         self.compiled = False
         if driver != "stepwise":
