@@ -43,11 +43,11 @@ def format_table(metrics: dict) -> str:
             text = str(value)
         lines.append(f"  {label:<24} {text}")
     arcsec = 180.0 / 3.141592653589793 * 3600.0
-    for label, key in (("APE RMS (x, y, z)", "ape_rms_rad"), ("APE 99 %", "ape_p99_rad"),
-                       ("AKE RMS (x, y, z)", "ake_rms_rad"), ("AKE 99 %", "ake_p99_rad")):
-        if metrics.get(key) is not None:  # per body axis, shown in arcsec (the JSON keeps rad)
+    if metrics.get("ake_rms_rad") is not None:  # the sensing loop ran: the pointing budget (--json: always APE)
+        for label, key in (("APE RMS (x, y, z)", "ape_rms_rad"), ("APE 99 %", "ape_p99_rad"),
+                           ("AKE RMS (x, y, z)", "ake_rms_rad"), ("AKE 99 %", "ake_p99_rad")):
+            # per body axis, shown in arcsec (the JSON keeps rad)
             lines.append(f"  {label:<24} " + " ".join(f"{v * arcsec:.4g}" for v in metrics[key]) + " arcsec")
-    if metrics.get("pointing_from_s") is not None and metrics.get("ape_rms_rad") is not None:
         lines.append(f"  {'pointing figures from':<24} {metrics['pointing_from_s']:.6g} s")
     if metrics.get("bag"):
         lines.append(f"  {'bag':<24} {metrics['bag']}")

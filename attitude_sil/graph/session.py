@@ -58,6 +58,7 @@ from attitude_sil.ros.contract import (
     WHEEL_TORQUE,
     check_namespace,
     episode_topics,
+    recorded_topics,
 )
 from attitude_sil.ros.environment import isolated_domain, localhost_environment
 from attitude_sil.ros.services import call_reset, set_remote_parameters
@@ -224,8 +225,8 @@ class GraphSession:
         try:
             kw = namespace_kwargs(self.namespace)
             outside = [t for t, producer in PRODUCERS.items() if producer in self.external]
-            self.recorder = Recorder(None, keep=KEPT_TOPICS, live=self.live, context=self.context,
-                                     volatile_topics=outside, **kw)
+            self.recorder = Recorder(None, keep=KEPT_TOPICS, topics=recorded_topics(self.scn.has_sensors),
+                                     live=self.live, context=self.context, volatile_topics=outside, **kw)
             self.recorder.latency = [] if "controller" in self.external else None
             self.executor = EventsExecutor(context=self.context)
             self.executor.add_node(self.recorder)

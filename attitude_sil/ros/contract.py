@@ -22,7 +22,7 @@ __all__ = ["CLOCK", "ATTITUDE", "BODY_RATE", "ATTITUDE_SETPOINT", "RATE_SETPOINT
            "check_parameter_name", "ROLE_OUTPUTS", "OPTIONAL_TOPICS", "ROLE_INPUTS", "episode_topics", "EXTERNAL",
            "UNKNOWN_NODE", "IMU", "STAR_TRACKER", "WHEEL_SPEED", "ESTIMATE_ATTITUDE", "ESTIMATE_BODY_RATE",
            "ESTIMATE_GYRO_BIAS", "ESTIMATE_ATTITUDE_SIGMA", "SENSING_TOPICS", "SENSING_STEP_TOPICS", "FEEDBACK_REMAP",
-           "feedback_remap"]
+           "feedback_remap", "recorded_topics"]
 
 # -- name rules (ROS 2: a token is a letter or _ then letters, digits, _) -----------------
 _TOKEN = re.compile(r"[A-Za-z_][A-Za-z0-9_]*")
@@ -209,6 +209,12 @@ MODEL_TOPICS: dict[str, str] = {FLEXIBLE_MODE: "geometry_msgs/msg/Vector3Stamped
 #: everything a run records
 RECORDED_TOPICS: dict[str, str] = {**STEP_TOPICS, **MODEL_TOPICS, **SENSING_TOPICS,
                                    PARAMETER_EVENTS: "rcl_interfaces/msg/ParameterEvent"}
+
+
+def recorded_topics(sensing: bool) -> dict[str, str]:
+    """What a run records: :data:`RECORDED_TOPICS`, the sensing loop's topics only where it runs (a run
+    without it has no empty ``imu``, ``estimate/*``, ... channels in its bag)."""
+    return {k: v for k, v in RECORDED_TOPICS.items() if sensing or k not in SENSING_TOPICS}
 
 
 def message_class(type_name: str):

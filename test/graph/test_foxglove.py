@@ -30,7 +30,7 @@ from websockets.exceptions import ConnectionClosed
 from websockets.sync.client import connect
 
 from attitude_sil.cli import main
-from attitude_sil.ros.contract import RECORDED_TOPICS
+from attitude_sil.ros.contract import RECORDED_TOPICS, recorded_topics
 from attitude_sil.storage.foxglove import STATUS_TOPIC
 from attitude_sil.storage.msgdefs import message_definition
 from conftest import CONFIG, ROOT
@@ -135,7 +135,8 @@ def test_the_official_open_source_client_watches_every_channel():
     got, _ = _official_client(_free_port(), "--attitude", "50")
     assert got["subprotocol"] == "foxglove.websocket.v1"  # the name Lichtblick and ws-protocol ask for
     topics = {c["topic"] for c in got["channels"]}
-    assert {n if n.startswith("/") else "/" + n for n in RECORDED_TOPICS} | {STATUS_TOPIC} <= topics
+    # every topic the run records (it runs no sensing loop: no sensor channels)
+    assert {n if n.startswith("/") else "/" + n for n in recorded_topics(False)} | {STATUS_TOPIC} <= topics
     assert all(c["encoding"] == "cdr" and c["schemaEncoding"] == "ros2msg" for c in got["channels"]
                if c["topic"] != STATUS_TOPIC)
     att = np.array(got["attitude"])  # sec, nanosec, x, y, z, w decoded by @foxglove/cdr

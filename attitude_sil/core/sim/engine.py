@@ -374,11 +374,13 @@ class Sensing:
         return self.mekf.step(k, sample.omega_meas_B, sample.star_tracker), sample.omega_meas_B
 
 
-def build_sensing(scn: Scenario, n_episodes: int = 1, seeds=None, gyro_bias_deg_h=None) -> Sensing | None:
+def build_sensing(scn: Scenario, n_episodes: int = 1, seeds=None, gyro_bias_deg_h=None,
+                  initial_rpy_deg=None) -> Sensing | None:
     """The scenario's sensors and estimator for P episodes (None if it runs without them).
 
     ``seeds`` (P,) gives each episode its sensor seed (default: ``sensors.seed`` for all), ``gyro_bias_deg_h``
-    (P, 3) its gyro's constant bias (default: ``sensors.gyro.bias_deg_h``).
+    (P, 3) its gyro's constant bias (default: ``sensors.gyro.bias_deg_h``), ``initial_rpy_deg`` (P, 3) its
+    filter's initial attitude (default: the estimator's, else the plant's initial attitude).
     """
     if not scn.has_sensors:
         return None
@@ -387,6 +389,8 @@ def build_sensing(scn: Scenario, n_episodes: int = 1, seeds=None, gyro_bias_deg_
         values["gyro.bias_deg_h"] = np.asarray(gyro_bias_deg_h, dtype=float).reshape(n_episodes, 3)
     suite = SensorSuite(values, scn.dt, n_episodes, seeds)
     estimator = {**scn.values["estimator"], **derived_values(scn, "estimator")}
+    if initial_rpy_deg is not None:
+        estimator["initial_attitude_rpy_deg"] = np.asarray(initial_rpy_deg, dtype=float).reshape(n_episodes, 3)
     settings = MekfSettings.from_values(estimator, suite.gyro.errors.arw, suite.star_tracker.errors.sigma_B)
     mekf = Mekf(settings, scn.dt, n_episodes, suite.star_tracker.latency_steps)
     return Sensing(suite, mekf, scn.feedback)
@@ -605,6 +609,7 @@ EPISODE_VALUES = {
     "disturbance": ("inertia", "noise.seed", "noise.power"),
     "wheels": EPISODE_MOTOR + EPISODE_FAILURE,
     "sensors": ("seed", "gyro.bias_deg_h"),
+    "estimator": ("initial_attitude_rpy_deg",),
 }
 
 
@@ -662,7 +667,8 @@ class _Run:
         if controller is not None:
             ctrl.active = controller
         self.models = (plant, wheels, dist, guide, ctrl)
-        self.sensing = build_sensing(scn, P, ev["sensors"].get("seed"), ev["sensors"].get("gyro.bias_deg_h"))
+        self.sensing = build_sensing(scn, P, ev["sensors"].get("seed"), ev["sensors"].get("gyro.bias_deg_h"),
+                                     ev["estimator"].get("initial_attitude_rpy_deg"))
         self.swaps = dict(schedule_from_scenario(scn) if schedule is None else schedule)
         self.compiled = False
         if driver != "stepwise":
