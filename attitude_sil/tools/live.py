@@ -196,9 +196,10 @@ class _Ros:
 
 
 def _wait_publishers(recorder: Recorder, spin, deadline: float, what: str) -> None:
-    """Spin until every node of the graph publishes what the others read (ROLE_OUTPUTS), whoever plays it."""
+    """Spin until every node of the lockstep publishes what the others read (ROLE_OUTPUTS), whoever plays it
+    (the sensing loop's nodes are optional: a hand-started graph may run without them)."""
     def missing() -> list[str]:
-        return [" or ".join(alt) for outputs in ROLE_OUTPUTS.values() for alt in outputs
+        return [" or ".join(alt) for role in GRAPH_NODES for alt in ROLE_OUTPUTS[role]
                 if not any(recorder.subs[t].get_publisher_count() > 0 for t in alt)]
 
     while gaps := missing():
@@ -210,10 +211,10 @@ def _wait_publishers(recorder: Recorder, spin, deadline: float, what: str) -> No
 
 
 def _graph_ready(recorder: Recorder, namespace: str | None, clients: dict) -> bool:
-    """The whole graph is up, whoever plays each node: every role's outputs published, and the parameter
+    """The whole graph is up, whoever plays each node: every lockstep role's outputs published, and the parameter
     service of each graph node that runs under its name ready."""
     if any(not any(recorder.subs[t].get_publisher_count() > 0 for t in alt)
-           for outputs in ROLE_OUTPUTS.values() for alt in outputs if all(t in recorder.subs for t in alt)):
+           for role in GRAPH_NODES for alt in ROLE_OUTPUTS[role] if all(t in recorder.subs for t in alt)):
         return False
     present = {n for n, ns in recorder.get_node_names_and_namespaces()
                if (ns.rstrip("/") or "/") == (f"/{namespace}" if namespace else "/")}
