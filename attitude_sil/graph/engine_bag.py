@@ -37,10 +37,10 @@ from attitude_sil.ros.contract import (
     DISTURBANCE_TORQUE,
     PARAMETER_EVENTS,
     RATE_SETPOINT,
-    RECORDED_TOPICS,
     WHEEL_MOMENTUM,
     WHEEL_STATE,
     WHEEL_TORQUE,
+    recorded_topics,
 )
 from attitude_sil.ros.convert import ns_to_stamp
 from attitude_sil.ros.qos import offered_qos_yaml
@@ -115,7 +115,9 @@ def record_episode(scn: Scenario, tr: Trajectory, run_dir: str | Path, *, episod
     q, q_r = tr.q_BN[p], tr.q_RN[p]
     err = euler_from_quat(quat_conjugate(quat_error(q, q_r)))
     try:
-        for topic, type_name in RECORDED_TOPICS.items():  # every topic, as the recorder registers them
+        # every topic, as the recorder registers them (the sensing loop's not yet: an engine bag of a run with
+        # sensors holds the lockstep's topics only; docs/sensors.md)
+        for topic, type_name in recorded_topics(False).items():
             writer.add_topic(_absolute(topic), type_name, offered_qos_yaml(topic), wait=False)
         if params:
             event = ParameterEvent(stamp=ns_to_stamp(0), node="/controller",

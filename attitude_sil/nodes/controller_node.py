@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from attitude_sil.core.plant.quaternion import euler_from_quat, quat_conjugate, quat_error, unit_or_none
+from attitude_sil.core.plant.quaternion import euler_from_quat, quat_conjugate, quat_error
 from attitude_sil.core.sim.engine import build_controller
 from attitude_sil.core.sim.lockstep import StepInputs, StepSequencer
 from attitude_sil.ros.contract import ATTITUDE, ATTITUDE_ERROR, ATTITUDE_SETPOINT, COMMAND_TOPIC, CONTROLLER_INPUTS
@@ -57,28 +57,9 @@ class ControllerNode(SchemaNode):
 
     def _on_input(self, name: str, value: np.ndarray, msg) -> None:
         t = stamp_to_ns(msg.header.stamp)
-        if not self.finite(value):
-            self.get_logger().error(f"{name} at t={t * 1e-9:.6f} s is not finite: {value[0].tolist()}; ignored",
-                                    throttle_duration_sec=1.0)
-            return
-        if value.shape[-1] == 4:
-            unit = unit_or_none(value)
-            if unit is None:
-                self.get_logger().error(f"{name} at t={t * 1e-9:.6f} s is not a unit quaternion (norm "
-                                        f"{np.linalg.norm(value):.6g}); ignored", throttle_duration_sec=1.0)
-                return
-            value = unit
-        slot = self.inputs.add(name, t, value)  # the first valid message of a step counts, as in the plant
+        slot = self.gather(name, value, t)
         if slot is None:
             return
-        kind = self.seq.classify(t, self.dt_ns)
-        if kind == StepSequencer.NEW:
-            self._rebuild()
-        elif kind != StepSequencer.NEXT:
-            self.get_logger().error(f"inputs stamped {t * 1e-9:.6f} s out of sequence ({kind}); ignored",
-                                    throttle_duration_sec=1.0)
-            return
-        self.inputs.taken(t)
         u = self.core.compute(*(slot[name] for name in INPUTS), t // self.dt_ns)
         err = euler_from_quat(quat_conjugate(quat_error(slot[ATTITUDE], slot[ATTITUDE_SETPOINT])))
         self.pub_cmd[self.core.kind].publish(vector_msg(u[0], t, "body"))

@@ -17,7 +17,6 @@ from __future__ import annotations
 
 import numpy as np
 
-from attitude_sil.core.plant.quaternion import unit_or_none
 from attitude_sil.core.sensing.models import SensorSuite, Tachometer
 from attitude_sil.core.sim.lockstep import StepInputs, StepSequencer
 from attitude_sil.ros.contract import ATTITUDE, BODY_RATE, IMU, STAR_TRACKER, WHEEL_SPEED, WHEEL_STATE
@@ -61,24 +60,9 @@ class SensorsNode(SchemaNode):
 
     def _on_input(self, name: str, msg) -> None:
         t = stamp_to_ns(msg.header.stamp)
-        value = message_to_array(msg)[None]
-        if value.shape[-1] == 4:
-            value = unit_or_none(value)  # None for a non-finite or non-unit quaternion
-        if value is None or not self.finite(value):
-            self.get_logger().error(f"{name} at t={t * 1e-9:.6f} s is not finite (or not a unit quaternion); "
-                                    "ignored", throttle_duration_sec=1.0)
-            return
-        slot = self.inputs.add(name, t, value)
+        slot = self.gather(name, message_to_array(msg)[None], t)
         if slot is None:
             return
-        kind = self.seq.classify(t, self.dt_ns)
-        if kind == StepSequencer.NEW:
-            self._rebuild()
-        elif kind != StepSequencer.NEXT:
-            self.get_logger().error(f"state stamped {t * 1e-9:.6f} s out of sequence ({kind}); ignored",
-                                    throttle_duration_sec=1.0)
-            return
-        self.inputs.taken(t)
         sample = self.core.sample(slot[ATTITUDE], slot[BODY_RATE], t // self.dt_ns)
         report = sample.star_tracker
         if report is not None:  # first, so the estimator holds it when the step's gyro reading comes

@@ -26,6 +26,8 @@ from rclpy.parameter import Parameter
 from rclpy.signals import SignalHandlerOptions
 
 from attitude_sil.core import yaml12
+from attitude_sil.core.plant.quaternion import unit_or_none
+from attitude_sil.core.sim.lockstep import StepSequencer
 from attitude_sil.core.sim.paramfile import node_key, sections_for
 from attitude_sil.core.sim.params import NODE_PARAMS
 from attitude_sil.core.sim.scenario import Scenario, scenario_from_dict
@@ -142,6 +144,38 @@ class SchemaNode(Node):
     @staticmethod
     def finite(array: np.ndarray) -> bool:
         return bool(np.all(np.isfinite(array)))
+
+    def gather(self, name: str, value: np.ndarray, t: int) -> dict | None:
+        """One input of a node that steps once it holds all of them for a stamp (the controller, the sensors).
+
+        ``value`` (1, 3) or (1, 4) is checked (finite; a quaternion near unit norm, renormalised) and held
+        in ``self.inputs`` (a :class:`~attitude_sil.core.sim.lockstep.StepInputs`); once the stamp ``t``
+        (ns) has every input and comes in sequence (``self.seq``), the step's inputs are returned; a new
+        episode (stamp 0) calls ``self._rebuild()`` first. A refused message is logged and returns None.
+        """
+        if not self.finite(value):
+            self.get_logger().error(f"{name} at t={t * 1e-9:.6f} s is not finite: {value[0].tolist()}; ignored",
+                                    throttle_duration_sec=1.0)
+            return None
+        if value.shape[-1] == 4:
+            unit = unit_or_none(value)
+            if unit is None:
+                self.get_logger().error(f"{name} at t={t * 1e-9:.6f} s is not a unit quaternion (norm "
+                                        f"{np.linalg.norm(value):.6g}); ignored", throttle_duration_sec=1.0)
+                return None
+            value = unit
+        slot = self.inputs.add(name, t, value)  # the first valid message of a step counts, as in the plant
+        if slot is None:
+            return None
+        kind = self.seq.classify(t, self.dt_ns)
+        if kind == StepSequencer.NEW:
+            self._rebuild()
+        elif kind != StepSequencer.NEXT:
+            self.get_logger().error(f"inputs stamped {t * 1e-9:.6f} s out of sequence ({kind}); ignored",
+                                    throttle_duration_sec=1.0)
+            return None
+        self.inputs.taken(t)
+        return slot
 
 
 def params_file_warning(node: Node, args: Sequence[str]) -> str:
