@@ -27,17 +27,17 @@ from rclpy.parameter import Parameter, parameter_value_to_python
 
 from attitude_sil.core import yaml12
 from attitude_sil.core.sim.paramfile import sections_for
-from attitude_sil.core.sim.params import GLOBAL_NODE, spec_for
+from attitude_sil.core.sim.params import GLOBAL_NODE, SCENARIO_NODE, spec_for
 from attitude_sil.core.sim.scenario import load_scenario, scenario_from_dict, yaml_problem
 from attitude_sil.errors import AttitudeSilError, BagError, ScenarioError
 from attitude_sil.nodes.controller_node import ControllerNode
-from attitude_sil.ros.contract import COMMAND_TOPICS, CONTROLLER_INPUTS, STEP_TOPICS, message_class
+from attitude_sil.ros.contract import COMMAND_TOPICS, CONTROLLER_INPUTS, FEEDBACK_REMAP, STEP_TOPICS, message_class
 from attitude_sil.ros.convert import stamp_to_ns, vector_to_array
 from attitude_sil.ros.environment import localhost_environment
 from attitude_sil.ros.parameters import typed_parameter
 from attitude_sil.ros.qos import LOCKSTEP_QOS
 from attitude_sil.storage.reader import BagReader, open_bag
-from attitude_sil.storage.writer import PARAMETERS_KEY
+from attitude_sil.storage.writer import PARAMETERS_KEY, SCENARIO_KEY
 
 __all__ = ["VerifyResult", "verify_controller", "controller_parameters"]
 
@@ -132,11 +132,25 @@ def _param_changes(reader) -> list[tuple[int, dict]]:
     return out
 
 
-def _bag_topics(reader: BagReader) -> tuple[dict[str, str], list[str]]:
-    """The bag's controller input topics (short name -> full name) and command topics; BagError if missing."""
+def _feedback(bag_path: str | Path) -> str:
+    """What the recorded controller read: the ``scenario.feedback`` of the bag's scenario section (``truth`` if
+    the bag has none)."""
+    path = Path(bag_path)
+    meta = (path if path.is_dir() else path.parent) / "metadata.yaml"
+    try:
+        info = yaml12.load_file(meta)["rosbag2_bagfile_information"]
+        section = yaml12.load(str(info["custom_data"][SCENARIO_KEY]))
+        return str(section[SCENARIO_NODE]["ros__parameters"].get("feedback", "truth"))
+    except (OSError, yaml.YAMLError, KeyError, TypeError, AttributeError):
+        return "truth"
+
+
+def _bag_topics(reader: BagReader, feedback: str = "truth") -> tuple[dict[str, str], list[str]]:
+    """The bag's controller input topics (short name -> full name: with ``feedback`` ``estimate`` the
+    estimator's outputs, as the run remapped them) and command topics; BagError if missing."""
     names = {}
     for short in INPUTS:
-        full = reader.find_topic(short)
+        full = reader.find_topic(FEEDBACK_REMAP.get(short, short) if feedback == "estimate" else short)
         if full is None:
             raise BagError(f"{reader.paths[0]}: no {short} topic: cannot feed a controller")
         names[short] = full
@@ -201,7 +215,7 @@ def verify_controller(bag_path: str | Path, params_file: str | Path | None = Non
     if params_file is not None:
         controller_parameters(bag_path, params_file)  # a bad --params is refused before the bag is read
     reader = open_bag(bag_path)
-    names, cmd_topics = _bag_topics(reader)
+    names, cmd_topics = _bag_topics(reader, _feedback(bag_path))
     values = controller_parameters(bag_path, params_file)
     changes = _param_changes(reader)
     inputs, recorded, stamps = _recorded_steps(reader, names, cmd_topics)

@@ -131,3 +131,11 @@ def test_sensor_presets_extend_their_base_preset_and_nothing_else(preset, base):
     assert mine == theirs
     scn = load_scenario(CONFIG / f"{preset}.yaml")
     assert scn.feedback == "estimate" and scn.has_sensors
+
+
+def test_verify_controller_feeds_an_estimate_fed_bag_its_estimates(sensed_run):
+    from attitude_sil.tools.verify import verify_controller
+
+    _, result = sensed_run
+    got = verify_controller(result.bag)  # the run's controller read estimate/*: so must the fresh one
+    assert got.passed and got.steps == 301, got
