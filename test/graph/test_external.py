@@ -198,3 +198,51 @@ def test_the_example_imports_nothing_of_the_package():
     assert not any(m.split(".")[0] == "attitude_sil" for m in modules), modules
     assert "rclpy" in modules and "geometry_msgs.msg" in modules
     assert "10)" in EXAMPLE.read_text()  # the tutorials' QoS: depth 10, reliable, volatile
+
+
+PERFECT_ESTIMATOR = '''
+"""A stand-in estimator outside the package: republishes the plant's truth as the estimate (rclpy, QoS 10)."""
+import rclpy
+from geometry_msgs.msg import QuaternionStamped, Vector3Stamped
+from rclpy.executors import ExternalShutdownException
+
+rclpy.init()
+node = rclpy.create_node("estimator")
+pub_q = node.create_publisher(QuaternionStamped, "estimate/attitude", 10)
+pub_w = node.create_publisher(Vector3Stamped, "estimate/body_rate", 10)
+pub_b = node.create_publisher(Vector3Stamped, "estimate/gyro_bias", 10)
+pub_s = node.create_publisher(Vector3Stamped, "estimate/attitude_sigma", 10)
+
+
+def on_rate(msg):
+    pub_w.publish(msg)
+    zero = Vector3Stamped()
+    zero.header = msg.header
+    pub_b.publish(zero)
+    pub_s.publish(zero)
+
+
+node.create_subscription(QuaternionStamped, "attitude", pub_q.publish, 10)
+node.create_subscription(Vector3Stamped, "body_rate", on_rate, 10)
+try:
+    rclpy.spin(node)
+except (KeyboardInterrupt, ExternalShutdownException):
+    pass
+'''
+
+
+def test_an_estimator_of_the_users_takes_the_estimators_place(builtin, tmp_path):
+    # --external estimator with feedback: estimate: the controller reads what the outside node publishes; a
+    # node that passes the truth through flies the truth-fed run's numbers, with no knowledge error
+    script = tmp_path / "perfect_estimator.py"
+    script.write_text(PERFECT_ESTIMATOR)
+    scn = load_scenario(SCENARIO).with_values("scenario", feedback="estimate", **{"metrics.pointing_after_s": 0.0})
+    est = _start([str(script)])
+    try:
+        result = run_graph(scn, duration=DURATION, controller="pid", external=("estimator",), progress=False)
+    finally:
+        _stop([est])
+    m = result.metrics
+    _same_metrics(m, builtin[DURATION])
+    assert m["ake_rms_rad"] == [0.0, 0.0, 0.0]
+    assert result.counts["imu"] == round(DURATION / scn.dt) + 1  # the package's sensors node ran beside it

@@ -362,7 +362,6 @@ class Sensing:
         self.suite = suite
         self.mekf = mekf
         self.feedback = feedback
-        self.last = None
 
     def reset(self) -> None:
         self.suite.reset()
