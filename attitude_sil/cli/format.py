@@ -42,7 +42,7 @@ def format_table(metrics: dict) -> str:
         else:
             text = str(value)
         lines.append(f"  {label:<24} {text}")
-    arcsec = 180.0 / 3.141592653589793 * 3600.0
+    arcsec = math.degrees(1.0) * 3600.0
     if metrics.get("ake_rms_rad") is not None:  # the sensing loop ran: the pointing budget (--json: always APE)
         for label, key in (("APE RMS (x, y, z)", "ape_rms_rad"), ("APE 99 %", "ape_p99_rad"),
                            ("AKE RMS (x, y, z)", "ake_rms_rad"), ("AKE 99 %", "ake_p99_rad")):

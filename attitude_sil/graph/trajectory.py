@@ -123,11 +123,12 @@ class StepAssembler:
     complete are held: a few in a lockstep run.
     """
 
-    _WIDTH = {ATTITUDE: 4, ATTITUDE_SETPOINT: 4, WHEEL_TORQUE: 3, ESTIMATE_ATTITUDE: 4}
+    _WIDTH = {ATTITUDE: 4, ATTITUDE_SETPOINT: 4, WHEEL_TORQUE: 3}
 
     def __init__(self, accumulator: EpisodeAccumulator, estimate: bool = False) -> None:
         self.accumulator = accumulator
-        self.parts = 5 if estimate else 4  # with the sensing loop, a step waits for its estimate too
+        # the stamped parts of a step and their widths (with the sensing loop, a step waits for its estimate too)
+        self.width = {**self._WIDTH, ESTIMATE_ATTITUDE: 4} if estimate else dict(self._WIDTH)
         self.pending: dict[int, dict[str, np.ndarray]] = {}
         self.done = -1  # stamp of the last step handed on, ns
         self.steps = 0
@@ -137,8 +138,8 @@ class StepAssembler:
         if topic in COMMAND_TOPIC.values():
             part = "command"
             width = 3
-        elif topic in self._WIDTH and (topic != ESTIMATE_ATTITUDE or self.parts == 5):
-            part, width = topic, self._WIDTH[topic]
+        elif topic in self.width:
+            part, width = topic, self.width[topic]
         else:
             return
         if stamp_ns <= self.done:
@@ -150,7 +151,7 @@ class StepAssembler:
         while self.pending:
             first = min(self.pending)
             parts = self.pending[first]
-            if len(parts) < self.parts:
+            if len(parts) < len(self.width) + 1:  # and the command
                 return
             del self.pending[first]
             self.accumulator.add(first * 1e-9, parts[ATTITUDE], parts[ATTITUDE_SETPOINT], parts[WHEEL_TORQUE],

@@ -24,7 +24,7 @@ import numpy as np
 
 from attitude_sil.core.plant.quaternion import unit_or_none
 from attitude_sil.core.sensing.mekf import Mekf, MekfSettings
-from attitude_sil.core.sensing.models import StarTrackerReport
+from attitude_sil.core.sensing.models import StarTrackerReport, TrackerSchedule
 from attitude_sil.core.sim.lockstep import StepSequencer
 from attitude_sil.errors import ScenarioError
 from attitude_sil.ros.contract import (
@@ -61,12 +61,8 @@ class EstimatorNode(SchemaNode):
     def _schedule(self) -> None:
         dt = self.param("control_period")
         self.dt_ns = int(round(dt * 1e9))
-        self.period_steps = max(1, int(round(1.0 / (self.param("star_tracker.rate_hz") * dt))))
-        self.latency_steps = int(round(self.param("star_tracker.latency_s") / dt))
-
-    def _due(self, k: int) -> bool:
-        j = k - self.latency_steps
-        return j >= 0 and j % self.period_steps == 0
+        self.schedule = TrackerSchedule(self.param("star_tracker.rate_hz"), self.param("star_tracker.latency_s"), dt)
+        self.latency_steps = self.schedule.latency_steps
 
     def _start(self, variance: np.ndarray) -> None:
         """A new episode: the filter from the parameters and the gyro's white-noise variance (rad/s)^2."""
@@ -115,7 +111,7 @@ class EstimatorNode(SchemaNode):
             if t not in self.imu:
                 return
             report = None
-            if self._due(k):
+            if self.schedule.reports_at(k):
                 t_exp = (k - self.latency_steps) * self.dt_ns
                 if t_exp not in self.star:
                     return

@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from attitude_sil.core.sensing.models import SensorSuite, Tachometer
+from attitude_sil.core.sensing.models import SensorSuite
 from attitude_sil.core.sim.lockstep import StepInputs, StepSequencer
 from attitude_sil.ros.contract import ATTITUDE, BODY_RATE, IMU, STAR_TRACKER, WHEEL_SPEED, WHEEL_STATE
 from attitude_sil.ros.convert import imu_msg, joint_state_msg, message_to_array, stamp_to_ns, star_tracker_msg
@@ -43,7 +43,6 @@ class SensorsNode(SchemaNode):
         self.seq = StepSequencer()
         self.wheel_seq = StepSequencer()
         self._rebuild()
-        self.tachometer = Tachometer(self.param("wheel_speed.counts_per_rev"), self.param("control_period"))
 
     def _rebuild(self) -> None:
         self.dt_ns = int(round(self.param("control_period") * 1e9))
@@ -75,7 +74,7 @@ class SensorsNode(SchemaNode):
         t = stamp_to_ns(msg.header.stamp)
         kind = self.wheel_seq.classify(t, self.dt_ns)
         if kind == StepSequencer.NEW:
-            self.tachometer = Tachometer(self.param("wheel_speed.counts_per_rev"), self.param("control_period"))
+            self.core.tachometer.reset()  # (the suite is rebuilt on the episode's first state, before this)
         elif kind != StepSequencer.NEXT:
             return
         angle = np.asarray(msg.position, dtype=float)
@@ -84,7 +83,7 @@ class SensorsNode(SchemaNode):
             self.get_logger().error(f"wheel_state at t={t * 1e-9:.6f} s is not finite; ignored",
                                     throttle_duration_sec=1.0)
             return
-        reading = self.tachometer.sample(angle, speed)
+        reading = self.core.tachometer.sample(angle, speed)
         self.pub_speed.publish(joint_state_msg(list(msg.name), np.zeros(0), reading, np.zeros(0), t))
 
 

@@ -22,7 +22,7 @@ __all__ = ["CLOCK", "ATTITUDE", "BODY_RATE", "ATTITUDE_SETPOINT", "RATE_SETPOINT
            "check_parameter_name", "ROLE_OUTPUTS", "OPTIONAL_TOPICS", "ROLE_INPUTS", "episode_topics", "EXTERNAL",
            "UNKNOWN_NODE", "IMU", "STAR_TRACKER", "WHEEL_SPEED", "ESTIMATE_ATTITUDE", "ESTIMATE_BODY_RATE",
            "ESTIMATE_GYRO_BIAS", "ESTIMATE_ATTITUDE_SIGMA", "SENSING_TOPICS", "SENSING_STEP_TOPICS", "FEEDBACK_REMAP",
-           "feedback_remap", "recorded_topics"]
+           "feedback_remap", "recorded_topics", "SENSING_ROLES"]
 
 # -- name rules (ROS 2: a token is a letter or _ then letters, digits, _) -----------------
 _TOKEN = re.compile(r"[A-Za-z_][A-Za-z0-9_]*")
@@ -148,6 +148,9 @@ PRODUCERS = {
     ESTIMATE_BODY_RATE: "estimator", ESTIMATE_GYRO_BIAS: "estimator", ESTIMATE_ATTITUDE_SIGMA: "estimator",
 }
 
+#: the nodes that publish the sensing loop's topics (the sensors and the estimator)
+SENSING_ROLES = tuple(dict.fromkeys(PRODUCERS[t] for t in SENSING_TOPICS))
+
 #: what each node of the graph must publish for the others, every step: a tuple of alternatives each (the
 #: controller publishes one command topic, of its law's kind); what a node started in place of a built-in one
 #: (``run --external NODE``) must provide (docs/flight-software.md)
@@ -176,7 +179,7 @@ def graph_subscribers(external=(), feedback: str | None = None) -> dict[str, int
     sensing loop runs, else None."""
     out: dict[str, int] = {}
     for role, inputs in ROLE_INPUTS.items():
-        if role in external or (feedback is None and role in ("sensors", "estimator")):
+        if role in external or (feedback is None and role in SENSING_ROLES):
             continue
         for topic in inputs:
             if role == "controller" and feedback == "estimate":

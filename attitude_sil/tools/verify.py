@@ -132,16 +132,13 @@ def _param_changes(reader) -> list[tuple[int, dict]]:
     return out
 
 
-def _feedback(bag_path: str | Path) -> str:
+def _feedback(reader: BagReader) -> str:
     """What the recorded controller read: the ``scenario.feedback`` of the bag's scenario section (``truth`` if
     the bag has none)."""
-    path = Path(bag_path)
-    meta = (path if path.is_dir() else path.parent) / "metadata.yaml"
     try:
-        info = yaml12.load_file(meta)["rosbag2_bagfile_information"]
-        section = yaml12.load(str(info["custom_data"][SCENARIO_KEY]))
+        section = yaml12.load(str(reader.custom_data[SCENARIO_KEY]))
         return str(section[SCENARIO_NODE]["ros__parameters"].get("feedback", "truth"))
-    except (OSError, yaml.YAMLError, KeyError, TypeError, AttributeError):
+    except (yaml.YAMLError, KeyError, TypeError, AttributeError):
         return "truth"
 
 
@@ -215,7 +212,7 @@ def verify_controller(bag_path: str | Path, params_file: str | Path | None = Non
     if params_file is not None:
         controller_parameters(bag_path, params_file)  # a bad --params is refused before the bag is read
     reader = open_bag(bag_path)
-    names, cmd_topics = _bag_topics(reader, _feedback(bag_path))
+    names, cmd_topics = _bag_topics(reader, _feedback(reader))
     values = controller_parameters(bag_path, params_file)
     changes = _param_changes(reader)
     inputs, recorded, stamps = _recorded_steps(reader, names, cmd_topics)

@@ -36,7 +36,7 @@ import numpy as np
 from scipy.special import ndtri
 
 from attitude_sil.core.plant.wheels import GEOMETRIES
-from attitude_sil.core.sim.scenario import Scenario, derived_values
+from attitude_sil.core.sim.scenario import Scenario, effective_values
 from attitude_sil.errors import ScenarioError, SpecError
 
 __all__ = ["DISPERSION_KEYS", "check_dispersions", "draw", "episode_values", "run_scenario", "value_columns"]
@@ -170,7 +170,7 @@ def episode_values(scn: Scenario, dispersions: dict, seed: int, runs) -> dict[st
         out["plant.initial_attitude_rpy_deg"] = (np.asarray(v["plant"]["initial_attitude_rpy_deg"])
                                                  + _offsets(dispersions["initial_attitude_deg"], u[:, 3:6]))
         if scn.has_sensors:  # the filter starts where it believes the plant starts, not at the dispersed truth
-            belief = {**v["estimator"], **derived_values(scn, "estimator")}["initial_attitude_rpy_deg"]
+            belief = effective_values(scn, "estimator")["initial_attitude_rpy_deg"]
             out["estimator.initial_attitude_rpy_deg"] = np.tile(np.asarray(belief, dtype=float), (n, 1))
     if "initial_rate_deg_s" in dispersions:
         out["plant.initial_body_rate"] = (np.asarray(v["plant"]["initial_body_rate"])

@@ -16,8 +16,8 @@ import pytest
 from scipy import stats
 from scipy.optimize import nnls
 
-from attitude_sil.core.plant.quaternion import attitude_error_B
-from attitude_sil.core.sensing.mekf import Mekf, MekfSettings, rotation_quaternion, transition
+from attitude_sil.core.plant.quaternion import attitude_error_B, rotation_quaternion
+from attitude_sil.core.sensing.mekf import Mekf, MekfSettings, transition
 from attitude_sil.core.sensing.models import (
     ARCSEC,
     DEG,
@@ -89,7 +89,7 @@ def test_star_tracker_errors_match_their_covariance_and_its_schedule():
                                rate_hz=4.0, latency=0.1, outages=((2.0, 3.0),))
     P = 2000
     st = StarTracker(errors, 0.01, np.arange(P))
-    assert (st.period_steps, st.latency_steps) == (25, 10)
+    assert (st.schedule.period_steps, st.schedule.latency_steps) == (25, 10)
     rng = np.random.default_rng(1)
     truth = {}
     reports = []

@@ -25,13 +25,10 @@ from __future__ import annotations
 import numpy as np
 
 from attitude_sil.core.plant.plants import exact_discretization
+from attitude_sil.core.plant.quaternion import cross_matrix
 from attitude_sil.core.plant.rigid_body import BodyState
 
 __all__ = ["linear_model", "LinearizedPlant"]
-
-
-def _skew(v: np.ndarray) -> np.ndarray:
-    return np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
 
 
 def linear_model(inertia: np.ndarray, omega0: np.ndarray | None = None,
@@ -49,8 +46,8 @@ def linear_model(inertia: np.ndarray, omega0: np.ndarray | None = None,
     h = np.zeros(3) if h0 is None else np.asarray(h0, dtype=float)
     inv = np.linalg.inv(inertia)
     # d(ω × (Iω + h))/dω = S(ω) I - S(Iω + h)
-    a_ww = -(_skew(w) @ inertia - _skew(inertia @ w + h))
-    a_wh = -_skew(w)
+    a_ww = -(cross_matrix(w) @ inertia - cross_matrix(inertia @ w + h))
+    a_wh = -cross_matrix(w)
     a = np.zeros((9, 9))
     a[0:3, 0:3] = inv @ a_ww
     a[0:3, 6:9] = inv @ a_wh

@@ -25,6 +25,10 @@ __all__ = [
     "error_vector",
     "quat_derivative",
     "attitude_error_B",
+    "cross_matrix",
+    "rotation_quaternion",
+    "rotation_vector",
+    "small_rotation",
 ]
 
 
@@ -180,6 +184,44 @@ def attitude_error_B(q_ref: np.ndarray, q: np.ndarray) -> np.ndarray:
     """
     d = quat_multiply(quat_conjugate(q_ref), q)
     return 2.0 * np.where(d[..., 3:4] < 0.0, -d[..., :3], d[..., :3])
+
+
+def cross_matrix(v: np.ndarray) -> np.ndarray:
+    """[v x]: the matrix (..., 3, 3) of the cross product with v (..., 3), ``cross_matrix(a) @ b = a x b``."""
+    v = np.asarray(v, dtype=float)
+    z = np.zeros(v.shape[:-1])
+    x, y, w = v[..., 0], v[..., 1], v[..., 2]
+    return np.stack([np.stack([z, -w, y], -1), np.stack([w, z, -x], -1), np.stack([-y, x, z], -1)], -2)
+
+
+def rotation_quaternion(theta: np.ndarray) -> np.ndarray:
+    """exp(theta / 2): the unit quaternion (..., 4) of rotation vector theta (..., 3) rad, exact."""
+    theta = np.asarray(theta, dtype=float)
+    angle = np.sqrt(np.sum(theta * theta, axis=-1, keepdims=True))
+    half = 0.5 * angle
+    # sin(a/2)/a, by its series below 1e-4 rad (error < 1e-17)
+    small = angle < 1e-4
+    safe = np.where(small, 1.0, angle)
+    s = np.where(small, 0.5 - angle * angle / 48.0, np.sin(half) / safe)
+    return np.concatenate([theta * s, np.cos(half)], axis=-1)
+
+
+def rotation_vector(q: np.ndarray) -> np.ndarray:
+    """The rotation vector (..., 3) rad of unit quaternions (..., 4), the short way (inverse of
+    :func:`rotation_quaternion`)."""
+    q = np.where(np.asarray(q)[..., 3:4] < 0.0, -np.asarray(q), np.asarray(q))
+    v = q[..., :3]
+    s = np.sqrt(np.sum(v * v, axis=-1, keepdims=True))
+    angle = 2.0 * np.arctan2(s, q[..., 3:4])
+    small = s < 1e-12
+    return v * np.where(small, 2.0 / np.maximum(q[..., 3:4], 1e-300), angle / np.where(small, 1.0, s))
+
+
+def small_rotation(d: np.ndarray) -> np.ndarray:
+    """The unit quaternion (..., 4) of a small rotation vector d (..., 3) rad: [d / 2, 1] normalised (the
+    multiplicative filter's error convention; :func:`rotation_quaternion` is the exact map)."""
+    half = 0.5 * np.asarray(d, dtype=float)
+    return quat_normalize(np.concatenate([half, np.ones(half.shape[:-1] + (1,))], axis=-1))
 
 
 def quat_derivative(q: np.ndarray, omega_B: np.ndarray) -> np.ndarray:

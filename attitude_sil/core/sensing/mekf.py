@@ -37,39 +37,28 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from attitude_sil.core.plant.quaternion import attitude_error_B, quat_from_euler, quat_multiply, quat_normalize
-from attitude_sil.core.sensing.models import DEG, small_rotation
+from attitude_sil.core.plant.quaternion import (
+    attitude_error_B,
+    cross_matrix,
+    quat_from_euler,
+    quat_multiply,
+    quat_normalize,
+    rotation_quaternion,
+    small_rotation,
+)
+from attitude_sil.core.sensing.models import DEG
 from attitude_sil.errors import ScenarioError
 
-__all__ = ["MekfSettings", "Mekf", "Estimate", "rotation_quaternion"]
+__all__ = ["MekfSettings", "Mekf", "Estimate", "transition"]
 
 #: smallest star-tracker noise the update assumes, rad (a perfect tracker would make the update singular)
 R_FLOOR = 1e-9
 
 
-def rotation_quaternion(theta: np.ndarray) -> np.ndarray:
-    """exp(theta / 2): the unit quaternion (..., 4) of rotation vector theta (..., 3) rad, exact."""
-    theta = np.asarray(theta, dtype=float)
-    angle = np.sqrt(np.sum(theta * theta, axis=-1, keepdims=True))
-    half = 0.5 * angle
-    # sin(a/2)/a, by its series below 1e-4 rad (error < 1e-17)
-    small = angle < 1e-4
-    safe = np.where(small, 1.0, angle)
-    s = np.where(small, 0.5 - angle * angle / 48.0, np.sin(half) / safe)
-    return np.concatenate([theta * s, np.cos(half)], axis=-1)
-
-
-def _skew(w: np.ndarray) -> np.ndarray:
-    """[w x] (P, 3, 3) of w (P, 3)."""
-    z = np.zeros(w.shape[:-1])
-    x, y, zz = w[..., 0], w[..., 1], w[..., 2]
-    return np.stack([np.stack([z, -zz, y], -1), np.stack([zz, z, -x], -1), np.stack([-y, x, z], -1)], -2)
-
-
 def transition(omega: np.ndarray, dt: float) -> np.ndarray:
     """Phi (P, 6, 6) of the error state over dt for the held rate omega (P, 3) rad/s (module docstring)."""
     P = omega.shape[0]
-    W = _skew(omega)
+    W = cross_matrix(omega)
     W2 = W @ W
     n = np.linalg.norm(omega, axis=-1)[:, None, None]
     th = n * dt
@@ -115,9 +104,10 @@ class MekfSettings:
     initial_bias_sigma: float
 
     @classmethod
-    def from_values(cls, estimator: dict, gyro_arw: float, star_tracker_sigma, initial_rpy_deg=None) -> MekfSettings:
-        """From the ``estimator`` node's parameters and the sensors' noise (SI units)."""
-        rpy = estimator["initial_attitude_rpy_deg"] if initial_rpy_deg is None else initial_rpy_deg
+    def from_values(cls, estimator: dict, gyro_arw: float, star_tracker_sigma) -> MekfSettings:
+        """From the ``estimator`` node's parameters (``initial_attitude_rpy_deg`` (3,) or (P, 3)) and the
+        sensors' noise (SI units)."""
+        rpy = estimator["initial_attitude_rpy_deg"]
         return cls(gyro_arw=float(gyro_arw),
                    bias_walk=estimator["bias_walk_deg_h_rt_h"] * DEG / 3600.0 / 60.0,
                    star_tracker_sigma=tuple(np.asarray(star_tracker_sigma, dtype=float)),

@@ -41,31 +41,22 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from attitude_sil.core.plant.quaternion import quat_conjugate, quat_multiply, quat_normalize
+from attitude_sil.core.plant.quaternion import (
+    cross_matrix,
+    quat_conjugate,
+    quat_multiply,
+    quat_normalize,
+    rotation_vector,
+    small_rotation,
+)
 from attitude_sil.core.sensing.noise import normals
 from attitude_sil.errors import ScenarioError
 
 __all__ = ["DEG", "ARCSEC", "GyroErrors", "Gyro", "StarTrackerErrors", "StarTracker", "StarTrackerReport",
-           "Tachometer", "SensorSuite", "SensorSample", "allan_variance_model", "small_rotation", "rotation_vector"]
+           "Tachometer", "SensorSuite", "SensorSample", "allan_variance_model", "TrackerSchedule"]
 
 DEG = np.pi / 180.0
 ARCSEC = DEG / 3600.0
-
-
-def rotation_vector(q: np.ndarray) -> np.ndarray:
-    """The rotation vector (..., 3) rad of unit quaternions (..., 4), the short way (inverse of exp(theta / 2))."""
-    q = np.where(np.asarray(q)[..., 3:4] < 0.0, -np.asarray(q), np.asarray(q))
-    v = q[..., :3]
-    s = np.sqrt(np.sum(v * v, axis=-1, keepdims=True))
-    angle = 2.0 * np.arctan2(s, q[..., 3:4])
-    small = s < 1e-12
-    return v * np.where(small, 2.0 / np.maximum(q[..., 3:4], 1e-300), angle / np.where(small, 1.0, s))
-
-
-def small_rotation(d: np.ndarray) -> np.ndarray:
-    """The unit quaternion (..., 4) of a small rotation vector d (..., 3) rad: [d / 2, 1] normalised."""
-    half = 0.5 * np.asarray(d, dtype=float)
-    return quat_normalize(np.concatenate([half, np.ones(half.shape[:-1] + (1,))], axis=-1))
 
 
 @dataclass(frozen=True)
@@ -150,10 +141,8 @@ class Gyro:
         self.dt = float(dt)
         self.seeds = np.asarray(seeds, dtype=np.int64)
         e = errors
-        m = np.asarray(e.misalignment, dtype=float)
-        skew = np.array([[0.0, -m[2], m[1]], [m[2], 0.0, -m[0]], [-m[1], m[0], 0.0]])
         #: omega_sensor = C omega_true
-        self.C = (np.eye(3) + np.diag(e.scale_factor)) @ (np.eye(3) - skew)
+        self.C = (np.eye(3) + np.diag(e.scale_factor)) @ (np.eye(3) - cross_matrix(e.misalignment))
         self.phi = float(np.exp(-self.dt / e.correlation_time))
         self.reset()
 
@@ -234,8 +223,11 @@ class StarTrackerErrors:
 
     @classmethod
     def from_values(cls, v: dict) -> StarTrackerErrors:
-        """From the ``sensors`` node's parameters (``star_tracker.*``)."""
+        """From the ``sensors`` node's parameters (``star_tracker.*``); ScenarioError for outages that are not
+        (start, end) pairs with end > start."""
         flat = list(v["star_tracker.outages_s"])
+        if len(flat) % 2 or any(b <= a for a, b in zip(flat[0::2], flat[1::2], strict=False)):
+            raise ScenarioError("sensors.star_tracker.outages_s must hold (start, end) pairs with end > start, s")
         return cls(cross_boresight=v["star_tracker.cross_boresight_arcsec"] * ARCSEC,
                    about_boresight=v["star_tracker.about_boresight_arcsec"] * ARCSEC,
                    boresight_axis=int(v["star_tracker.boresight_axis"]),
@@ -256,6 +248,27 @@ def _steps(value: float, dt: float, what: str) -> int:
     if abs(n * dt - value) > 1e-9 * max(1.0, value):
         raise ScenarioError(f"{what} = {value:g} s is not a whole number of control steps (dt = {dt:g} s)")
     return int(n)
+
+
+class TrackerSchedule:
+    """When a star tracker reports: an exposure every ``1 / rate_hz`` s, reported ``latency`` s later, both whole
+    numbers of control steps (ScenarioError otherwise), so the graph and the batch engine keep one schedule.
+    The tracker and the filter that waits for its reports (the ``estimator`` node) share it."""
+
+    def __init__(self, rate_hz: float, latency: float, dt: float) -> None:
+        self.period_steps = _steps(1.0 / rate_hz, dt, "star_tracker: 1 / rate_hz")
+        self.latency_steps = _steps(latency, dt, "star_tracker.latency_s")
+        if self.period_steps < 1:
+            raise ScenarioError(f"star_tracker.rate_hz = {rate_hz:g} is above the control rate")
+
+    def exposes_at(self, k: int) -> bool:
+        """Whether step ``k`` is an exposure."""
+        return k % self.period_steps == 0
+
+    def reports_at(self, k: int) -> bool:
+        """Whether step ``k`` carries a report (of exposure k - latency_steps)."""
+        j = k - self.latency_steps
+        return j >= 0 and self.exposes_at(j)
 
 
 @dataclass
@@ -288,19 +301,8 @@ class StarTracker:
         self.errors = errors
         self.dt = float(dt)
         self.seeds = np.asarray(seeds, dtype=np.int64)
-        self.period_steps = _steps(1.0 / errors.rate_hz, dt, "star_tracker: 1 / rate_hz")
-        self.latency_steps = _steps(errors.latency, dt, "star_tracker.latency_s")
-        if self.period_steps < 1:
-            raise ScenarioError(f"star_tracker.rate_hz = {errors.rate_hz:g} is above the control rate")
-        self.reset()
-
-    def reset(self) -> None:
-        self._history: dict[int, np.ndarray] = {}
-
-    def reports_at(self, k: int) -> bool:
-        """Whether step ``k`` carries a report (of exposure k - latency_steps)."""
-        j = k - self.latency_steps
-        return j >= 0 and j % self.period_steps == 0
+        self.schedule = TrackerSchedule(errors.rate_hz, errors.latency, dt)
+        self._history: dict[int, np.ndarray] = {}  # exposure step -> true attitude, until reported
 
     def in_outage(self, j: int) -> bool:
         """Whether exposure step ``j`` falls in a scheduled outage."""
@@ -309,11 +311,11 @@ class StarTracker:
 
     def sample(self, q_BN: np.ndarray, k: int) -> StarTrackerReport | None:
         """Step ``k``: remember the true attitude (P, 4); return the report due at this step, or None."""
-        if k % self.period_steps == 0:  # an exposure: kept until it is reported
+        if self.schedule.exposes_at(k):  # kept until it is reported
             self._history[k] = np.array(q_BN, dtype=float)
-        if not self.reports_at(k):
+        if not self.schedule.reports_at(k):
             return None
-        j = k - self.latency_steps
+        j = k - self.schedule.latency_steps
         q_true = self._history.pop(j)
         if self.in_outage(j):
             return StarTrackerReport(j, q_true, False)
@@ -377,17 +379,9 @@ class SensorSuite:
         seeds = np.full(n_episodes, int(values["seed"])) if seeds is None else np.asarray(seeds, dtype=np.int64)
         if seeds.shape != (n_episodes,):
             raise ScenarioError(f"sensors: {seeds.size} seeds for {n_episodes} episodes")
-        flat = list(values["star_tracker.outages_s"])
-        if len(flat) % 2 or any(b <= a for a, b in zip(flat[0::2], flat[1::2], strict=False)):
-            raise ScenarioError("sensors.star_tracker.outages_s must hold (start, end) pairs with end > start, s")
         self.gyro = Gyro(GyroErrors.from_values(values), dt, seeds)
         self.star_tracker = StarTracker(StarTrackerErrors.from_values(values), dt, seeds)
         self.tachometer = Tachometer(int(values["wheel_speed.counts_per_rev"]), dt)
-
-    def reset(self) -> None:
-        self.gyro.reset()
-        self.star_tracker.reset()
-        self.tachometer.reset()
 
     def sample(self, q_BN: np.ndarray, omega_BN_B: np.ndarray, k: int) -> SensorSample:
         """The readings at step ``k`` of the truth (P, 4), (P, 3)."""

@@ -33,7 +33,7 @@ from attitude_sil.core.sensing.mekf import Mekf, MekfSettings
 from attitude_sil.core.sensing.models import SensorSuite
 from attitude_sil.core.sim.batch import COMPILED_DISTURBANCES, TRAJECTORY_FIELDS, run_compiled
 from attitude_sil.core.sim.params import NODE_PARAMS
-from attitude_sil.core.sim.scenario import Scenario, derived_values
+from attitude_sil.core.sim.scenario import Scenario, effective_values
 from attitude_sil.core.trajectory import EpisodeSummary, Trajectory, WheelStep
 from attitude_sil.errors import ScenarioError
 
@@ -363,10 +363,6 @@ class Sensing:
         self.mekf = mekf
         self.feedback = feedback
 
-    def reset(self) -> None:
-        self.suite.reset()
-        self.mekf.reset()
-
     def step(self, k: int, q_BN: np.ndarray, omega_BN_B: np.ndarray):
         """The estimate at step ``k`` (a :class:`~attitude_sil.core.sensing.mekf.Estimate`) and the gyro reading."""
         sample = self.suite.sample(q_BN, omega_BN_B, k)
@@ -387,11 +383,11 @@ def build_sensing(scn: Scenario, n_episodes: int = 1, seeds=None, gyro_bias_deg_
     if gyro_bias_deg_h is not None:
         values["gyro.bias_deg_h"] = np.asarray(gyro_bias_deg_h, dtype=float).reshape(n_episodes, 3)
     suite = SensorSuite(values, scn.dt, n_episodes, seeds)
-    estimator = {**scn.values["estimator"], **derived_values(scn, "estimator")}
+    estimator = effective_values(scn, "estimator")
     if initial_rpy_deg is not None:
         estimator["initial_attitude_rpy_deg"] = np.asarray(initial_rpy_deg, dtype=float).reshape(n_episodes, 3)
     settings = MekfSettings.from_values(estimator, suite.gyro.errors.arw, suite.star_tracker.errors.sigma_B)
-    mekf = Mekf(settings, scn.dt, n_episodes, suite.star_tracker.latency_steps)
+    mekf = Mekf(settings, scn.dt, n_episodes, suite.star_tracker.schedule.latency_steps)
     return Sensing(suite, mekf, scn.feedback)
 
 

@@ -34,7 +34,8 @@ from attitude_sil.core.sim.params import GLOBAL_NODE, NODE_PARAMS, SCENARIO_NODE
 from attitude_sil.errors import ScenarioError
 
 __all__ = ["ScenarioError", "Scenario", "load_scenario", "scenario_from_dict", "with_parameter_file", "yaml_problem",
-           "GRAPH_NODES", "SENSOR_NODES", "ALL_NODES", "PRESETS", "default_config_dir", "derived_values"]
+           "GRAPH_NODES", "SENSOR_NODES", "ALL_NODES", "PRESETS", "default_config_dir", "derived_values",
+           "effective_values"]
 
 #: the preset scenarios of the five papers (``config/<name>.yaml``)
 PRESETS = ("hst_roll_step", "hawaiisat_lvlh", "flexible_axis", "cubesat_1u", "pitch_axis")
@@ -188,6 +189,11 @@ def derived_values(scn: Scenario, node: str) -> dict[str, Any]:
     mine = scn.explicit.get(node, {})
     return {name: copy.deepcopy(scn.values[src][src_name]) for name, (src, src_name) in DERIVED.get(node, {}).items()
             if name not in mine}
+
+
+def effective_values(scn: Scenario, node: str) -> dict[str, Any]:
+    """``node``'s values as it runs: the scenario's, with :func:`derived_values` laid over them."""
+    return {**scn.values[node], **derived_values(scn, node)}
 
 
 def _check_consistency(scn: Scenario) -> None:
