@@ -17,7 +17,10 @@ Prints, for the HST roll step at 100 Hz control:
   (``soa_reference.py``, checked equal to the fused loop) and the physical
   limit (``limits.py``); then the tuning example's evaluations and a
   10,000-run Monte Carlo campaign, locally and on a Dask cluster.
-  ``python bench/bench_engine.py simd`` runs it alone;
+  ``python bench/bench_engine.py simd`` runs it alone, after ``laws``;
+* ``laws``: each registered law's step in the controller bank's row loop
+  against its loop on the episode axis (``vector_<code>``), and how much of it
+  LLVM packed;
 * ``jax``: the same episode in JAX on the CPU (``jax_reference.py``, run by
   ``$JAX_PYTHON``; not a dependency), the measurement behind the choice of tool.
 
@@ -43,7 +46,7 @@ os.environ.setdefault("ROS_DOMAIN_ID", str(150 + os.getpid() % 50))
 from bench_cluster import _spec as mc_spec  # noqa: E402
 from fused_reference import fused_parallel, fused_serial, fused_setup  # noqa: E402
 from limits import count_step_ops, peak_fma_flops  # noqa: E402
-from numba import config, set_num_threads  # noqa: E402
+from numba import config, njit, set_num_threads  # noqa: E402
 from soa_reference import LANES, lanes_args, lanes_run  # noqa: E402
 
 from attitude_sil.core.control.registry import names as law_names  # noqa: E402
@@ -59,10 +62,14 @@ from attitude_sil.tuning.spec import load_spec  # noqa: E402
 
 def main() -> None:
     scn = load_scenario(ROOT / "config" / "hst_roll_step.yaml")
+    if sys.argv[1:] == ["laws"]:
+        law_lanes(scn)
+        return
     if sys.argv[1:] == ["jax"]:
         jax_table(scn)
         return
     if sys.argv[1:] == ["simd"]:
+        law_lanes(scn)
         simd(scn)
         targets(scn)
         return
@@ -79,6 +86,7 @@ def main() -> None:
     ceiling(scn)
     newly_compiled(scn)
     costs = {p: controller_cost(scn, p) for p in (1, 50)}
+    law_lanes(scn)
     simd(scn)
     targets(scn)
     print("controller cost, us per step per episode (ratio to pid at the same P):")
@@ -252,6 +260,74 @@ def jax_table(scn) -> None:
                 print(f"{p:>6} {cores:>5} {p * duration / f:12,.0f}   {cells}   {float(res['compile_s']):9.1f} s"
                       f"   |final state - fused| {diff:.1e}")
     set_num_threads(config.NUMBA_NUM_THREADS)
+
+
+def law_lanes(scn, n_episodes: int = 64, steps: int = 2000) -> None:
+    """Each law on the episode axis: ns per episode and step of its ``vector_<code>`` loop (the batch
+    engine's one-law case, column-major arrays, on a block of the engine's 64 episodes) against the same step
+    in the controller bank's row loop
+    (row-major, a law test per row), on the same inputs; and how much of the vector loop's arithmetic LLVM
+    packed (ymm instructions among the double-precision ones). A law whose branches LLVM cannot turn into
+    selects stays scalar: its speed-up near 1 and its packed share near 0 are what it loses to them."""
+    import re
+
+    from attitude_sil.core.control.compiled import dispatch_module
+    rng = np.random.default_rng(0)
+    q = quat_from_euler(np.radians(rng.uniform(-20, 20, (n_episodes, 3))))
+    w = rng.normal(0, 0.01, (n_episodes, 3))
+    q_r = np.tile([0.0, 0.0, 0.0, 1.0], (n_episodes, 1))
+    w_r = np.zeros((n_episodes, 3))
+    d = dispatch_module()
+    fortran = [np.asfortranarray(a) for a in (q, w, q_r, w_r)]
+    print(f"each law on {n_episodes} episodes, ns per episode step (vector loop: the engine's one-law case):")
+    print(f"{'law':<12} {'row loop':>9} {'vector loop':>12} {'speed-up':>9} {'packed share':>13}")
+    for kind in law_names():
+        bank = build_controller(scn, n_episodes)
+        code = bank.codes[kind]
+        rec = bank.record(kind)
+        par = type(rec)(*(np.asfortranarray(f) if isinstance(f, np.ndarray) else f for f in rec))
+        st = bank.new_states(n_episodes, order="F")[code]
+        u = np.zeros((n_episodes, 3), order="F")
+        vec = getattr(d, f"vector_{code}")
+        vec(*fortran, par, st, scn.dt, u)
+        law = np.full(n_episodes, code, dtype=np.int64)
+        present = np.zeros(len(bank.names), dtype=np.bool_)
+        present[code] = True
+        pars = bank.records_for(bank.names)
+        sts = bank.new_states(n_episodes)
+        u_row, offset, has_off = np.zeros((n_episodes, 3)), np.zeros((n_episodes, 3)), np.zeros(n_episodes, bool)
+        row_args = (law, present, (q, w, q_r, w_r), pars, sts, scn.dt, u_row, offset, has_off, 0.0)
+        vec_args = (*fortran, par, st, scn.dt, u)
+        t_row = _best(lambda a=row_args: _repeat_stage(d.lanes_stage, steps, *a), 3) / steps / n_episodes * 1e9
+        t_vec = _best(lambda f=vec, a=vec_args: _repeat_vector(f, steps, *a), 3) / steps / n_episodes * 1e9
+        asm = _vector_asm(d, code, (*fortran, par, st, scn.dt, u))
+        packed = len(re.findall(r"\bv\w+pd\s+%ymm", asm))
+        scalar = len(re.findall(r"\bv\w+sd\s", asm))
+        print(f"{kind:<12} {t_row:9.1f} {t_vec:12.1f} {t_row / t_vec:9.2f} {packed / max(1, packed + scalar):13.0%}")
+
+
+@njit
+def _repeat_stage(stage, reps, law, present, view, pars, sts, dt, u, offset, has_off, decay):
+    # the row loop called reps times from compiled code (a call from Python costs more than the loop)
+    for _ in range(reps):
+        stage(law, present, view, pars, sts, dt, u, offset, has_off, decay)
+
+
+@njit
+def _repeat_vector(vector, reps, q, w, q_r, w_r, par, st, dt, u):
+    for _ in range(reps):
+        vector(q, w, q_r, w_r, par, st, dt, u)
+
+
+def _vector_asm(d, code: int, args: tuple) -> str:
+    """The assembly of law ``code``'s vector loop, compiled afresh (numba shows none for what it loaded
+    from its cache)."""
+    from numba import njit
+
+    from attitude_sil.core.control.compiled import LanesCompiler
+    fresh = njit(error_model="numpy", pipeline_class=LanesCompiler)(getattr(d, f"vector_{code}").py_func)
+    fresh(*args)
+    return fresh.inspect_asm(fresh.signatures[0])
 
 
 def targets(scn) -> None:

@@ -88,10 +88,11 @@ class ControllerBank:
         self.has_offset = np.zeros(self.n, dtype=np.bool_)
         self.reset()
 
-    def new_states(self, n: int) -> tuple:
-        """Every law's state record for n episodes, zeroed (the generated ``State_<code>`` classes)."""
+    def new_states(self, n: int, order: str = "C") -> tuple:
+        """Every law's state record for n episodes, zeroed (the generated ``State_<code>`` classes); ``order``:
+        the arrays' memory order (the batch engine's are column-major, "F")."""
         return tuple(getattr(self.dispatch, f"State_{i}")(
-            *(np.zeros((n, int(w)), dtype=d) for w, d in state_layout(registry.get(name)).values()))
+            *(np.zeros((n, int(w)), dtype=d, order=order) for w, d in state_layout(registry.get(name)).values()))
             for i, name in enumerate(self.names))
 
     def configure(self, values: dict) -> None:

@@ -19,6 +19,12 @@ generated module holds:
   for the rare swap;
 * ``lanes_stage``, ``lanes_enter``: the same as compiled entry points over P
   rows, for the controller bank (the nodes with P = 1 and the stepwise driver);
+* ``vector_<code>(q, w, q_r, w_r, par, st, dt, u)``: each law's step on every
+  row, for the batch engine's arrays in column-major order (the episodes
+  contiguous in every column), compiled so that LLVM packs the episodes into
+  SIMD lanes: the law's own step, unchanged, inlined by LLVM
+  (:data:`VECTOR_STEP`) into a loop compiled with its arrays declared free of
+  aliasing (:class:`LanesCompiler`). bench/README.md says why each is needed;
 * ``State_<code>``: each law's state record class.
 
 :func:`from_template` makes a module of another compiled loop (the batch
@@ -37,15 +43,96 @@ from pathlib import Path
 from types import ModuleType
 
 import numpy as np
+from numba import types
+from numba.core.compiler import CompilerBase, DefaultPassBuilder
+from numba.core.compiler_machinery import FunctionPass, register_pass
+from numba.extending import overload
 
 from attitude_sil.core.control import registry
 from attitude_sil.core.control.law import Law, state_layout
 
-__all__ = ["dispatch_module", "from_template", "cache_dir", "STUB_BEGIN", "STUB_END"]
+__all__ = ["dispatch_module", "from_template", "cache_dir", "LanesCompiler", "VECTOR_STEP", "every_row", "STUB_BEGIN",
+           "STUB_END"]
 
 #: the lines that delimit a template's stand-ins for the generated dispatch
 STUB_BEGIN = "# >>> law dispatch stubs"
 STUB_END = "# <<< law dispatch stubs"
+
+#: how a law's step is compiled again for :func:`vector_<code>`: inlined by LLVM (``alwaysinline``), not by
+#: numba. numba's own inlining (``inline="always"``) binds the step's array arguments to new names, and the
+#: reference counts it takes and drops for them each row are calls, which keep LLVM's loop vectoriser away
+#: (they are pruned only after it has run); an LLVM-inlined call takes none. The batch loop's error model.
+VECTOR_STEP = {"forceinline": True, "error_model": "numpy"}
+
+
+@register_pass(mutates_CFG=False, analysis_only=False)
+class _ArraysDoNotAlias(FunctionPass):
+    """Declare the function's array arguments free of aliasing (numba's ``noalias`` flag; parfors use it)."""
+
+    _name = "attitude_sil_arrays_do_not_alias"
+
+    def __init__(self) -> None:
+        FunctionPass.__init__(self)
+
+    def run_pass(self, state) -> bool:
+        state.flags.noalias = True
+        return False
+
+
+class LanesCompiler(CompilerBase):
+    """numba's nopython pipeline for a loop over the episodes whose array arguments share no memory.
+
+    A law's step reads ten and more arrays and writes a few; with no promise
+    that they do not overlap, LLVM would have to test every pair at run time
+    before a packed loop, and past eight pairs it keeps the loop scalar. The
+    caller's promise: no array argument is written through while another
+    argument reaches the same memory (records are read-only, each state field
+    and the command are arrays of their own).
+    """
+
+    def define_pipelines(self):
+        pm = DefaultPassBuilder.define_nopython_pipeline(self.state)
+        pm.add_pass_after(_ArraysDoNotAlias, pm.passes[0][0])
+        pm.finalize()
+        return [pm]
+
+
+#: at most this many bool fields of a record get loops of their own in :func:`every_row` (2**n loops)
+MAX_VERSIONED_FLAGS = 2
+
+
+def every_row(step, q, w, q_r, w_r, par, st, dt, u):
+    """``step`` on every row of ``u``; compiled, a loop of its own for each value of the record's bool fields.
+
+    A branch on a mode switch of the record (``par.angle_mode``) is the same
+    for every episode, but inside one loop LLVM turns it into a select and
+    evaluates both sides for every lane: the angle mode's three ``asin``
+    calls, scalar, on every PID step (30-45 ns per episode instead of 12-14
+    in one run). With a loop per value, the condition is known inside each
+    and the branch disappears. Up to :data:`MAX_VERSIONED_FLAGS` fields, in
+    the record's order.
+    """
+    for p in range(u.shape[0]):
+        step(q, w, q_r, w_r, p, par, st, dt, u)
+
+
+@overload(every_row, inline="always")
+def _every_row(step, q, w, q_r, w_r, par, st, dt, u):
+    fields = getattr(par, "fields", ())
+    flags = [f for f, t in zip(fields, par.types, strict=True) if isinstance(t, types.Boolean)][:MAX_VERSIONED_FLAGS]
+    loop = ["for p in range(u.shape[0]):", "    step(q, w, q_r, w_r, p, par, st, dt, u)"]
+
+    def nest(names: list[str]) -> list[str]:
+        if not names:
+            return loop
+        inner = nest(names[1:])
+        return [f"if par.{names[0]}:", *("    " + x for x in inner), "else:", *("    " + x for x in inner)]
+
+    source = "\n".join(["def impl(step, q, w, q_r, w_r, par, st, dt, u):", *("    " + x for x in nest(flags))])
+    scope: dict = {}
+    exec(compile(source, f"<every_row of {', '.join(flags) or 'no flags'}>", "exec"), scope)  # noqa: S102
+    return scope["impl"]
+
 
 _LOCK = threading.Lock()
 _MODULES: dict[str, ModuleType] = {}
@@ -102,11 +189,13 @@ def _stage_lines(laws: list[Law], names: dict[str, str], fast: bool = True) -> l
 
     Then the transfer offset and, for a law that does not saturate, the clip.
     ``names`` renames the loop's variables (:data:`_STAGE_NAMES`). ``fast``
-    adds the one-law loop first (the batch engine's); without it each law's
-    step is compiled once, not twice (the bank's stage: one row in a node).
+    adds the one-law case first (the batch engine's: the law's
+    ``vector_<code>`` on every row, its arrays column-major); without it each
+    law's step is compiled once, not twice (the bank's stage: one row in a node).
     """
     n = {k: names.get(k, k) for k in _STAGE_NAMES}
-    inp = f"{n['q']}, {n['w']}, {n['q_r']}, {n['w_r']}, p"
+    view = f"{n['q']}, {n['w']}, {n['q_r']}, {n['w_r']}"
+    inp = f"{view}, p"
     # the common case first: every row runs one law with no transfer offset pending; then the law's step runs
     # in a loop of its own with no test per row (a test per row kept the PID's loop from being optimised:
     # bench/README.md)
@@ -120,8 +209,8 @@ def _stage_lines(laws: list[Law], names: dict[str, str], fast: bool = True) -> l
     for i, law in enumerate(laws):
         clip = ["for j in range(3):", f"    {n['u']}[p, j] = min(max({n['u']}[p, j], -par_{i}.u_max), par_{i}.u_max)"]
         if fast:
-            out += [f"if only == {i}:", f"    for p in range({n['law']}.shape[0]):",
-                    f"        _step_{i}({inp}, par_{i}, st_{i}, {n['dt']}, {n['u']})"]
+            out += [f"if only == {i}:",
+                    f"    _vector_{i}({view}, par_{i}, st_{i}, {n['dt']}, {n['u']})"]
             if not law.saturated:
                 out += [f"    for p in range({n['law']}.shape[0]):", *("        " + c for c in clip)]
         out += [f"elif only < 0 and {n['present']}[{i}]:" if fast else f"if {n['present']}[{i}]:",
@@ -145,6 +234,7 @@ def _dispatch_source(laws: list[Law]) -> str:
         lines.append(f"from {mod} import {law.step.py_func.__name__} as _step_{i}")
         if law.enter is not None:
             lines.append(f"from {law.enter.py_func.__module__} import {law.enter.py_func.__name__} as _enter_{i}")
+    lines += ["", "from attitude_sil.core.control.compiled import VECTOR_STEP, LanesCompiler, every_row"]
     lines.append("")
     lines.append(f"LAWS = {tuple(x.name for x in laws)!r}")
     for i, law in enumerate(laws):
@@ -176,6 +266,14 @@ def _dispatch_source(laws: list[Law]) -> str:
                 "return False"]
 
     jit = "@njit(cache=True, inline='always')"
+    vector_lines = []
+    for i in range(len(laws)):
+        vector_lines += ["", "", f"_lane_step_{i} = njit(**VECTOR_STEP)(_step_{i}.py_func)", "", "",
+                         "@njit(cache=True, error_model='numpy', pipeline_class=LanesCompiler)",
+                         f"def vector_{i}(q, w, q_r, w_r, par, st, dt, u):",
+                         "    # every row's command by this law: the rows are SIMD lanes when the arrays are",
+                         "    # column-major (a column's episodes contiguous)",
+                         f"    every_row(_lane_step_{i}, q, w, q_r, w_r, par, st, dt, u)"]
     torque = " or ".join(f"code == {i}" for i, x in enumerate(laws) if x.output == "torque") or "False"
     stages = ["    " + x for x in _record_lines(laws) + _stage_lines(laws, {}, fast=False)]
     lines += ["", "", jit, "def law_stage(law, present, view, pars, sts, dt, u, offset, has_off, decay):",
@@ -191,6 +289,7 @@ def _dispatch_source(laws: list[Law]) -> str:
               *chain(enter_lines),
               "    return False",
               "", "", jit, "def law_is_torque(code):", f"    return {torque}",
+              *vector_lines,
               "", "", "@njit(cache=True)",
               "def lanes_stage(law, present, view, pars, sts, dt, u, offset, has_off, decay):",
               "    law_stage(law, present, view, pars, sts, dt, u, offset, has_off, decay)",
@@ -258,6 +357,7 @@ def from_template(template: ModuleType, law_names: tuple[str, ...] | None = None
     head, rest = text.split(STUB_BEGIN, 1)
     _, tail = rest.split(STUB_END, 1)
     imports = [f"from {dispatch.__name__} import law_enter, law_is_torque, law_reset",
+               *(f"from {dispatch.__name__} import vector_{i} as _vector_{i}" for i in range(len(laws))),
                "from attitude_sil.core.control.kernels import offset_row"]
     imports += [f"from {x.step.py_func.__module__} import {x.step.py_func.__name__} as _step_{i}"
                 for i, x in enumerate(laws)]

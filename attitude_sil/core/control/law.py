@@ -22,6 +22,11 @@ out by ``state``), advances row ``p`` of the state by one control period
 ``output``). It allocates nothing and touches no Python object, so the
 engine can inline it into its compiled loop and the node can call it with
 n = 1: the same arithmetic everywhere, which is what makes graph == batch.
+When every episode of a batch runs one law, the engine calls the step in a
+loop over ``p`` with every array in column-major order (the episodes of a
+column contiguous), and LLVM packs the episodes into SIMD lanes
+(``vector_<code>``, :mod:`attitude_sil.core.control.compiled`): the author
+writes the step once, for one row.
 
 Bumpless entry
 --------------

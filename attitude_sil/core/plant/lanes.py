@@ -24,7 +24,8 @@ on the way, and what these functions therefore keep to:
   the drive limits, the exact motor step and the mean torque on the body
   (``wheels.WheelAssembly``);
 * :func:`rows_to_lanes` & co.: copies between a block and the row-major
-  (P, width) arrays the rest of the package uses.
+  (P, width) arrays the rest of the package uses; :func:`column_major`: the
+  laws' (m, width) arrays in the batch engine, episodes contiguous.
 
 The batch engine's chunk (:mod:`attitude_sil.core.sim.batch_loop`) keeps the
 plant state in a block for a whole episode; the row kernels the nodes and
@@ -40,7 +41,7 @@ from numba import njit
 
 __all__ = ["BODY_ROWS", "MOTOR_ROWS", "Q", "W", "H", "TC", "TE", "II", "IV", "U", "rk4_body_lanes", "wheel_lanes",
            "motor_lanes", "body_block", "rows_to_lanes", "lanes_to_rows", "mat_to_lanes", "wheels_to_lanes",
-           "lanes_to_wheels", "copy_wheels"]
+           "lanes_to_wheels", "copy_wheels", "column_major"]
 
 # ---------------------------------------------------------------- the body block's rows
 #: q_BN (x, y, z, w), omega_BN_B (rad/s), h_wheels_B (N m s), tau_c_B and tau_ext_B (N m)
@@ -60,6 +61,21 @@ MOTOR_ROWS = 18
 
 
 # ---------------------------------------------------------------- copies
+@njit(cache=True, inline="always")
+def column_major(a, lo, m):
+    """Rows lo..lo+m-1 of ``a`` (P, width) as a new (m, width) array in column-major order.
+
+    The layout of the laws' arrays in the batch engine: indexed ``[p, i]`` as
+    everywhere, but a column's episodes are contiguous, so a loop over the
+    episodes reads and writes them as packed vectors.
+    """
+    out = np.empty((a.shape[1], m)).T
+    for i in range(a.shape[1]):
+        for p in range(m):
+            out[p, i] = a[lo + p, i]
+    return out
+
+
 @njit(cache=True, inline="always")
 def rows_to_lanes(a, lo, block, row, m):
     """Rows lo..lo+m-1 of ``a`` (P, width) into rows ``row..row+width-1`` of ``block``."""

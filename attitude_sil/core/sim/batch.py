@@ -278,21 +278,20 @@ def _chunk_runner(ctrl, used: set[str], sim: SimArrays, outputs: Outputs, spec: 
 
     def run(span, noise, noise_lo):
         lo, hi = span
-        # each chunk gets its own rows of the law records (contiguous copies) and a fresh state
+        # each chunk gets its own rows of the law records and a fresh state, column-major (the episodes
+        # contiguous: compiled.vector_<code>)
         pars = tuple(type(r)(*(_rows(f, lo, hi, P) for f in r)) for r in records)
-        sts = ctrl.new_states(hi - lo)
+        sts = ctrl.new_states(hi - lo, order="F")
         loop.chunk(lo, hi, sim, pars, sts, noise, noise_lo, outputs, spec)
 
     return run
 
 
 def _rows(field, lo: int, hi: int, P: int):
-    """Rows lo..hi-1 of a record field with a leading episode axis, as a writable contiguous copy (the field
-    itself for one chunk of all: records are read-only in the loop); scalars as they are."""
+    """Rows lo..hi-1 of a record field with a leading episode axis, as a writable column-major copy;
+    scalars as they are."""
     if isinstance(field, np.ndarray) and field.ndim >= 1 and field.shape[0] == P:
-        if lo == 0 and hi == P:
-            return field
-        return np.array(field[lo:hi], order="C")
+        return np.array(field[lo:hi], order="F")
     return field
 
 

@@ -32,6 +32,7 @@ from attitude_sil.core.plant.lanes import (
     U,
     W,
     body_block,
+    column_major,
     copy_wheels,
     lanes_to_rows,
     motor_lanes,
@@ -143,8 +144,10 @@ def chunk(lo, hi, sim, pars, sts, noise, noise_lo, out, sums):
     step ``sim.sw_k[s]`` (sorted), with the controller bank's bumpless transfer.
     """
     m = hi - lo
-    q, w = sim.q0[lo:hi].copy(), sim.w0[lo:hi].copy()  # rows (m, 4), (m, 3): what the laws and the metrics read
-    qi, qf, omega_r = sim.q_initial[lo:hi].copy(), sim.q_final[lo:hi].copy(), sim.omega_ref[lo:hi].copy()
+    # what the laws read, (m, 4) and (m, 3) in column-major order (a law's one-law loop runs on packed lanes)
+    q, w = column_major(sim.q0, lo, m), column_major(sim.w0, lo, m)
+    qi, qf = column_major(sim.q_initial, lo, m), column_major(sim.q_final, lo, m)
+    omega_r = column_major(sim.omega_ref, lo, m)
     law = sim.law0[lo:hi].copy()
     # @laws records
     present = np.zeros(len(pars), dtype=np.bool_)  # the laws some episode of the chunk runs
@@ -157,7 +160,8 @@ def chunk(lo, hi, sim, pars, sts, noise, noise_lo, out, sums):
     tau_constant, tau_step = sim.tau_constant.copy(), sim.tau_step.copy()
     s_seeds, s_att, s_rate = sim.s_seeds.copy(), sim.s_att.copy(), sim.s_rate.copy()
     sw_k, sw_law = sim.sw_k.copy(), sim.sw_law.copy()
-    qm, wm, tau_e, u = np.empty((m, 4)), np.empty((m, 3)), np.zeros((m, 3)), np.empty((m, 3))
+    qm, wm, u = column_major(sim.q0, lo, m), column_major(sim.w0, lo, m), column_major(sim.w0, lo, m)
+    tau_e = np.zeros((m, 3))
     torque = np.empty(m, dtype=np.bool_)  # the rows whose command is a torque
     tau_c, h0 = np.empty((m, 3)), np.empty((m, 3))
     b, xw, xn = _plant_start(sim, lo, m)

@@ -73,11 +73,11 @@ def geometric_row(q_BN, omega, q_RN, w_d, w_d_prev, has_prev, p, par, dt, out):
     q20, q21, q22 = 2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)
     a0, a1, a2 = w_d[p, 0], w_d[p, 1], w_d[p, 2]
     nu = (q00 * a0 + q10 * a1 + q20 * a2, q01 * a0 + q11 * a1 + q21 * a2, q02 * a0 + q12 * a1 + q22 * a2)
-    if has_prev:
-        d0, d1, d2 = (a0 - w_d_prev[p, 0]) / dt, (a1 - w_d_prev[p, 1]) / dt, (a2 - w_d_prev[p, 2]) / dt
-        wdd = (q00 * d0 + q10 * d1 + q20 * d2, q01 * d0 + q11 * d1 + q21 * d2, q02 * d0 + q12 * d1 + q22 * d2)
-    else:
-        wdd = (0.0, 0.0, 0.0)
+    # ω̇_d by the backward difference, zero at the first step: computed either way and chosen per element, so
+    # that on the episode axis the choice is a select (a branch over a tuple keeps the loop scalar)
+    d0, d1, d2 = (a0 - w_d_prev[p, 0]) / dt, (a1 - w_d_prev[p, 1]) / dt, (a2 - w_d_prev[p, 2]) / dt
+    wdd = (q00 * d0 + q10 * d1 + q20 * d2 if has_prev else 0.0, q01 * d0 + q11 * d1 + q21 * d2 if has_prev else 0.0,
+           q02 * d0 + q12 * d1 + q22 * d2 if has_prev else 0.0)
     jnu = _jv(inertia, p, nu[0], nu[1], nu[2])
     jwdd = _jv(inertia, p, wdd[0], wdd[1], wdd[2])
     s_k = (k[p, 2] * q21 - k[p, 1] * q12, k[p, 0] * q02 - k[p, 2] * q20, k[p, 1] * q10 - k[p, 0] * q01)
