@@ -234,3 +234,20 @@ def test_keep_only_what_is_asked(hst):
         simulate(hst, 1, duration=1.0, keep=("attitude",))
     with pytest.raises(ScenarioError, match="at least one"):
         simulate(hst, 1, duration=1.0, keep=())
+
+
+def test_one_compiled_loop_serves_every_kind_of_run(hst):
+    # what a run varies are values, not types: per-episode setpoints (their start and end angles are
+    # read-only views), disturbance noise, swaps, a kept trajectory or only the running sums all run the loop
+    # compiled once. A second signature would compile the whole loop again: minutes on a fresh install
+    from attitude_sil.core.sim import batch
+
+    setpoints = np.array([[2.0, -1.0, 0.5], [1.0, 0.0, 0.0], [-3.0, 0.5, 0.0]])
+    simulate_summary(hst, 3, duration=0.6, episode_values={"guidance.setpoint_rpy_deg": setpoints})
+    simulate_summary(hst, 2, duration=0.6)
+    noisy = hst.with_values("disturbance", models=["noise"], **{"noise.power": [5e-2, 5e-2, 5e-2]})
+    simulate_summary(noisy, 2, duration=0.6, episode_values={"disturbance.noise.seed": np.array([3, 4])})
+    simulate(hst, 2, duration=0.6, keep=("q_BN",), controller="pid", schedule=[(30, "fuzzy_pid")])
+    assert batch._LOOPS, "no compiled loop ran"
+    for names, loop in batch._LOOPS.items():
+        assert len(loop.chunk.signatures) == 1, (names, [str(s) for s in loop.chunk.signatures])

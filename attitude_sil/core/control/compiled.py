@@ -24,7 +24,10 @@ generated module holds:
   contiguous in every column), compiled so that LLVM packs the episodes into
   SIMD lanes: the law's own step, unchanged, inlined by LLVM
   (:data:`VECTOR_STEP`) into a loop compiled with its arrays declared free of
-  aliasing (:class:`LanesCompiler`). bench/README.md says why each is needed;
+  aliasing (:class:`LanesCompiler`). bench/README.md says why each is needed.
+  The engine calls it through its address (:func:`vector_addresses`,
+  :func:`call_at`), so it is compiled once, not again inside every variant of
+  the engine's loop;
 * ``State_<code>``: each law's state record class.
 
 :func:`from_template` makes a module of another compiled loop (the batch
@@ -43,16 +46,18 @@ from pathlib import Path
 from types import ModuleType
 
 import numpy as np
+import numba
 from numba import types
+from numba.core import cgutils
 from numba.core.compiler import CompilerBase, DefaultPassBuilder
 from numba.core.compiler_machinery import FunctionPass, register_pass
-from numba.extending import overload
+from numba.extending import intrinsic, overload
 
 from attitude_sil.core.control import registry
 from attitude_sil.core.control.law import Law, state_layout
 
-__all__ = ["dispatch_module", "from_template", "cache_dir", "LanesCompiler", "VECTOR_STEP", "every_row", "STUB_BEGIN",
-           "STUB_END"]
+__all__ = ["dispatch_module", "from_template", "cache_dir", "LanesCompiler", "VECTOR_STEP", "every_row",
+           "vector_addresses", "call_at", "STUB_BEGIN", "STUB_END"]
 
 #: the lines that delimit a template's stand-ins for the generated dispatch
 STUB_BEGIN = "# >>> law dispatch stubs"
@@ -134,6 +139,74 @@ def _every_row(step, q, w, q_r, w_r, par, st, dt, u):
     return scope["impl"]
 
 
+#: the type of the engine's law inputs and command in :func:`vector_addresses`: (m, width) float64, column-major
+COLUMNS = types.Array(types.float64, 2, "F")
+
+
+def vector_addresses(dispatch: ModuleType, codes, pars: tuple, sts: tuple) -> np.ndarray:
+    """The machine address of ``vector_<code>`` for each law code in ``codes``, compiled for these records.
+
+    Parameters
+    ----------
+    dispatch : module
+        A generated dispatch module (:func:`dispatch_module`).
+    codes : iterable of int
+        The laws the engine may run alone in a block (the others get 0: not callable).
+    pars, sts : tuple
+        Every law's parameter and state records as the engine's loop receives them (their numba types are
+        the compiled signature's).
+
+    Returns
+    -------
+    numpy.ndarray, shape (n_laws,), int64
+        The addresses, for :func:`call_at`. They are valid in this process only, so the loop takes them as
+        an argument (its cached machine code holds none).
+
+    Why: a compiled function that calls another links the callee's code into
+    its own and LLVM optimises the whole again, once per variant of the
+    caller. The engine's loop has many variants (trajectory kept or not,
+    noise, swaps), and the laws' vector loops are its costliest part to
+    optimise (bench/README.md). Called through its address, each is compiled
+    once per record type and cached on its own.
+    """
+    out = np.zeros(len(pars), dtype=np.int64)
+    for code in codes:
+        fn = getattr(dispatch, f"vector_{code}")
+        sig = (COLUMNS, COLUMNS, COLUMNS, COLUMNS, numba.typeof(pars[code]), numba.typeof(sts[code]), types.float64,
+               COLUMNS)
+        if sig not in fn.overloads:
+            fn.compile(sig)
+        cres = fn.overloads[sig]
+        out[code] = cres.library.get_pointer_to_function(cres.fndesc.llvm_func_name)
+    return out
+
+
+@intrinsic
+def call_at(typingctx, address, args):
+    """Call the compiled function at ``address`` (int64, :func:`vector_addresses`) with the tuple ``args``.
+
+    numba's own calling convention for a function returning nothing; the
+    callee must have been compiled for exactly ``args``' types (an array's
+    layout is part of that: :data:`COLUMNS`). An error status the callee
+    returns is passed on (the vector loops, compiled with numpy's error
+    model, return none).
+    """
+    if not (isinstance(address, types.Integer) and isinstance(args, types.BaseTuple)):
+        return None
+
+    def codegen(context, builder, signature, llargs):
+        arg_types = tuple(signature.args[1])
+        values = [builder.extract_value(llargs[1], i) for i in range(len(arg_types))]
+        fnty = context.call_conv.get_function_type(types.none, arg_types)
+        callee = builder.inttoptr(llargs[0], fnty.as_pointer())
+        status, _ = context.call_conv.call_function(builder, callee, types.none, arg_types, values)
+        with cgutils.if_unlikely(builder, status.is_error):
+            context.call_conv.return_status_propagate(builder, status)
+        return context.get_dummy_value()
+
+    return types.none(address, args), codegen
+
+
 _LOCK = threading.Lock()
 _MODULES: dict[str, ModuleType] = {}
 _BY_NAMES: dict[tuple[str, ...], ModuleType] = {}
@@ -176,7 +249,7 @@ def _zero(dtype) -> str:
 
 
 #: the names the stage code uses for the loop's variables, and what a template may rename them to
-_STAGE_NAMES = ("law", "present", "q", "w", "q_r", "w_r", "dt", "u", "offset", "has_off", "decay")
+_STAGE_NAMES = ("law", "present", "q", "w", "q_r", "w_r", "dt", "u", "offset", "has_off", "decay", "at")
 
 
 def _record_lines(laws: list[Law]) -> list[str]:
@@ -190,7 +263,8 @@ def _stage_lines(laws: list[Law], names: dict[str, str], fast: bool = True) -> l
     Then the transfer offset and, for a law that does not saturate, the clip.
     ``names`` renames the loop's variables (:data:`_STAGE_NAMES`). ``fast``
     adds the one-law case first (the batch engine's: the law's
-    ``vector_<code>`` on every row, its arrays column-major); without it each
+    ``vector_<code>`` on every row, its arrays column-major, called at its
+    address ``at[code]`` when not 0); without it each
     law's step is compiled once, not twice (the bank's stage: one row in a node).
     """
     n = {k: names.get(k, k) for k in _STAGE_NAMES}
@@ -205,12 +279,14 @@ def _stage_lines(laws: list[Law], names: dict[str, str], fast: bool = True) -> l
                f"for p in range({n['law']}.shape[0]):",
                f"    if {n['law']}[p] != only or {n['has_off']}[p]:",
                "        only = -1",
-               "        break"]
+               "        break",
+               f"if only >= 0 and {n['at']}[only] == 0:",
+               "    only = -1"]
     for i, law in enumerate(laws):
         clip = ["for j in range(3):", f"    {n['u']}[p, j] = min(max({n['u']}[p, j], -par_{i}.u_max), par_{i}.u_max)"]
         if fast:
             out += [f"if only == {i}:",
-                    f"    _vector_{i}({view}, par_{i}, st_{i}, {n['dt']}, {n['u']})"]
+                    f"    call_at({n['at']}[{i}], ({view}, par_{i}, st_{i}, {n['dt']}, {n['u']}))"]
             if not law.saturated:
                 out += [f"    for p in range({n['law']}.shape[0]):", *("        " + c for c in clip)]
         out += [f"elif only < 0 and {n['present']}[{i}]:" if fast else f"if {n['present']}[{i}]:",
@@ -357,7 +433,7 @@ def from_template(template: ModuleType, law_names: tuple[str, ...] | None = None
     head, rest = text.split(STUB_BEGIN, 1)
     _, tail = rest.split(STUB_END, 1)
     imports = [f"from {dispatch.__name__} import law_enter, law_is_torque, law_reset",
-               *(f"from {dispatch.__name__} import vector_{i} as _vector_{i}" for i in range(len(laws))),
+               "from attitude_sil.core.control.compiled import call_at",
                "from attitude_sil.core.control.kernels import offset_row"]
     imports += [f"from {x.step.py_func.__module__} import {x.step.py_func.__name__} as _step_{i}"
                 for i, x in enumerate(laws)]

@@ -34,7 +34,7 @@ from typing import NamedTuple
 import numba
 import numpy as np
 
-from attitude_sil.core.control.compiled import from_template
+from attitude_sil.core.control.compiled import dispatch_module, from_template, vector_addresses
 from attitude_sil.core.plant.kernels import WheelFailure, WheelParams
 from attitude_sil.core.plant.wheels import no_failure
 from attitude_sil.core.sim import batch_loop
@@ -133,8 +133,10 @@ def _pool() -> ThreadPoolExecutor:
 
 
 def _c(a, shape=None) -> np.ndarray:
+    # float64, broadcast to shape, contiguous and writable (a per-episode array broadcast to its own shape
+    # stays a read-only view, and once compiled the loop again for that type: 2 min from an empty cache)
     a = np.asarray(a, dtype=float)
-    return np.ascontiguousarray(a if shape is None else np.broadcast_to(a, shape))
+    return _writable(a if shape is None else np.broadcast_to(a, shape))
 
 
 def _writable(a):
@@ -276,23 +278,42 @@ def _chunk_runner(ctrl, used: set[str], sim: SimArrays, outputs: Outputs, spec: 
     records = ctrl.records_for(used)
     loop = _loop(ctrl.names)
 
+    def blocks(lo, hi):
+        # each chunk gets its own rows of the law records and a fresh state, column-major (the episodes
+        # contiguous: compiled.vector_<code>); at least two rows (_rows says why)
+        pars = tuple(type(r)(*(_rows(f, lo, hi, P) for f in r)) for r in records)
+        return pars, ctrl.new_states(max(hi - lo, 2), order="F")
+
+    # the laws' vector loops, compiled (or loaded) here, once, before the threads start
+    at = vector_addresses(dispatch_module(ctrl.names), sorted(ctrl.names.index(n) for n in used), *blocks(0, 1))
+
     def run(span, noise, noise_lo):
         lo, hi = span
-        # each chunk gets its own rows of the law records and a fresh state, column-major (the episodes
-        # contiguous: compiled.vector_<code>)
-        pars = tuple(type(r)(*(_rows(f, lo, hi, P) for f in r)) for r in records)
-        sts = ctrl.new_states(hi - lo, order="F")
-        loop.chunk(lo, hi, sim, pars, sts, noise, noise_lo, outputs, spec)
+        pars, sts = blocks(lo, hi)
+        loop.chunk(lo, hi, sim, pars, sts, noise, noise_lo, outputs, spec, at)
 
     return run
 
 
 def _rows(field, lo: int, hi: int, P: int):
-    """Rows lo..hi-1 of a record field with a leading episode axis, as a writable column-major copy;
-    scalars as they are."""
-    if isinstance(field, np.ndarray) and field.ndim >= 1 and field.shape[0] == P:
-        return np.array(field[lo:hi], order="F")
-    return field
+    """Rows lo..hi-1 of a record field with a leading episode axis, as a writable column-major copy with at
+    least two rows; a stand-in's field (no rows: a law no episode runs) as two rows of zeros; scalars as
+    they are.
+
+    numpy calls an array of one row or none C-contiguous, and numba would type
+    it so: the loop would be compiled again for every chunk of one episode and
+    every set of laws a run uses, and the laws' vector loops, compiled for
+    column-major records, called with another layout. The loop reads rows
+    0..hi-lo-1 only.
+    """
+    if not (isinstance(field, np.ndarray) and field.ndim >= 1):
+        return field
+    rows = field[lo:hi] if field.shape[0] == P else field[:0]
+    if rows.shape[0] == 0:
+        rows = np.zeros((2, *rows.shape[1:]), dtype=rows.dtype)
+    elif rows.shape[0] == 1:
+        rows = np.repeat(rows, 2, axis=0)
+    return np.array(rows, order="F")
 
 
 def _sim_arrays(models: tuple, n_steps: int, stride: int, dt: float, law0: np.ndarray,

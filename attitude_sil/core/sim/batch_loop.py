@@ -133,7 +133,7 @@ def _plant_start(sim, lo, m):
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
-def chunk(lo, hi, sim, pars, sts, noise, noise_lo, out, sums):
+def chunk(lo, hi, sim, pars, sts, noise, noise_lo, out, sums, at):
     """Episodes ``lo..hi-1`` from step 0 to K, the stepwise driver's order of calls, kept every ``stride``.
 
     ``sim`` (batch.SimArrays): the models' arrays; ``pars``, ``sts``: each law's parameter and state records
@@ -141,7 +141,8 @@ def chunk(lo, hi, sim, pars, sts, noise, noise_lo, out, sums):
     torque, or no rows; ``out`` (batch.Outputs): the kept trajectory arrays (no rows: not kept); ``sums``
     (batch.SumsSpec): the running sums' axis, start and final values, band and output (no rows: none). Each
     episode runs its own law (``sim.law0``) and takes the swaps ``sim.sw_law[s]`` before the command of
-    step ``sim.sw_k[s]`` (sorted), with the controller bank's bumpless transfer.
+    step ``sim.sw_k[s]`` (sorted), with the controller bank's bumpless transfer. ``at`` (n_laws,): the
+    address of each law's vector loop (``compiled.vector_addresses``; 0: the rows one at a time).
     """
     m = hi - lo
     # what the laws read, (m, 4) and (m, 3) in column-major order (a law's one-law loop runs on packed lanes)
