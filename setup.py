@@ -41,7 +41,7 @@ setup(
     # are installed by the Makefile; a ROS 2 install provides them instead.
     # a node-only install: pip install . ; everything (the attitude-sil command): pip install '.[tune]'
     install_requires=REQUIRES,
-    extras_require={"tune": TUNE, "test": [*TUNE, "pytest>=8.0", "ruff>=0.5", "rosbags>=0.10", "websockets>=12.0"],
+    extras_require={"tune": TUNE, "test": [*TUNE, "pytest>=8.0", "pytest-xdist>=3.5", "ruff>=0.5", "rosbags>=0.10", "websockets>=12.0"],
                     "docs": ["mkdocs>=1.5"]},  # make docs: the site
     zip_safe=True,
     maintainer="attitude_sil developers",
