@@ -7,12 +7,17 @@ a fresh install that first use is typically a graph run: five node processes
 and the runner, started together on a machine with fewer cores, each
 compiling the same kernels before the cache exists. ``python -m
 attitude_sil.tools.warm`` (run by ``make`` right after installing) compiles
-them in one process: every preset through both batch drivers and every
-control law, which are the signatures the nodes, the engine and the tuner use.
+them first: every preset through both batch drivers and every control law,
+which are the signatures the nodes, the engine and the tuner use. The two
+drivers' kernels are compiled in two processes at once where the machine
+has two cores or more (they share little: the compiled loop is one large
+function, the stepwise driver's kernels the nodes' own).
 """
 
 from __future__ import annotations
 
+import multiprocessing
+import os
 import sys
 import time
 from pathlib import Path
@@ -22,7 +27,7 @@ from attitude_sil.core.sim.engine import simulate
 from attitude_sil.core.sim.scenario import PRESETS, ScenarioError, default_config_dir, load_scenario
 
 
-def warm(config_dir: str | Path | None = None, say=None) -> float:
+def warm(config_dir: str | Path | None = None, say=None, drivers: tuple[str, ...] = ("auto", "stepwise")) -> float:
     """Compile and cache the kernels; returns the wall seconds it took.
 
     Parameters
@@ -31,6 +36,8 @@ def warm(config_dir: str | Path | None = None, say=None) -> float:
         Where the preset scenarios are (default: :func:`~attitude_sil.core.sim.scenario.default_config_dir`).
     say : callable(str), optional
         Told of each preset as it starts (a cold cache takes minutes).
+    drivers : tuple of str
+        The batch drivers whose kernels to compile (``auto``: the compiled loop where it runs the preset).
     """
     folder = Path(config_dir) if config_dir is not None else default_config_dir()
     t0 = time.perf_counter()
@@ -40,7 +47,7 @@ def warm(config_dir: str | Path | None = None, say=None) -> float:
         scn = load_scenario(folder / f"{name}.yaml")
         first = scn.param("controller", "controller_type")
         for controller in registry.names():
-            for driver in ("auto", "stepwise"):
+            for driver in drivers:
                 try:  # the law alone, then a swap to it (the bumpless entry)
                     simulate(scn, 1, duration=2 * scn.dt, controller=controller, driver=driver)
                     if controller != first:
@@ -51,11 +58,27 @@ def warm(config_dir: str | Path | None = None, say=None) -> float:
     return time.perf_counter() - t0
 
 
+def _warm_stepwise() -> None:
+    warm(drivers=("stepwise",))
+
+
 def main() -> int:
     print("attitude_sil: compiling the numba kernels into their cache (a few minutes the first time; cached after)",
           file=sys.stderr, flush=True)
-    took = warm(say=lambda line: print(line, file=sys.stderr, flush=True))
-    print(f"attitude_sil kernels compiled and cached in {took:.1f} s", file=sys.stderr)
+    t0 = time.perf_counter()
+    helper = None
+    if (os.cpu_count() or 1) >= 2:  # the stepwise driver's kernels in a second process, on the second core
+        helper = multiprocessing.get_context("spawn").Process(target=_warm_stepwise, name="attitude_sil-warm")
+        helper.start()
+    drivers = ("auto",) if helper is not None else ("auto", "stepwise")
+    warm(say=lambda line: print(line, file=sys.stderr, flush=True), drivers=drivers)
+    if helper is not None:
+        helper.join()
+        if helper.exitcode != 0:
+            print(f"attitude_sil: compiling the stepwise driver's kernels failed (exit {helper.exitcode})",
+                  file=sys.stderr)
+            return 1
+    print(f"attitude_sil kernels compiled and cached in {time.perf_counter() - t0:.1f} s", file=sys.stderr)
     return 0
 
 

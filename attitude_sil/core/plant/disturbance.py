@@ -67,7 +67,7 @@ def lvlh_attitude(t: float, q_LN0: np.ndarray, rate: float) -> np.ndarray:
     """LVLH orientation at time t: ``q_LN(0) ⊗ R_y(rate t)``, shape like ``q_LN0``."""
     half = 0.5 * rate * t
     turn = np.array([0.0, np.sin(half), 0.0, np.cos(half)])
-    return quat_multiply(q_LN0, np.broadcast_to(turn, np.shape(q_LN0)))
+    return quat_multiply(q_LN0, turn)
 
 
 def gravity_gradient_torque(R_BL: np.ndarray, inertia: np.ndarray, rate: float) -> np.ndarray:
@@ -165,7 +165,7 @@ class DisturbanceModel:
 
     def _lvlh_to_body(self, q_BN: np.ndarray, t_ns: int) -> np.ndarray:
         q_LN = lvlh_attitude(t_ns * 1e-9, self.q_LN0, self.rate)
-        q_BL = quat_multiply(quat_conjugate(np.broadcast_to(q_LN, q_BN.shape)), q_BN)
+        q_BL = quat_multiply(quat_conjugate(q_LN), q_BN)
         return np.swapaxes(quat_to_dcm(q_BL), -1, -2)  # R_BL = R_LB^T
 
     def torque(self, q_BN: np.ndarray, t_ns: int = 0) -> np.ndarray:

@@ -33,14 +33,19 @@ __all__ = [
 
 
 def cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Cross product over the last axis, shapes ``(..., 3)``.
+    """Cross product over the last axis, shapes ``(..., 3)`` (broadcast against each other).
 
-    Written out by components: ``np.cross`` costs several times more on the
-    small arrays of the lockstep loop.
+    Written out by components into one output array: ``np.cross``, and
+    ``np.stack`` of the components, cost several times more on the small
+    arrays of the lockstep loop.
     """
     a1, a2, a3 = a[..., 0], a[..., 1], a[..., 2]
     b1, b2, b3 = b[..., 0], b[..., 1], b[..., 2]
-    return np.stack((a2 * b3 - a3 * b2, a3 * b1 - a1 * b3, a1 * b2 - a2 * b1), axis=-1)
+    out = np.empty(np.broadcast_shapes(np.shape(a), np.shape(b)))
+    out[..., 0] = a2 * b3 - a3 * b2
+    out[..., 1] = a3 * b1 - a1 * b3
+    out[..., 2] = a1 * b2 - a2 * b1
+    return out
 
 
 def quat_multiply(q: np.ndarray, p: np.ndarray) -> np.ndarray:
@@ -49,6 +54,7 @@ def quat_multiply(q: np.ndarray, p: np.ndarray) -> np.ndarray:
     Parameters
     ----------
     q, p : ndarray, shape (..., 4)
+        Broadcast against each other (one quaternion times many needs no copies).
 
     Returns
     -------
@@ -56,15 +62,12 @@ def quat_multiply(q: np.ndarray, p: np.ndarray) -> np.ndarray:
     """
     qx, qy, qz, qw = q[..., 0], q[..., 1], q[..., 2], q[..., 3]
     px, py, pz, pw = p[..., 0], p[..., 1], p[..., 2], p[..., 3]
-    return np.stack(
-        (
-            qw * px + pw * qx + qy * pz - qz * py,
-            qw * py + pw * qy + qz * px - qx * pz,
-            qw * pz + pw * qz + qx * py - qy * px,
-            qw * pw - qx * px - qy * py - qz * pz,
-        ),
-        axis=-1,
-    )
+    out = np.empty(np.broadcast_shapes(np.shape(q), np.shape(p)))  # components written in place: no np.stack
+    out[..., 0] = qw * px + pw * qx + qy * pz - qz * py
+    out[..., 1] = qw * py + pw * qy + qz * px - qx * pz
+    out[..., 2] = qw * pz + pw * qz + qx * py - qy * px
+    out[..., 3] = qw * pw - qx * px - qy * py - qz * pz
+    return out
 
 
 def quat_conjugate(q: np.ndarray) -> np.ndarray:
