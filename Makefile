@@ -27,7 +27,7 @@ lint: $(STAMP)
 	$(BIN)/ruff check attitude_sil test bench launch examples
 
 test: $(STAMP) lint
-	$(BIN)/python -m pytest -q -n auto test
+	$(BIN)/python -m pytest -q -n auto --dist worksteal test
 
 # the ROS-free layer alone (no graph): about 20 s
 test-unit: $(STAMP)

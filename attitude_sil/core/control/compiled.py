@@ -45,8 +45,8 @@ import threading
 from pathlib import Path
 from types import ModuleType
 
-import numpy as np
 import numba
+import numpy as np
 from numba import types
 from numba.core import cgutils
 from numba.core.compiler import CompilerBase, DefaultPassBuilder
