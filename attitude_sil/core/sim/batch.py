@@ -272,6 +272,11 @@ def _sums_spec(sums: tuple | None, P: int) -> SumsSpec:
                     np.empty((P, len(SUMMARY_COLUMNS))))
 
 
+#: the laws' vector-loop addresses by law set, laws run and the records' field kinds (what fixes their numba
+#: types once _rows has laid them out): typing the records took about 1 ms of a one-episode call
+_ADDRESSES: dict[tuple, np.ndarray] = {}
+
+
 def _chunk_runner(ctrl, used: set[str], sim: SimArrays, outputs: Outputs, spec: SumsSpec):
     """``run((lo, hi), noise, noise_lo)``: the compiled loop on episodes lo..hi-1 of the bank's law set."""
     P = ctrl.n
@@ -285,7 +290,12 @@ def _chunk_runner(ctrl, used: set[str], sim: SimArrays, outputs: Outputs, spec: 
         return pars, ctrl.new_states(max(hi - lo, 2), order="F")
 
     # the laws' vector loops, compiled (or loaded) here, once, before the threads start
-    at = vector_addresses(dispatch_module(ctrl.names), sorted(ctrl.names.index(n) for n in used), *blocks(0, 1))
+    codes = tuple(sorted(ctrl.names.index(n) for n in used))
+    key = (ctrl.names, codes, tuple((type(r), tuple((f.dtype.str, f.ndim) if isinstance(f, np.ndarray) else type(f)
+                                                    for f in r)) for r in records))
+    if key not in _ADDRESSES:
+        _ADDRESSES[key] = vector_addresses(dispatch_module(ctrl.names), codes, *blocks(0, 1))
+    at = _ADDRESSES[key]
 
     def run(span, noise, noise_lo):
         lo, hi = span
