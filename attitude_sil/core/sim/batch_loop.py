@@ -161,7 +161,7 @@ def chunk(lo, hi, sim, pars, sts, noise, noise_lo, out, sums, at):
     tau_constant, tau_step = sim.tau_constant.copy(), sim.tau_step.copy()
     s_seeds, s_att, s_rate = sim.s_seeds.copy(), sim.s_att.copy(), sim.s_rate.copy()
     sw_k, sw_law = sim.sw_k.copy(), sim.sw_law.copy()
-    qm, wm, u = column_major(sim.q0, lo, m), column_major(sim.w0, lo, m), column_major(sim.w0, lo, m)
+    qm, wm, u = np.empty((4, m)).T, np.empty((3, m)).T, np.empty((3, m)).T  # column-major too, written before read
     tau_e = np.zeros((m, 3))
     torque = np.empty(m, dtype=np.bool_)  # the rows whose command is a torque
     tau_c, h0 = np.empty((m, 3)), np.empty((m, 3))
