@@ -88,7 +88,7 @@ def aerodynamic_torque(R_BL: np.ndarray, density: float, drag_coefficient: float
                        cp_offset_B: np.ndarray) -> np.ndarray:
     """Aerodynamic drag moment (paper 001 eq. 2), (P, 3) N m; v is l1 (the velocity) in B."""
     v_hat = R_BL[..., :, 0]
-    return 0.5 * density * drag_coefficient * area * speed**2 * cross(v_hat, np.broadcast_to(cp_offset_B, v_hat.shape))
+    return 0.5 * density * drag_coefficient * area * speed**2 * cross(v_hat, cp_offset_B)
 
 
 class DisturbanceModel:

@@ -206,7 +206,7 @@ def initial_attitude(values: dict, rpy0_deg=None) -> np.ndarray:
         if norm == 0.0:
             raise ScenarioError("plant.initial_error_axis must not be zero")
         turn = np.append(np.sin(angle / 2) * axis / norm, np.cos(angle / 2))
-        q = quat_multiply(q, np.broadcast_to(turn, q.shape))
+        q = quat_multiply(q, turn)
     return q
 
 
