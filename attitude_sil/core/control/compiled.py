@@ -19,15 +19,18 @@ generated module holds:
   for the rare swap;
 * ``lanes_stage``, ``lanes_enter``: the same as compiled entry points over P
   rows, for the controller bank (the nodes with P = 1 and the stepwise driver);
-* ``vector_<code>(q, w, q_r, w_r, par, st, dt, u)``: each law's step on every
-  row, for the batch engine's arrays in column-major order (the episodes
-  contiguous in every column), compiled so that LLVM packs the episodes into
-  SIMD lanes: the law's own step, unchanged, inlined by LLVM
-  (:data:`VECTOR_STEP`) into a loop compiled with its arrays declared free of
-  aliasing (:class:`LanesCompiler`). bench/README.md says why each is needed.
-  The engine calls it through its address (:func:`vector_addresses`,
-  :func:`call_at`), so it is compiled once, not again inside every variant of
-  the engine's loop;
+* for the batch engine, each law's compiled loops, each compiled on its own
+  and called at its address (:func:`law_addresses`, :func:`call_at`), so that
+  they are compiled once, not again inside every variant of the engine's
+  loop: ``vector_<code>(q, w, q_r, w_r, par, st, dt, u)``, the law's step on
+  every row, with the arrays in column-major order (the episodes contiguous
+  in every column) so that LLVM packs the episodes into SIMD lanes (the
+  law's own step, unchanged, inlined by LLVM (:data:`VECTOR_STEP`) into a
+  loop compiled with its arrays declared free of aliasing
+  (:class:`LanesCompiler`); bench/README.md says why each is needed);
+  ``rows_<code>``, its rows of a block of several laws one at a time, with
+  the transfer offset; ``enter_<code>``, the bumpless entry of one row
+  (``enter_at`` picks it by code);
 * ``State_<code>``: each law's state record class.
 
 :func:`from_template` makes a module of another compiled loop (the batch
@@ -57,7 +60,7 @@ from attitude_sil.core.control import registry
 from attitude_sil.core.control.law import Law, state_layout
 
 __all__ = ["dispatch_module", "from_template", "cache_dir", "LanesCompiler", "VECTOR_STEP", "every_row",
-           "vector_addresses", "call_at", "STUB_BEGIN", "STUB_END"]
+           "law_addresses", "call_at", "STUB_BEGIN", "STUB_END"]
 
 #: the lines that delimit a template's stand-ins for the generated dispatch
 STUB_BEGIN = "# >>> law dispatch stubs"
@@ -139,51 +142,62 @@ def _every_row(step, q, w, q_r, w_r, par, st, dt, u):
     return scope["impl"]
 
 
-#: the type of the engine's law inputs and command in :func:`vector_addresses`: (m, width) float64, column-major
+#: the types of the batch loop's arrays that the laws' compiled loops take (:func:`law_addresses`): the laws'
+#: inputs and the command, (m, width) float64 column-major; the transfer's offsets and last command (m, 3)
+#: row-major; flags per row; each row's law code
 COLUMNS = types.Array(types.float64, 2, "F")
+ROWS = types.Array(types.float64, 2, "C")
+FLAGS = types.Array(types.boolean, 1, "C")
+CODES = types.Array(types.int64, 1, "C")
 
 
-def vector_addresses(dispatch: ModuleType, codes, pars: tuple, sts: tuple) -> np.ndarray:
-    """The machine address of ``vector_<code>`` for each law code in ``codes``, compiled for these records.
+def law_addresses(dispatch: ModuleType, codes, pars: tuple, sts: tuple) -> np.ndarray:
+    """The machine addresses of each law's compiled loops in ``codes``, compiled for these records.
 
     Parameters
     ----------
     dispatch : module
         A generated dispatch module (:func:`dispatch_module`).
     codes : iterable of int
-        The laws the engine may run alone in a block (the others get 0: not callable).
+        The laws the engine may run (the others get 0: not callable).
     pars, sts : tuple
         Every law's parameter and state records as the engine's loop receives them (their numba types are
         the compiled signature's).
 
     Returns
     -------
-    numpy.ndarray, shape (n_laws,), int64
-        The addresses, for :func:`call_at`. They are valid in this process only, so the loop takes them as
-        an argument (its cached machine code holds none).
+    numpy.ndarray, shape (3, n_laws), int64
+        For :func:`call_at`: row 0 ``vector_<code>`` (every row of a block runs the law), row 1
+        ``rows_<code>`` (its rows of a block of several laws, or with a transfer pending), row 2
+        ``enter_<code>`` (the bumpless entry of one row). They are valid in this process only, so the loop
+        takes them as an argument (its cached machine code holds none).
 
     Why: a compiled function that calls another links the callee's code into
     its own and LLVM optimises the whole again, once per variant of the
-    caller. The engine's loop has many variants (trajectory kept or not,
-    noise, swaps), and the laws' vector loops are its costliest part to
-    optimise (bench/README.md). Called through its address, each is compiled
-    once per record type and cached on its own.
+    caller. Every law's step linked into the engine's loop made it the
+    costliest function of the package to compile (bench/README.md), and
+    again for every variant. Called through its address, each law's loop is
+    compiled once per record type and cached on its own.
     """
-    out = np.zeros(len(pars), dtype=np.int64)
+    out = np.zeros((3, len(pars)), dtype=np.int64)
     for code in codes:
-        fn = getattr(dispatch, f"vector_{code}")
-        sig = (COLUMNS, COLUMNS, COLUMNS, COLUMNS, numba.typeof(pars[code]), numba.typeof(sts[code]), types.float64,
-               COLUMNS)
-        if sig not in fn.overloads:
-            fn.compile(sig)
-        cres = fn.overloads[sig]
-        out[code] = cres.library.get_pointer_to_function(cres.fndesc.llvm_func_name)
+        rec = (numba.typeof(pars[code]), numba.typeof(sts[code]))
+        view = (COLUMNS,) * 4
+        sigs = ((*view, *rec, types.float64, COLUMNS),
+                (CODES, *view, *rec, types.float64, COLUMNS, ROWS, FLAGS, types.float64),
+                (*view, types.intp, *rec, types.float64, types.float64, ROWS, ROWS, COLUMNS, FLAGS))
+        for row, (kind, sig) in enumerate(zip(("vector", "rows", "enter"), sigs, strict=True)):
+            fn = getattr(dispatch, f"{kind}_{code}")
+            if sig not in fn.overloads:
+                fn.compile(sig)
+            cres = fn.overloads[sig]
+            out[row, code] = cres.library.get_pointer_to_function(cres.fndesc.llvm_func_name)
     return out
 
 
 @intrinsic
 def call_at(typingctx, address, args):
-    """Call the compiled function at ``address`` (int64, :func:`vector_addresses`) with the tuple ``args``.
+    """Call the compiled function at ``address`` (int64, :func:`law_addresses`) with the tuple ``args``.
 
     numba's own calling convention for a function returning nothing; the
     callee must have been compiled for exactly ``args``' types (an array's
@@ -257,48 +271,81 @@ def _record_lines(laws: list[Law]) -> list[str]:
     return [f"par_{i}, st_{i} = pars[{i}], sts[{i}]" for i in range(len(laws))]
 
 
+def _rows_lines(i: int, law: Law, names: dict[str, str]) -> list[str]:
+    """Law ``i``'s command on each row that runs it, one row at a time: its step, the transfer offset, the clip."""
+    n = {k: names.get(k, k) for k in _STAGE_NAMES}
+    clip = ["for j in range(3):", f"    {n['u']}[p, j] = min(max({n['u']}[p, j], -par_{i}.u_max), par_{i}.u_max)"]
+    out = [f"for p in range({n['law']}.shape[0]):",
+           f"    if {n['law']}[p] == {i}:",
+           f"        _step_{i}({n['q']}, {n['w']}, {n['q_r']}, {n['w_r']}, p, par_{i}, st_{i}, {n['dt']}, {n['u']})",
+           f"        if {n['has_off']}[p]:",
+           f"            offset_row({n['u']}, p, {n['offset']}, {n['has_off']}, {n['decay']})",
+           *("            " + c for c in clip)]
+    if not law.saturated:
+        out += ["        else:", *("            " + c for c in clip)]
+    return out
+
+
 def _stage_lines(laws: list[Law], names: dict[str, str], fast: bool = True) -> list[str]:
-    """Every row's command: a loop per law present over its rows, the law's step called directly.
+    """Every row's command: the law's loop over its rows, for each law present.
 
     Then the transfer offset and, for a law that does not saturate, the clip.
-    ``names`` renames the loop's variables (:data:`_STAGE_NAMES`). ``fast``
-    adds the one-law case first (the batch engine's: the law's
-    ``vector_<code>`` on every row, its arrays column-major, called at its
-    address ``at[code]`` when not 0); without it each
-    law's step is compiled once, not twice (the bank's stage: one row in a node).
+    ``names`` renames the loop's variables (:data:`_STAGE_NAMES`). ``fast``:
+    the batch engine's stage, which calls the law's compiled loops at their
+    addresses (``at``, :func:`law_addresses`): ``vector_<code>`` when every
+    row runs one law with no transfer pending (its arrays column-major),
+    else ``rows_<code>``; without it, each law's step is written out in the
+    stage (the bank's: one row in a node).
     """
     n = {k: names.get(k, k) for k in _STAGE_NAMES}
     view = f"{n['q']}, {n['w']}, {n['q_r']}, {n['w_r']}"
-    inp = f"{view}, p"
-    # the common case first: every row runs one law with no transfer offset pending; then the law's step runs
-    # in a loop of its own with no test per row (a test per row kept the PID's loop from being optimised:
-    # bench/README.md)
     out = []
     if fast:
+        # the common case first: every row runs one law with no transfer offset pending; then the law's step
+        # runs in a loop of its own with no test per row (a test per row kept the PID's loop from being
+        # optimised: bench/README.md)
         out = ["only = " + n["law"] + "[0] if " + n["law"] + ".shape[0] > 0 else -1",
                f"for p in range({n['law']}.shape[0]):",
                f"    if {n['law']}[p] != only or {n['has_off']}[p]:",
                "        only = -1",
-               "        break",
-               f"if only >= 0 and {n['at']}[only] == 0:",
-               "    only = -1"]
+               "        break"]
     for i, law in enumerate(laws):
-        clip = ["for j in range(3):", f"    {n['u']}[p, j] = min(max({n['u']}[p, j], -par_{i}.u_max), par_{i}.u_max)"]
-        if fast:
-            out += [f"if only == {i}:",
-                    f"    call_at({n['at']}[{i}], ({view}, par_{i}, st_{i}, {n['dt']}, {n['u']}))"]
-            if not law.saturated:
-                out += [f"    for p in range({n['law']}.shape[0]):", *("        " + c for c in clip)]
-        out += [f"elif only < 0 and {n['present']}[{i}]:" if fast else f"if {n['present']}[{i}]:",
-                f"    for p in range({n['law']}.shape[0]):",
-                f"        if {n['law']}[p] == {i}:",
-                f"            _step_{i}({inp}, par_{i}, st_{i}, {n['dt']}, {n['u']})",
-                f"            if {n['has_off']}[p]:",
-                f"                offset_row({n['u']}, p, {n['offset']}, {n['has_off']}, {n['decay']})",
-                *("                " + c for c in clip)]
+        if not fast:
+            out += [f"if {n['present']}[{i}]:", *("    " + x for x in _rows_lines(i, law, names))]
+            continue
+        out += [f"if only == {i}:",
+                f"    call_at({n['at']}[0, {i}], ({view}, par_{i}, st_{i}, {n['dt']}, {n['u']}))"]
         if not law.saturated:
-            out += ["            else:", *("                " + c for c in clip)]
+            out += [f"    for p in range({n['law']}.shape[0]):", "        for j in range(3):",
+                    f"            {n['u']}[p, j] = min(max({n['u']}[p, j], -par_{i}.u_max), par_{i}.u_max)"]
+        out += [f"elif only < 0 and {n['present']}[{i}]:",
+                f"    call_at({n['at']}[1, {i}], ({n['law']}, {view}, par_{i}, st_{i}, {n['dt']}, {n['u']}, "
+                f"{n['offset']}, {n['has_off']}, {n['decay']}))"]
     return out
+
+
+def _zero_lines(law: Law, st: str) -> list[str]:
+    """Zero row ``p`` of the law's state record ``st``."""
+    out = []
+    for name, (width, dtype) in state_layout(law).items():
+        out += [f"for j in range({int(width)}):", f"    {st}.{name}[p, j] = {_zero(dtype)}"]
+    return out
+
+
+def _entry_lines(i: int, law: Law) -> list[str]:
+    """The bumpless entry of row p into law i (``par_{i}``, ``st_{i}``); the expression's value: whether a
+    decaying offset remains. A law with no ``enter`` of its own keeps its fresh state and hands the
+    difference to the offset."""
+    args = f"q, w, q_r, w_r, p, par_{i}, st_{i}, dt"
+    if law.enter is not None:
+        return [f"return _enter_{i}({args}, decay, u_last, offset)"]
+    return ["if decay > 0.0:",
+            f"    _step_{i}({args}, scratch)",
+            *("    " + x for x in _zero_lines(law, f"st_{i}")),
+            "    for j in range(3):",
+            "        offset[p, j] = u_last[p, j] - scratch[p, j]",
+            "    return True",
+            "return False"]
 
 
 def _dispatch_source(laws: list[Law]) -> str:
@@ -310,12 +357,11 @@ def _dispatch_source(laws: list[Law]) -> str:
         lines.append(f"from {mod} import {law.step.py_func.__name__} as _step_{i}")
         if law.enter is not None:
             lines.append(f"from {law.enter.py_func.__module__} import {law.enter.py_func.__name__} as _enter_{i}")
-    lines += ["", "from attitude_sil.core.control.compiled import VECTOR_STEP, LanesCompiler, every_row"]
+    lines += ["", "from attitude_sil.core.control.compiled import VECTOR_STEP, LanesCompiler, call_at, every_row"]
     lines.append("")
     lines.append(f"LAWS = {tuple(x.name for x in laws)!r}")
     for i, law in enumerate(laws):
         lines.append(f"State_{i} = namedtuple('State_{i}', {list(state_layout(law))!r})")
-    inp = "q, w, q_r, w_r, p"
 
     def chain(body_of, indent="    "):
         out = []
@@ -324,32 +370,29 @@ def _dispatch_source(laws: list[Law]) -> str:
             out.extend(f"{indent}    {b}" for b in body_of(i, law))
         return out
 
-    def reset_lines(i, law):
-        out = [f"st = sts[{i}]"]
-        for name, (width, dtype) in state_layout(law).items():
-            out += [f"for j in range({int(width)}):", f"    st.{name}[p, j] = {_zero(dtype)}"]
-        return out
-
-    def enter_lines(i, law):
-        if law.enter is not None:
-            return [f"return _enter_{i}({inp}, pars[{i}], sts[{i}], dt, decay, u_last, offset)"]
-        return ["if decay > 0.0:",
-                f"    _step_{i}({inp}, pars[{i}], sts[{i}], dt, scratch)",
-                f"    law_reset({i}, p, sts)",
-                "    for j in range(3):",
-                "        offset[p, j] = u_last[p, j] - scratch[p, j]",
-                "    return True",
-                "return False"]
-
     jit = "@njit(cache=True, inline='always')"
-    vector_lines = []
-    for i in range(len(laws)):
-        vector_lines += ["", "", f"_lane_step_{i} = njit(**VECTOR_STEP)(_step_{i}.py_func)", "", "",
-                         "@njit(cache=True, error_model='numpy', pipeline_class=LanesCompiler)",
-                         f"def vector_{i}(q, w, q_r, w_r, par, st, dt, u):",
-                         "    # every row's command by this law: the rows are SIMD lanes when the arrays are",
-                         "    # column-major (a column's episodes contiguous)",
-                         f"    every_row(_lane_step_{i}, q, w, q_r, w_r, par, st, dt, u)"]
+    own = "@njit(cache=True, error_model='numpy')"  # compiled on their own, called at their address (batch loop)
+    loops = []
+    for i, law in enumerate(laws):
+        loops += ["", "", f"_lane_step_{i} = njit(**VECTOR_STEP)(_step_{i}.py_func)", "", "",
+                  "@njit(cache=True, error_model='numpy', pipeline_class=LanesCompiler)",
+                  f"def vector_{i}(q, w, q_r, w_r, par, st, dt, u):",
+                  "    # every row's command by this law: the rows are SIMD lanes when the arrays are",
+                  "    # column-major (a column's episodes contiguous)",
+                  f"    every_row(_lane_step_{i}, q, w, q_r, w_r, par, st, dt, u)",
+                  "", "", own,
+                  f"def rows_{i}(law, q, w, q_r, w_r, par_{i}, st_{i}, dt, u, offset, has_off, decay):",
+                  "    # the command of the rows that run this law, one at a time (a block of several laws, or",
+                  "    # a transfer pending)",
+                  *("    " + x for x in _rows_lines(i, law, {})),
+                  "", "", jit,
+                  f"def _entry_{i}(q, w, q_r, w_r, p, par_{i}, st_{i}, dt, decay, u_last, offset, scratch):",
+                  *("    " + x for x in _entry_lines(i, law)),
+                  "", "", own,
+                  f"def enter_{i}(q, w, q_r, w_r, p, par_{i}, st_{i}, dt, decay, u_last, offset, scratch, has_off):",
+                  "    # the bumpless entry of row p (its state reset); has_off[p]: a decaying offset remains",
+                  f"    has_off[p] = _entry_{i}(q, w, q_r, w_r, p, par_{i}, st_{i}, dt, decay, u_last, offset, "
+                  "scratch)"]
     torque = " or ".join(f"code == {i}" for i, x in enumerate(laws) if x.output == "torque") or "False"
     stages = ["    " + x for x in _record_lines(laws) + _stage_lines(laws, {}, fast=False)]
     lines += ["", "", jit, "def law_stage(law, present, view, pars, sts, dt, u, offset, has_off, decay):",
@@ -359,13 +402,20 @@ def _dispatch_source(laws: list[Law]) -> str:
               "    q, w, q_r, w_r = view",
               *stages,
               "", "", jit, "def law_reset(code, p, sts):", "    # zero row p of the law's state",
-              *chain(reset_lines),
+              *chain(lambda i, law: [f"st = sts[{i}]", *_zero_lines(law, "st")]),
               "", "", jit, "def law_enter(code, view, p, pars, sts, dt, decay, u_last, offset, scratch):",
               "    # bumpless entry of row p; True when a decaying offset remains", "    q, w, q_r, w_r = view",
-              *chain(enter_lines),
+              *chain(lambda i, law: [f"par_{i}, st_{i} = pars[{i}], sts[{i}]",
+                                     f"return _entry_{i}(q, w, q_r, w_r, p, par_{i}, st_{i}, dt, decay, u_last, "
+                                     "offset, scratch)"]),
               "    return False",
+              "", "", jit, "def enter_at(code, at, view, p, pars, sts, dt, decay, u_last, offset, scratch, has_off):",
+              "    # law_enter, the law's entry called at its address (at: law_addresses): has_off[p]",
+              "    q, w, q_r, w_r = view",
+              *chain(lambda i, law: [f"call_at(at[2, {i}], (q, w, q_r, w_r, p, pars[{i}], sts[{i}], dt, decay, "
+                                     "u_last, offset, scratch, has_off))"]),
               "", "", jit, "def law_is_torque(code):", f"    return {torque}",
-              *vector_lines,
+              *loops,
               "", "", "@njit(cache=True)",
               "def lanes_stage(law, present, view, pars, sts, dt, u, offset, has_off, decay):",
               "    law_stage(law, present, view, pars, sts, dt, u, offset, has_off, decay)",
@@ -419,12 +469,11 @@ def from_template(template: ModuleType, law_names: tuple[str, ...] | None = None
     The template is an ordinary module of the package (linted and read like
     any other); its imports must be absolute. Between :data:`STUB_BEGIN` and
     :data:`STUB_END` it has stand-ins that keep it importable: they become an
-    import of the generated ``law_enter``, ``law_reset`` and ``law_is_torque``
-    and of each law's step. A line ``# @laws records`` becomes the laws'
-    records taken out of ``pars`` and ``sts`` once, and a line ``# @laws stage
-    NAME=VAR ...`` the command stage written out in place (no call: an
-    inlined call would copy every law's records each step), with the loop's
-    variables renamed as given.
+    import of the generated ``enter_at``, ``law_reset`` and ``law_is_torque``.
+    A line ``# @laws records`` becomes the laws' records taken out of ``pars``
+    and ``sts`` once, and a line ``# @laws stage NAME=VAR ...`` the command
+    stage written out in place (no call: an inlined call would copy every
+    law's records each step), with the loop's variables renamed as given.
     """
     key = tuple(law_names or registry.names())
     dispatch = dispatch_module(key)
@@ -432,11 +481,8 @@ def from_template(template: ModuleType, law_names: tuple[str, ...] | None = None
     text = Path(inspect.getsourcefile(template)).read_text()
     head, rest = text.split(STUB_BEGIN, 1)
     _, tail = rest.split(STUB_END, 1)
-    imports = [f"from {dispatch.__name__} import law_enter, law_is_torque, law_reset",
-               "from attitude_sil.core.control.compiled import call_at",
-               "from attitude_sil.core.control.kernels import offset_row"]
-    imports += [f"from {x.step.py_func.__module__} import {x.step.py_func.__name__} as _step_{i}"
-                for i, x in enumerate(laws)]
+    imports = [f"from {dispatch.__name__} import enter_at, law_is_torque, law_reset",
+               "from attitude_sil.core.control.compiled import call_at"]
     lines = []
     for line in (head + "\n".join(imports) + "\n" + tail).split("\n"):
         marker = line.strip()

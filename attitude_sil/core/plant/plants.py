@@ -21,7 +21,6 @@ the rest of the graph (controller, recorder, metrics) is unchanged.
 from __future__ import annotations
 
 import numpy as np
-from scipy.linalg import expm
 
 from attitude_sil.core.plant.rigid_body import BodyState
 
@@ -44,6 +43,8 @@ def exact_discretization(a: np.ndarray, b: np.ndarray, dt: float) -> tuple[np.nd
     ----------
     a : (n, n), b : (n, m)
     """
+    from scipy.linalg import expm  # here: scipy.linalg is a seventh of a node process's import time
+
     n, m = b.shape
     aug = np.zeros((n + m, n + m))
     aug[:n, :n] = a

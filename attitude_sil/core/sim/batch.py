@@ -34,7 +34,7 @@ from typing import NamedTuple
 import numba
 import numpy as np
 
-from attitude_sil.core.control.compiled import dispatch_module, from_template, vector_addresses
+from attitude_sil.core.control.compiled import dispatch_module, from_template, law_addresses
 from attitude_sil.core.plant.kernels import WheelFailure, WheelParams
 from attitude_sil.core.plant.wheels import no_failure
 from attitude_sil.core.sim import batch_loop
@@ -272,7 +272,7 @@ def _sums_spec(sums: tuple | None, P: int) -> SumsSpec:
                     np.empty((P, len(SUMMARY_COLUMNS))))
 
 
-#: the laws' vector-loop addresses by law set, laws run and the records' field kinds (what fixes their numba
+#: the laws' compiled loops' addresses by law set, laws run and the records' field kinds (what fixes their numba
 #: types once _rows has laid them out): typing the records took about 1 ms of a one-episode call
 _ADDRESSES: dict[tuple, np.ndarray] = {}
 
@@ -289,12 +289,12 @@ def _chunk_runner(ctrl, used: set[str], sim: SimArrays, outputs: Outputs, spec: 
         pars = tuple(type(r)(*(_rows(f, lo, hi, P) for f in r)) for r in records)
         return pars, ctrl.new_states(max(hi - lo, 2), order="F")
 
-    # the laws' vector loops, compiled (or loaded) here, once, before the threads start
+    # the laws' compiled loops, compiled (or loaded) here, once, before the threads start
     codes = tuple(sorted(ctrl.names.index(n) for n in used))
     key = (ctrl.names, codes, tuple((type(r), tuple((f.dtype.str, f.ndim) if isinstance(f, np.ndarray) else type(f)
                                                     for f in r)) for r in records))
     if key not in _ADDRESSES:
-        _ADDRESSES[key] = vector_addresses(dispatch_module(ctrl.names), codes, *blocks(0, 1))
+        _ADDRESSES[key] = law_addresses(dispatch_module(ctrl.names), codes, *blocks(0, 1))
     at = _ADDRESSES[key]
 
     def run(span, noise, noise_lo):

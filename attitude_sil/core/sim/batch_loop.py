@@ -5,9 +5,9 @@ into a generated module with the law dispatch of the registered laws in
 place of the stubs below (numba cannot call a run-time choice of function
 otherwise), and :mod:`attitude_sil.core.sim.batch` runs that module's
 :func:`chunk`. Read it as ordinary code where the ``# @laws stage`` line
-runs every law's compiled step on the episodes whose code is that law's (a
-loop per law, written out there by the generator), and ``law_enter`` & co. do
-the bumpless swap (:mod:`attitude_sil.core.control.law`).
+runs every law's compiled loop on the episodes whose code is that law's
+(called at its address, written out there by the generator), and
+``enter_at`` & co. do the bumpless swap (:mod:`attitude_sil.core.control.law`).
 The loop runs in stages over the chunk's episodes (swaps, commands, wheels,
 body), each episode's arithmetic in the order of the stepwise driver. The
 plant's state lives in blocks (:mod:`attitude_sil.core.plant.lanes`: the
@@ -49,8 +49,8 @@ def law_reset(code, p, sts):  # pragma: no cover - a stand-in
     raise NotImplementedError
 
 
-def law_enter(code, view, p, pars, sts, dt, decay, u_last, offset, scratch):  # pragma: no cover - a stand-in
-    raise NotImplementedError
+def enter_at(code, at, view, p, pars, sts, dt, decay, u_last, offset, scratch, has_off):  # pragma: no cover
+    raise NotImplementedError  # a stand-in
 
 
 def law_is_torque(code):  # pragma: no cover - a stand-in
@@ -62,16 +62,17 @@ N_SUMS = 13
 
 
 @njit(cache=True, inline="always")
-def _swap_row(k, p, swap, law, view, pars, sts, sim, xfer, u):
-    # ControllerBank.compute with a swap pending, for row p: reset, then the bumpless entry. view: the law's
-    # inputs (q, w, q_r, w_r); xfer: the transfer's (u_last, offset, has_off)
+def _swap_row(k, p, swap, law, view, pars, sts, sim, xfer, u, at):
+    # ControllerBank.compute with a swap pending, for row p: reset, then the bumpless entry (the law's
+    # enter_<code>, at its address). view: the law's inputs (q, w, q_r, w_r); xfer: the transfer's
+    # (u_last, offset, has_off)
     u_last, offset, has_off = xfer
     same_kind = law_is_torque(law[p]) == law_is_torque(swap) or sim.command_torque
     law[p] = swap
     law_reset(swap, p, sts)
     has_off[p] = False
     if k > 0 and same_kind:
-        has_off[p] = law_enter(swap, view, p, pars, sts, sim.dt, sim.decay, u_last, offset, u)
+        enter_at(swap, at, view, p, pars, sts, sim.dt, sim.decay, u_last, offset, u, has_off)
 
 
 @njit(cache=True, inline="always")
@@ -141,8 +142,8 @@ def chunk(lo, hi, sim, pars, sts, noise, noise_lo, out, sums, at):
     torque, or no rows; ``out`` (batch.Outputs): the kept trajectory arrays (no rows: not kept); ``sums``
     (batch.SumsSpec): the running sums' axis, start and final values, band and output (no rows: none). Each
     episode runs its own law (``sim.law0``) and takes the swaps ``sim.sw_law[s]`` before the command of
-    step ``sim.sw_k[s]`` (sorted), with the controller bank's bumpless transfer. ``at`` (n_laws,): the
-    address of each law's vector loop (``compiled.vector_addresses``; 0: the rows one at a time).
+    step ``sim.sw_k[s]`` (sorted), with the controller bank's bumpless transfer. ``at`` (3, n_laws): the
+    addresses of each law's compiled loops (``compiled.law_addresses``).
     """
     m = hi - lo
     # what the laws read, (m, 4) and (m, 3) in column-major order (a law's one-law loop runs on packed lanes)
@@ -187,7 +188,8 @@ def chunk(lo, hi, sim, pars, sts, noise, noise_lo, out, sums, at):
             present[swap] = True
             for p in range(m):
                 if law[p] != swap:
-                    _swap_row(k, p, swap, law, (qs, ws, q_r, omega_r), pars, sts, sim, (u_last, offset, has_off), u)
+                    _swap_row(k, p, swap, law, (qs, ws, q_r, omega_r), pars, sts, sim, (u_last, offset, has_off), u,
+                              at)
         # @laws stage q=qs w=ws w_r=omega_r dt=sim.dt decay=sim.decay
         for p in range(m):
             torque[p] = sim.command_torque or law_is_torque(law[p])
