@@ -443,24 +443,23 @@ def _rows_001() -> list[Row]:
 
 # ------------------------------------------------------------------ paper 002
 def _flexible(ps: Presets) -> dict:
-    """Rigid and flexible settling of both PIDs on the five plants (one batch per PID)."""
+    """Rigid and flexible settling of both PIDs on the five plants, in one batch (the plant per episode)."""
     def run():
         scn = ps.scenario("flexible_axis")
         s = scn.values["scenario"]
-        out = {}
         names = list(PAPER_002_GAINS)
-        params = {k: [[PAPER_002_GAINS[w][i]] * 3 for w in names] for i, k in enumerate(("pid.kp", "pid.ki", "pid.kd"))}
-        for case in FLEXIBLE_CASES:
-            variant = scn.with_values("plant", **{"flex.case": case})
-            tr = simulate(variant, len(names), controller_params=params, schedule=[], threads=1)
-            theta, alpha = flexible_states(variant, tr)
-            axis = variant.param("plant", "flex.axis")
-            target = float(np.radians(variant.param("guidance", "setpoint_rpy_deg")[axis]))
-            split = flexible_split(tr.t, theta, alpha, target, s["metrics.settling_band"])
-            for i, which in enumerate(names):
-                out[which, case] = (float(split["flexible_settling_time_s"][i]),
-                                    float(split["rigid_settling_time_s"][i]))
-        return out
+        pairs = [(which, case) for case in FLEXIBLE_CASES for which in names]  # one episode each
+        params = {k: [[PAPER_002_GAINS[w][i]] * 3 for w, _ in pairs] for i, k in enumerate(("pid.kp", "pid.ki",
+                                                                                                "pid.kd"))}
+        cases = [case for _, case in pairs]
+        tr = simulate(scn, len(pairs), controller_params=params, schedule=[], threads=1,
+                      episode_values={"plant.flex.case": cases})
+        theta, alpha = flexible_states(scn, tr, flex_case=cases)
+        axis = scn.param("plant", "flex.axis")
+        target = float(np.radians(scn.param("guidance", "setpoint_rpy_deg")[axis]))
+        split = flexible_split(tr.t, theta, alpha, target, s["metrics.settling_band"])
+        return {pair: (float(split["flexible_settling_time_s"][i]), float(split["rigid_settling_time_s"][i]))
+                for i, pair in enumerate(pairs)}
     return ps.memo("002", run)
 
 

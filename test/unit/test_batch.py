@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from attitude_sil.core.analysis.metrics import summarize
-from attitude_sil.core.sim.engine import simulate, simulate_summary
+from attitude_sil.core.sim.engine import flexible_states, simulate, simulate_summary
 from attitude_sil.core.sim.scenario import load_scenario
 from attitude_sil.errors import ScenarioError
 from conftest import CONFIG
@@ -251,3 +251,27 @@ def test_one_compiled_loop_serves_every_kind_of_run(hst):
     assert batch._LOOPS, "no compiled loop ran"
     for names, loop in batch._LOOPS.items():
         assert len(loop.chunk.signatures) == 1, (names, [str(s) for s in loop.chunk.signatures])
+
+
+def test_the_flexible_plant_case_per_episode_runs_each_as_if_alone(hst):
+    # paper 002's plants in one batch (fidelity and robustness run them so): each episode's numbers are
+    # those of its plant run alone, its internal states too, and a case no plant has is refused
+    scn = load_scenario(CONFIG / "flexible_axis.yaml").with_values("plant", **{"flex.k1": 0.3})
+    cases = ["case2", "nominal", "custom", "case4"]
+    batch = simulate(scn, 4, duration=3.0, episode_values={"plant.flex.case": cases})
+    theta, alpha = flexible_states(scn, batch, flex_case=cases)
+    for p, case in enumerate(cases):
+        variant = scn.with_values("plant", **{"flex.case": case})
+        alone = simulate(variant, 1, duration=3.0)
+        for f in FIELDS:
+            a, b = getattr(alone, f), getattr(batch, f)
+            assert (a is None and b is None) or np.array_equal(b[p:p + 1], a), (case, f)
+        theta_1, alpha_1 = flexible_states(variant, alone)
+        assert np.array_equal(theta[p:p + 1], theta_1) and np.array_equal(alpha[p:p + 1], alpha_1), case
+    assert len({float(a) for a in alpha[:, -1]}) == 4  # four different plants: a mix-up would show
+    with pytest.raises(ScenarioError, match="unknown case 'case9'"):
+        simulate(scn, 1, duration=0.1, episode_values={"plant.flex.case": ["case9"]})
+    with pytest.raises(ScenarioError, match="2 cases for 1 episodes"):
+        simulate(scn, 1, duration=0.1, episode_values={"plant.flex.case": ["case1", "case2"]})
+    with pytest.raises(ScenarioError, match="flexible_axis model only"):
+        simulate(hst, 1, duration=0.1, episode_values={"plant.flex.case": ["nominal"]})

@@ -210,12 +210,31 @@ def initial_attitude(values: dict, rpy0_deg=None) -> np.ndarray:
     return q
 
 
-def build_plant(scn: Scenario, n_episodes: int = 1, inertia=None, rpy0_deg=None, omega0=None):
+def _flex_constants(p: dict, n_episodes: int, flex_case=None) -> tuple:
+    """(k1, k2, omega^2) of the flexible mode, (P,) each, from ``flex.case``: the scenario's, or one per episode."""
+    if flex_case is None:
+        cases = [p["flex.case"]] * n_episodes
+    else:
+        cases = [str(c) for c in np.atleast_1d(np.asarray(flex_case, dtype=object))]
+        if len(cases) != n_episodes:
+            raise ScenarioError(f"plant.flex.case: {len(cases)} cases for {n_episodes} episodes")
+        known = (*FLEXIBLE_CASES, "custom")
+        bad = [c for c in cases if c not in known]
+        if bad:
+            raise ScenarioError(f"plant.flex.case: unknown case {bad[0]!r} (known: {', '.join(known)})")
+    custom = (p["flex.k1"], p["flex.k2"], p["flex.omega_sq"])
+    rows = [custom if c == "custom" else FLEXIBLE_CASES[c] for c in cases]
+    return tuple(np.array(column, dtype=float) for column in zip(*rows, strict=True))
+
+
+def build_plant(scn: Scenario, n_episodes: int = 1, inertia=None, rpy0_deg=None, omega0=None, flex_case=None):
     """The body model of the scenario's ``plant`` parameters (per-episode overrides optional).
 
     ``rigid_body`` gives a :class:`Plant`, ``linearized`` the model of
     :mod:`attitude_sil.core.plant.linear`; ``flexible_axis`` and
     ``pitch_normalized`` the single-axis models of :mod:`attitude_sil.core.plant.plants`.
+    ``flex_case``: the ``flexible_axis`` plant's ``flex.case`` per episode (P names: paper 002's five
+    plants in one batch); other models take none.
     """
     p = scn.values["plant"]
     dt = p["control_period"]
@@ -223,9 +242,10 @@ def build_plant(scn: Scenario, n_episodes: int = 1, inertia=None, rpy0_deg=None,
     w0 = _per_episode(p["initial_body_rate"] if omega0 is None else omega0, n_episodes, 3)
     if p["model"] == "flexible_axis":
         a = p["flex.axis"]
-        k1, k2, w2 = (p["flex.k1"], p["flex.k2"], p["flex.omega_sq"]) if p["flex.case"] == "custom" \
-            else FLEXIBLE_CASES[p["flex.case"]]
+        k1, k2, w2 = _flex_constants(p, n_episodes, flex_case)
         return FlexibleAxisPlant(p["flex.b"], k1, k2, w2, a, dt, np.radians(rpy[:, a]), w0[:, a], p["flex.alpha0"])
+    if flex_case is not None:
+        raise ScenarioError(f"plant.flex.case varies per episode for the flexible_axis model only, not {p['model']}")
     if p["model"] == "pitch_normalized":
         return PitchNormalizedPlant(p["pitch.epsilon"], dt, np.radians(rpy[:, 1]), w0[:, 1], p["pitch.h0"])
     m = inertia_matrix(p["inertia"] if inertia is None else inertia)
@@ -236,14 +256,15 @@ def build_plant(scn: Scenario, n_episodes: int = 1, inertia=None, rpy0_deg=None,
     return Plant(m, dt, p["substeps"], q0, w0)
 
 
-def flexible_states(scn: Scenario, tr) -> tuple[np.ndarray, np.ndarray]:
+def flexible_states(scn: Scenario, tr, flex_case=None) -> tuple[np.ndarray, np.ndarray]:
     """Rigid angle theta and deflection alpha (rad, (P, K+1) each) of a ``flexible_axis`` run.
 
     The plant is linear and the run's torques are known, so the trajectory's
     torques replayed through a fresh plant of the same scenario give its
     internal states exactly (the published attitude is only ``y = theta + k2 alpha``).
+    ``flex_case``: the run's ``plant.flex.case`` per episode, if it had one.
     """
-    plant = build_plant(scn, tr.tau_c_B.shape[0])
+    plant = build_plant(scn, tr.tau_c_B.shape[0], flex_case=flex_case)
     x = plant.x
     u = tr.tau_c_B[:, :, plant.axis] + (0.0 if tr.tau_ext_B is None else tr.tau_ext_B[:, :, plant.axis])
     states = np.empty(tr.tau_c_B.shape[:2] + (4,))
@@ -599,7 +620,7 @@ def simulate_summary(
 #: scenario values :func:`simulate` takes per episode (``episode_values``), by node; every ``controller``
 #: parameter may vary per episode too
 EPISODE_VALUES = {
-    "plant": ("inertia", "initial_attitude_rpy_deg", "initial_body_rate"),
+    "plant": ("inertia", "initial_attitude_rpy_deg", "initial_body_rate", "flex.case"),
     "guidance": ("setpoint_rpy_deg",),
     "disturbance": ("inertia", "noise.seed", "noise.power"),
     "wheels": EPISODE_MOTOR + EPISODE_FAILURE,
@@ -647,7 +668,7 @@ class _Run:
         ev = split_episode_values(episode_values)
         pv, dv, gv = ev["plant"], ev["disturbance"], ev["guidance"]
         plant = build_plant(scn, P, inertia=pv.get("inertia"), rpy0_deg=pv.get("initial_attitude_rpy_deg"),
-                            omega0=pv.get("initial_body_rate"))
+                            omega0=pv.get("initial_body_rate"), flex_case=pv.get("flex.case"))
         wheels = build_wheels(scn, P, ev["wheels"])
         dist = build_disturbance(scn, P, seeds=dv.get("noise.seed"), inertia=dv.get("inertia"),
                                  noise_power=dv.get("noise.power"))
