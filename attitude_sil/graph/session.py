@@ -544,12 +544,13 @@ def spin_episode(recorder: Recorder, spin, plant, children, k_steps: int, scn: S
     ------
     RunError
         The plant (in this process) failed, recording failed, no step came for
-        ``input_timeout`` + 2 s, or a node process exited.
+        ``input_timeout`` + 2 s (the plant's, followed as it is set while the
+        graph runs), or a node process exited.
     """
     counts = recorder.counts
     needed = k_steps + 1
     dt = scn.dt
-    timeout = scn.param("plant", "input_timeout") + 2.0
+    input_timeout = scn.param("plant", "input_timeout")
     restart_after = min(RESTART_AFTER_S, 0.5 * scn.param("plant", "input_timeout"))
     last_count, last_change = -1, time.monotonic()
     restarts = 0
@@ -588,7 +589,7 @@ def spin_episode(recorder: Recorder, spin, plant, children, k_steps: int, scn: S
                                         "written before DDS matched its reader, or slow); episode restarted")
             restart()
             last_change = time.monotonic()
-        elif now - last_change > timeout:
+        elif now - last_change > (recorder.plant_input_timeout or input_timeout) + 2.0:
             missing = [t for t in step_topics if counts[t] < needed]
             raise RunError(f"episode stalled at t={max(n - 1, 0) * dt:.3f} s: no progress on {', '.join(missing)}")
         check_children(children)

@@ -98,6 +98,9 @@ class Recorder(Node):
         self.latency: list[float] | None = None
         # called as the graph's controller changes law: (controller_type, stamp of the last command taken or -1)
         self.on_controller: Callable[[str, int], None] | None = None
+        # the plant's input_timeout (s) as last set while the graph runs (None: as at start); the runner's stall
+        # watchdog follows it
+        self.plant_input_timeout: float | None = None
         self._attitude_at: dict[int, float] = {}
         self.counts: dict[str, int] = defaultdict(int)
         self.last_stamp: dict[str, int] = {}  # the latest stamp taken per topic, ns
@@ -232,7 +235,7 @@ class Recorder(Node):
             except BagWriteError as exc:  # disk full, file too large: stop recording, keep what is written
                 self.error = f"recording stopped at t={t * 1e-9:.3f} s: {exc}"
                 self.writer = None
-        if name == PARAMETER_EVENTS and (self.live is not None or self.on_controller is not None):
+        if name == PARAMETER_EVENTS:  # rare (a node's start, a change): read each
             self._on_parameter_event(data, t)
         if self.live is not None:
             self._to_live(name, data, t)
@@ -253,7 +256,8 @@ class Recorder(Node):
 
     def _on_parameter_event(self, data: bytes, t: int) -> None:
         # a live view's Parameters panel follows every change; a swap of our controller's law goes to the live
-        # view's status and to on_controller(law, stamp of the last command taken)
+        # view's status and to on_controller(law, stamp of the last command taken); the plant's input_timeout
+        # to the runner's stall watchdog
         event = deserialize_message(data, ParameterEvent)
         values = {}
         for p in (*event.new_parameters, *event.changed_parameters):
@@ -261,6 +265,9 @@ class Recorder(Node):
             values[p.name] = v if isinstance(v, (str, bytes, bool, int, float)) or v is None else list(v)
         if self.live is not None:
             self.live.parameters_changed(event.node, values)
+        ns = self.get_namespace().rstrip("/")
+        if event.node == ns + "/plant" and isinstance(values.get("input_timeout"), float):
+            self.plant_input_timeout = values["input_timeout"]
         if event.node == self.get_namespace().rstrip("/") + "/controller" and "controller_type" in values:
             if self.live is not None:
                 self.live.set_controller(values["controller_type"], t)

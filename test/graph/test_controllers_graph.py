@@ -264,11 +264,15 @@ def test_a_failed_node_process_ends_the_run_with_one_line_and_a_readable_bag(tmp
     nodes = []
     try:
         assert "real time" in run.stderr.readline()
-        # once the episode runs (node processes loaded and stepping), a stopped node is to be noticed after 2 s
-        # instead of 10: set at start, a node process still loading its kernels under load tripped it at step 0
-        fast = subprocess.run([sys.executable, "-m", "attitude_sil.cli", "param", "set", "plant", "input_timeout",
-                               "2.0"], cwd=ROOT, capture_output=True, text=True, timeout=120, stdin=subprocess.DEVNULL)
-        assert fast.returncode == 0, fast.stderr
+        if fault == signal.SIGSTOP:
+            # once the episode runs (node processes loaded and stepping), a stopped node is to be noticed after 2 s
+            # instead of 10, by the plant and by the runner's watchdog, which follows the live value: set at start,
+            # a node process still loading its kernels under load tripped it at step 0 (a killed node's exit is
+            # seen at once)
+            fast = subprocess.run([sys.executable, "-m", "attitude_sil.cli", "param", "set", "plant",
+                                   "input_timeout", "2.0"], cwd=ROOT, capture_output=True, text=True, timeout=120,
+                                  stdin=subprocess.DEVNULL)
+            assert fast.returncode == 0, fast.stderr
         nodes = _children(run.pid)
         target = next(pid for pid in nodes if _node_of(pid) == victim)
         os.kill(target, fault)
