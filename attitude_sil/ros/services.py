@@ -18,7 +18,7 @@ from std_srvs.srv import Trigger
 
 from attitude_sil.errors import RunError
 
-__all__ = ["get_remote_parameters", "set_remote_parameters", "call_reset", "wait_future"]
+__all__ = ["get_remote_parameters", "set_remote_parameters", "call_reset", "wait_future", "ask_again"]
 
 Spin = Callable[[float], None]
 
@@ -30,6 +30,24 @@ def wait_future(future, spin: Spin, deadline: float, what: str):
             raise RunError(f"{what} did not answer")
         spin(0.02)
     return future.result()
+
+
+def ask_again(send: Callable[[], Any], spin: Spin, deadline: float, what: str, first: float = 1.0):
+    """``send()`` (a request's future) until one is answered: again after 1, 2, 4, ... s, up to ``deadline``.
+
+    For idempotent requests (a get). A client's first request can be answered
+    before DDS has matched the server's reply writer with the client's
+    reader, and that answer is lost: the service looked ready, and waiting
+    longer would not help.
+    """
+    wait = first
+    while True:
+        try:
+            return wait_future(send(), spin, min(deadline, time.monotonic() + wait), what)
+        except RunError:
+            if time.monotonic() > deadline:
+                raise
+            wait *= 2.0
 
 
 def get_remote_parameters(node: Node, spin: Spin, target: str, names: list[str],
@@ -49,12 +67,13 @@ def get_remote_parameters(node: Node, spin: Spin, target: str, names: list[str],
     """
     client, deadline = _parameter_client(node, spin, target, timeout)
     what = f"{target} (parameter get)"
-    values = wait_future(client.get_parameters(names), spin, deadline, what).values
+    values = ask_again(lambda: client.get_parameters(names), spin, deadline, what).values
     if len(values) != len(names):
         # rclpy answers nothing for a batch holding a name declared with a type but no value (an
         # empty array here) or not declared: ask name by name (one at a time: a service keeps
         # only its last 10 requests)
-        answers = [wait_future(client.get_parameters([name]), spin, deadline, what).values for name in names]
+        answers = [ask_again(lambda n=name: client.get_parameters([n]), spin, deadline, what).values
+                   for name in names]
         pairs = [(name, a[0]) for name, a in zip(names, answers, strict=True) if a]
     else:
         pairs = list(zip(names, values, strict=True))

@@ -275,3 +275,15 @@ def test_the_flexible_plant_case_per_episode_runs_each_as_if_alone(hst):
         simulate(scn, 1, duration=0.1, episode_values={"plant.flex.case": ["case1", "case2"]})
     with pytest.raises(ScenarioError, match="flexible_axis model only"):
         simulate(hst, 1, duration=0.1, episode_values={"plant.flex.case": ["nominal"]})
+
+
+def test_a_law_no_episode_runs_takes_per_episode_gains_in_any_order(hst, monkeypatch):
+    # the records of the laws a run does not use are empty stand-ins of their type, built once per process from
+    # the bank's values; built first in a run whose gains are per episode (a population), they must fit
+    from attitude_sil.core.control import bank
+
+    monkeypatch.setattr(bank, "_STAND_INS", {})
+    gains = {"pid.kp": np.linspace(20, 80, 9).reshape(3, 3)}
+    tr = simulate(hst, 3, duration=0.2, controller="fuzzy_pid", controller_params=gains, driver="compiled")
+    assert np.all(np.isfinite(tr.u_cmd))
+    assert all(f.shape[0] == 0 for n, rec in bank._STAND_INS.items() for f in rec if isinstance(f, np.ndarray))

@@ -46,12 +46,17 @@ def law_values(law: Law, values: Mapping[str, Any]) -> dict[str, Any]:
 _STAND_INS: dict[tuple[str, float], tuple] = {}
 
 
-def _stand_in(name: str, dt: float, values: dict) -> tuple:
-    """Law ``name``'s record for no episodes: its numba type (the values do not matter), built once per process."""
+def _stand_in(name: str, dt: float, values: dict, n: int) -> tuple:
+    """Law ``name``'s record for no episodes: its numba type (the values do not matter), built once per process.
+
+    Built for the bank's ``n`` episodes, then cut to none: ``values`` may hold
+    a value per episode (a population's gains), which fits n rows, not 0.
+    """
     key = (name, dt)
     if key not in _STAND_INS:
         law = registry.get(name)
-        _STAND_INS[key] = law.record(law_values(law, values), 0, dt)
+        rec = law.record(law_values(law, values), n, dt)
+        _STAND_INS[key] = type(rec)(*(f[:0] if isinstance(f, np.ndarray) and f.ndim >= 1 else f for f in rec))
     return _STAND_INS[key]
 
 
@@ -121,7 +126,8 @@ class ControllerBank:
         runs need their P rows built (at P = 1 the building cost more than the run).
         """
         wanted = set(names)
-        return tuple(self.record(n) if n in wanted else _stand_in(n, self.dt, self.values) for n in self.names)
+        return tuple(self.record(n) if n in wanted else _stand_in(n, self.dt, self.values, self.n)
+                     for n in self.names)
 
     def _set_sensor(self, v: dict) -> None:
         """Sensor noise on the law's inputs (``sensor_noise.*``, scalars or per-episode (P,) arrays)."""

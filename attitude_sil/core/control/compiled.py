@@ -185,7 +185,7 @@ def law_addresses(dispatch: ModuleType, codes, pars: tuple, sts: tuple) -> np.nd
         view = (COLUMNS,) * 4
         sigs = ((*view, *rec, types.float64, COLUMNS),
                 (CODES, *view, *rec, types.float64, COLUMNS, ROWS, FLAGS, types.float64),
-                (*view, types.intp, *rec, types.float64, types.float64, ROWS, ROWS, COLUMNS, FLAGS))
+                (*view, types.intp, *rec, types.float64, types.float64, types.Tuple((ROWS, ROWS, FLAGS)), COLUMNS))
         for row, (kind, sig) in enumerate(zip(("vector", "rows", "enter"), sigs, strict=True)):
             fn = getattr(dispatch, f"{kind}_{code}")
             if sig not in fn.overloads:
@@ -389,8 +389,10 @@ def _dispatch_source(laws: list[Law]) -> str:
                   f"def _entry_{i}(q, w, q_r, w_r, p, par_{i}, st_{i}, dt, decay, u_last, offset, scratch):",
                   *("    " + x for x in _entry_lines(i, law)),
                   "", "", own,
-                  f"def enter_{i}(q, w, q_r, w_r, p, par_{i}, st_{i}, dt, decay, u_last, offset, scratch, has_off):",
-                  "    # the bumpless entry of row p (its state reset); has_off[p]: a decaying offset remains",
+                  f"def enter_{i}(q, w, q_r, w_r, p, par_{i}, st_{i}, dt, decay, xfer, scratch):",
+                  "    # the bumpless entry of row p (its state reset); xfer: the transfer's (u_last, offset,",
+                  "    # has_off), has_off[p]: a decaying offset remains",
+                  "    u_last, offset, has_off = xfer",
                   f"    has_off[p] = _entry_{i}(q, w, q_r, w_r, p, par_{i}, st_{i}, dt, decay, u_last, offset, "
                   "scratch)"]
     torque = " or ".join(f"code == {i}" for i, x in enumerate(laws) if x.output == "torque") or "False"
@@ -409,11 +411,11 @@ def _dispatch_source(laws: list[Law]) -> str:
                                      f"return _entry_{i}(q, w, q_r, w_r, p, par_{i}, st_{i}, dt, decay, u_last, "
                                      "offset, scratch)"]),
               "    return False",
-              "", "", jit, "def enter_at(code, at, view, p, pars, sts, dt, decay, u_last, offset, scratch, has_off):",
-              "    # law_enter, the law's entry called at its address (at: law_addresses): has_off[p]",
+              "", "", jit, "def enter_at(code, at, view, p, pars, sts, dt, decay, xfer, scratch):",
+              "    # law_enter, the law's entry called at its address (at: law_addresses): has_off[p] (xfer[2])",
               "    q, w, q_r, w_r = view",
               *chain(lambda i, law: [f"call_at(at[2, {i}], (q, w, q_r, w_r, p, pars[{i}], sts[{i}], dt, decay, "
-                                     "u_last, offset, scratch, has_off))"]),
+                                     "xfer, scratch))"]),
               "", "", jit, "def law_is_torque(code):", f"    return {torque}",
               *loops,
               "", "", "@njit(cache=True)",

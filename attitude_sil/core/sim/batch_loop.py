@@ -49,8 +49,8 @@ def law_reset(code, p, sts):  # pragma: no cover - a stand-in
     raise NotImplementedError
 
 
-def enter_at(code, at, view, p, pars, sts, dt, decay, u_last, offset, scratch, has_off):  # pragma: no cover
-    raise NotImplementedError  # a stand-in
+def enter_at(code, at, view, p, pars, sts, dt, decay, xfer, scratch):  # pragma: no cover - a stand-in
+    raise NotImplementedError
 
 
 def law_is_torque(code):  # pragma: no cover - a stand-in
@@ -66,13 +66,13 @@ def _swap_row(k, p, swap, law, view, pars, sts, sim, xfer, u, at):
     # ControllerBank.compute with a swap pending, for row p: reset, then the bumpless entry (the law's
     # enter_<code>, at its address). view: the law's inputs (q, w, q_r, w_r); xfer: the transfer's
     # (u_last, offset, has_off)
-    u_last, offset, has_off = xfer
+    has_off = xfer[2]
     same_kind = law_is_torque(law[p]) == law_is_torque(swap) or sim.command_torque
     law[p] = swap
     law_reset(swap, p, sts)
     has_off[p] = False
     if k > 0 and same_kind:
-        enter_at(swap, at, view, p, pars, sts, sim.dt, sim.decay, u_last, offset, u, has_off)
+        enter_at(swap, at, view, p, pars, sts, sim.dt, sim.decay, xfer, u)
 
 
 @njit(cache=True, inline="always")
@@ -156,6 +156,7 @@ def chunk(lo, hi, sim, pars, sts, noise, noise_lo, out, sums, at):
     for p in range(m):
         present[law[p]] = True
     offset, has_off, u_last = np.zeros((m, 3)), np.zeros(m, dtype=np.bool_), np.zeros((m, 3))
+    xfer = (u_last, offset, has_off)  # the bumpless transfer's arrays
     # private copies of the shared read-only arrays: threads sharing one array would fight over its reference count
     wp, f = wheel_params_copy(sim.wheel), sim.failure
     fail = WheelFailure(f.wheel.copy(), f.step.copy(), f.stuck.copy(), f.e_hold.copy())  # e_hold: rows lo..hi-1
@@ -168,9 +169,7 @@ def chunk(lo, hi, sim, pars, sts, noise, noise_lo, out, sums, at):
     tau_c, h0 = np.empty((m, 3)), np.empty((m, 3))
     b, xw, xn = _plant_start(sim, lo, m)
     mot = motor_lanes(wp, lo, m)
-    keep = False
-    for o in out:
-        keep = keep or o.shape[0] > 0
+    keep = _any_kept(out)
     sums_out, with_sums = sums.out, sums.out.shape[0] > 0
     response = (sums.axis, sums.band, sums.y0, sums.r)  # out of the record once (a take per step costs refcounts)
     sums_state = _sums_start(m)
@@ -188,8 +187,7 @@ def chunk(lo, hi, sim, pars, sts, noise, noise_lo, out, sums, at):
             present[swap] = True
             for p in range(m):
                 if law[p] != swap:
-                    _swap_row(k, p, swap, law, (qs, ws, q_r, omega_r), pars, sts, sim, (u_last, offset, has_off), u,
-                              at)
+                    _swap_row(k, p, swap, law, (qs, ws, q_r, omega_r), pars, sts, sim, xfer, u, at)
         # @laws stage q=qs w=ws w_r=omega_r dt=sim.dt decay=sim.decay
         for p in range(m):
             torque[p] = sim.command_torque or law_is_torque(law[p])
@@ -215,6 +213,15 @@ def chunk(lo, hi, sim, pars, sts, noise, noise_lo, out, sums, at):
         copy_wheels(xn, xw)  # copied, not swapped: a loop over a swapped pair of arrays stays scalar (bench/README.md)
     if with_sums:
         _sums_end(sums_state, n_after, sums_out, lo)
+
+
+@njit(cache=True, inline="always")
+def _any_kept(out):
+    # whether any trajectory output is kept (has rows)
+    keep = False
+    for o in out:
+        keep = keep or o.shape[0] > 0
+    return keep
 
 
 @njit(cache=True, inline="always")
