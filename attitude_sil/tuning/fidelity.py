@@ -33,7 +33,6 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
-import control
 import numpy as np
 
 from attitude_sil.core.analysis.metrics import flexible_split, scenario_metrics, step_metrics, tracking_metrics
@@ -311,6 +310,8 @@ def _hst_disturbed(ps: Presets) -> dict:
 def _hst_linear(ps: Presets, which: str) -> dict:
     """Linear closed-loop step figures (63.2 % time, overshoot, 2 % settling) of a gain set, python-control."""
     def run():
+        import control  # where it is used: seconds of a process's start (tuning/rootlocus.py)
+
         scn = ps.scenario("hst_roll_step")
         cl = closed_loop(reduced_roll_loop(scn, 0), *PAPER_000_GAINS[which])
         info = control.step_info(cl, T=np.linspace(0.0, 60.0, 6001))

@@ -20,15 +20,17 @@ nearest ``tau_d`` with overshoot under 2 % and settling under
 is scored with the nonlinear model's cost J (as the paper's Results do), and
 the root locus through the design (``control.root_locus_map`` of the loop
 with the PID's overall gain as the locus parameter) is plotted next to the results.
+
+python-control and matplotlib are imported in the functions that use them:
+with scipy.signal they took 3-4 s of the start of every process that tunes
+(the tuner imports this module for every method) or reads the fidelity rows.
 """
 
 from __future__ import annotations
 
 import json
 
-import control
 import numpy as np
-from matplotlib.figure import Figure
 
 from attitude_sil.core.analysis.metrics import scenario_metrics
 from attitude_sil.core.plant.linear import linear_model
@@ -46,6 +48,7 @@ def roll_loop(scn, axis: int = 0):
     States: body (omega, g, h_w) and, per wheel, (current, speed); the wheel
     momentum state of the body model is replaced by the motors' own.
     """
+    import control
 
     p = scn.values["plant"]
     inertia = inertia_matrix(p["inertia"])
@@ -77,6 +80,7 @@ def roll_loop(scn, axis: int = 0):
 
 def closed_loop(plant, kp, ki, kd, n):
     """Unity feedback of the PID ``kp + ki/s + kd n s/(s+n)`` around ``plant`` (reference in g units)."""
+    import control
 
     s = control.tf("s")
     pid = kp + ki / s + kd * n * s / (s + n)
@@ -85,11 +89,13 @@ def closed_loop(plant, kp, ki, kd, n):
 
 def reduced_roll_loop(scn, axis: int = 0):
     """:func:`roll_loop` with the states this input cannot reach removed (the other axes' free integrators)."""
+    import control
     return control.ss(control.tf(roll_loop(scn, axis)).minreal(tol=1e-6))
 
 
 def _step_figures(cl, t: np.ndarray) -> tuple[float, float, float]:
     """(63.2 % time, overshoot %, 2 % settling time) of a closed loop's unit step."""
+    import control
     y = np.asarray(control.step_response(cl, T=t).outputs).ravel()
     if not np.all(np.isfinite(y)) or y[-1] <= 0:
         return np.inf, np.inf, np.inf
@@ -160,6 +166,7 @@ def _targets(scn):
 
 def tune_root_locus(spec, progress=None):
     """Place the dominant closed-loop poles (see the module docstring); write the usual results."""
+    import control
 
     scn = spec.scenarios[0]
     axis = scn.values["scenario"]["metrics.axis"]
@@ -216,6 +223,8 @@ def tune_root_locus(spec, progress=None):
 
 def _plot_locus(plant, kp, ki, kd, n, target, path) -> None:
     """Closed-loop poles as the PID's overall gain k sweeps 0.05-20 x the design, the design marked."""
+    import control
+    from matplotlib.figure import Figure
 
     s = control.tf("s")
     loop = (kp + ki / s + kd * n * s / (s + n)) * control.tf(plant)
