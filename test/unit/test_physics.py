@@ -162,3 +162,18 @@ def test_the_compiled_orbit_torques_are_the_papers_equations_as_written():
                       tau)
         assert np.array_equal(tau, (np.zeros((50, 3)) + gg) + aero if on_gg and on_aero else want)
     assert np.min(np.abs(gg)) > 0 and np.min(np.abs(aero)) > 0  # both moments present: equality is not trivial
+
+
+def test_the_lvlh_frame_multiplied_out_is_the_quaternion_product_to_the_bit():
+    from attitude_sil.core.plant.disturbance import lvlh_attitude
+    from attitude_sil.core.plant.quaternion import quat_multiply
+
+    rng = np.random.default_rng(11)
+    frames = rng.normal(size=(20, 4))
+    frames /= np.linalg.norm(frames, axis=1, keepdims=True)
+    for q_LN0, t in zip(frames, rng.uniform(0.0, 6000.0, 20), strict=True):
+        half = 0.5 * 1.1e-3 * t
+        want = quat_multiply(q_LN0, np.array([0.0, np.sin(half), 0.0, np.cos(half)]))
+        assert np.array_equal(lvlh_attitude(t, q_LN0, 1.1e-3), want)
+    assert np.array_equal(lvlh_attitude(100.0, frames, 1.1e-3), quat_multiply(frames, lvlh_attitude(100.0, np.array(
+        [0.0, 0.0, 0.0, 1.0]), 1.1e-3)))  # many frames at once: the product as it is

@@ -64,10 +64,19 @@ def orbit_rate(mu: float, radius: float) -> float:
 
 
 def lvlh_attitude(t: float, q_LN0: np.ndarray, rate: float) -> np.ndarray:
-    """LVLH orientation at time t: ``q_LN(0) ⊗ R_y(rate t)``, shape like ``q_LN0``."""
+    """LVLH orientation at time t: ``q_LN(0) ⊗ R_y(rate t)``, shape like ``q_LN0``.
+
+    One frame (``q_LN0`` of shape (4,)), the usual case, is multiplied out in
+    floats: :func:`quat_multiply`'s arithmetic in its order, without numpy's
+    per-call cost (the guidance and the disturbance ask for it every step).
+    """
     half = 0.5 * rate * t
-    turn = np.array([0.0, np.sin(half), 0.0, np.cos(half)])
-    return quat_multiply(q_LN0, turn)
+    s, c = float(np.sin(half)), float(np.cos(half))
+    if np.shape(q_LN0) != (4,):
+        return quat_multiply(q_LN0, np.array([0.0, s, 0.0, c]))
+    qx, qy, qz, qw = (float(v) for v in q_LN0)
+    return np.array([qw * 0.0 + c * qx + qy * 0.0 - qz * s, qw * s + c * qy + qz * 0.0 - qx * 0.0,
+                     qw * 0.0 + c * qz + qx * s - qy * 0.0, qw * c - qx * 0.0 - qy * s - qz * 0.0])
 
 
 def gravity_gradient_torque(R_BL: np.ndarray, inertia: np.ndarray, rate: float) -> np.ndarray:
