@@ -271,10 +271,15 @@ def _record_lines(laws: list[Law]) -> list[str]:
     return [f"par_{i}, st_{i} = pars[{i}], sts[{i}]" for i in range(len(laws))]
 
 
+def _clip_lines(i: int, u: str) -> list[str]:
+    """Row ``p`` of the command ``u`` clipped to law ``i``'s ``u_max`` (a law that does not saturate itself)."""
+    return ["for j in range(3):", f"    {u}[p, j] = min(max({u}[p, j], -par_{i}.u_max), par_{i}.u_max)"]
+
+
 def _rows_lines(i: int, law: Law, names: dict[str, str]) -> list[str]:
     """Law ``i``'s command on each row that runs it, one row at a time: its step, the transfer offset, the clip."""
     n = {k: names.get(k, k) for k in _STAGE_NAMES}
-    clip = ["for j in range(3):", f"    {n['u']}[p, j] = min(max({n['u']}[p, j], -par_{i}.u_max), par_{i}.u_max)"]
+    clip = _clip_lines(i, n["u"])
     out = [f"for p in range({n['law']}.shape[0]):",
            f"    if {n['law']}[p] == {i}:",
            f"        _step_{i}({n['q']}, {n['w']}, {n['q_r']}, {n['w_r']}, p, par_{i}, st_{i}, {n['dt']}, {n['u']})",
@@ -316,8 +321,7 @@ def _stage_lines(laws: list[Law], names: dict[str, str], fast: bool = True) -> l
         out += [f"if only == {i}:",
                 f"    call_at({n['at']}[0, {i}], ({view}, par_{i}, st_{i}, {n['dt']}, {n['u']}))"]
         if not law.saturated:
-            out += [f"    for p in range({n['law']}.shape[0]):", "        for j in range(3):",
-                    f"            {n['u']}[p, j] = min(max({n['u']}[p, j], -par_{i}.u_max), par_{i}.u_max)"]
+            out += [f"    for p in range({n['law']}.shape[0]):", *("        " + c for c in _clip_lines(i, n["u"]))]
         out += [f"elif only < 0 and {n['present']}[{i}]:",
                 f"    call_at({n['at']}[1, {i}], ({n['law']}, {view}, par_{i}, st_{i}, {n['dt']}, {n['u']}, "
                 f"{n['offset']}, {n['has_off']}, {n['decay']}))"]

@@ -166,14 +166,18 @@ class DisturbanceModel:
         self.seeds = [int(s) for s in seeds]
         self.n_episodes = len(self.seeds)
         self.inertia = np.broadcast_to(np.asarray(inertia, dtype=float), (self.n_episodes, 3, 3))
-        self._inertia_c = np.ascontiguousarray(self.inertia)
-        self._cp_offset = np.ascontiguousarray(values["aero.cp_offset"], dtype=float)
         diag = np.diagonal(self.inertia, axis1=-2, axis2=-1)
         mu, radius = values["orbit.mu"], values["orbit.radius"]
         n2 = 3.0 * mu / radius**3
         self.gg_gain = np.stack((n2 * (diag[:, 2] - diag[:, 1]), n2 * (diag[:, 2] - diag[:, 0])), axis=-1)
         self.rate = orbit_rate(mu, radius)
         self.speed = float(np.sqrt(mu / radius))
+        # orbit_torques's arguments but the attitude and the frame: the gains' products in the order of the
+        # numpy forms (the same numbers), the models on
+        self._orbit = (np.ascontiguousarray(self.inertia), float(3.0 * self.rate**2),
+                       float(0.5 * values["aero.density"] * values["aero.drag_coefficient"] * values["aero.area"]
+                             * self.speed**2), np.ascontiguousarray(values["aero.cp_offset"], dtype=float),
+                       "gravity_gradient" in self.models, "aerodynamic" in self.models)
         self.q_LN0 = quat_from_euler(np.radians(values["orbit.lvlh_initial_rpy_deg"]))
         ratio = self.dt / values["noise.sample_time"]
         self.samples_per_step = int(round(ratio))
@@ -241,11 +245,7 @@ class DisturbanceModel:
             tau[:, :2] += self.gg_gain * rpy[:, :2]
         if "gravity_gradient" in self.models or "aerodynamic" in self.models:
             q_LN = lvlh_attitude(t_ns * 1e-9, self.q_LN0, self.rate)
-            gg_gain = 3.0 * self.rate**2  # the products in the order of the numpy forms: the same numbers
-            aero_gain = 0.5 * v["aero.density"] * v["aero.drag_coefficient"] * v["aero.area"] * self.speed**2
-            orbit_torques(np.ascontiguousarray(q_BN, dtype=float), q_LN, self._inertia_c, float(gg_gain),
-                          float(aero_gain), self._cp_offset, "gravity_gradient" in self.models,
-                          "aerodynamic" in self.models, tau)
+            orbit_torques(np.ascontiguousarray(q_BN, dtype=float), q_LN, *self._orbit, tau)
         return tau
 
     def _impulse(self, k: int) -> float:
