@@ -551,7 +551,7 @@ def spin_episode(recorder: Recorder, spin, plant, children, k_steps: int, scn: S
     needed = k_steps + 1
     dt = scn.dt
     input_timeout = scn.param("plant", "input_timeout")
-    restart_after = min(RESTART_AFTER_S, 0.5 * scn.param("plant", "input_timeout"))
+    restart_after = min(RESTART_AFTER_S, 0.5 * input_timeout)
     last_count, last_change = -1, time.monotonic()
     restarts = 0
     step_topics = episode_topics() if topics is None else topics

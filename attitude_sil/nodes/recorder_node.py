@@ -268,7 +268,7 @@ class Recorder(Node):
         ns = self.get_namespace().rstrip("/")
         if event.node == ns + "/plant" and isinstance(values.get("input_timeout"), float):
             self.plant_input_timeout = values["input_timeout"]
-        if event.node == self.get_namespace().rstrip("/") + "/controller" and "controller_type" in values:
+        if event.node == ns + "/controller" and "controller_type" in values:
             if self.live is not None:
                 self.live.set_controller(values["controller_type"], t)
             if self.on_controller is not None and event.changed_parameters:

@@ -35,12 +35,12 @@ from pathlib import Path
 
 import numpy as np
 
-from attitude_sil.core.analysis.metrics import flexible_split, scenario_metrics, step_metrics, tracking_metrics
+from attitude_sil.core.analysis.metrics import scenario_metrics, step_metrics, tracking_metrics
 from attitude_sil.core.papers import PAPERS
 from attitude_sil.core.plant.actuators import SpeedLoopWheels
 from attitude_sil.core.plant.plants import FLEXIBLE_CASES
 from attitude_sil.core.plant.quaternion import euler_from_quat
-from attitude_sil.core.sim.engine import flexible_states, simulate
+from attitude_sil.core.sim.engine import flexible_settling, simulate
 from attitude_sil.core.sim.scenario import PRESETS, Scenario, default_config_dir, load_scenario
 from attitude_sil.errors import AttitudeSilError
 from attitude_sil.tuning.linearize import PAPER_000_TABLE_1, PAPER_000_TABLE_1_DURATION, rmse_table
@@ -447,7 +447,6 @@ def _flexible(ps: Presets) -> dict:
     """Rigid and flexible settling of both PIDs on the five plants, in one batch (the plant per episode)."""
     def run():
         scn = ps.scenario("flexible_axis")
-        s = scn.values["scenario"]
         names = list(PAPER_002_GAINS)
         pairs = [(which, case) for case in FLEXIBLE_CASES for which in names]  # one episode each
         params = {k: [[PAPER_002_GAINS[w][i]] * 3 for w, _ in pairs] for i, k in enumerate(("pid.kp", "pid.ki",
@@ -455,10 +454,7 @@ def _flexible(ps: Presets) -> dict:
         cases = [case for _, case in pairs]
         tr = simulate(scn, len(pairs), controller_params=params, schedule=[], threads=1,
                       episode_values={"plant.flex.case": cases})
-        theta, alpha = flexible_states(scn, tr, flex_case=cases)
-        axis = scn.param("plant", "flex.axis")
-        target = float(np.radians(scn.param("guidance", "setpoint_rpy_deg")[axis]))
-        split = flexible_split(tr.t, theta, alpha, target, s["metrics.settling_band"])
+        split = flexible_settling(scn, tr, flex_case=cases)
         return {pair: (float(split["flexible_settling_time_s"][i]), float(split["rigid_settling_time_s"][i]))
                 for i, pair in enumerate(pairs)}
     return ps.memo("002", run)

@@ -14,9 +14,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from attitude_sil.core.analysis.metrics import flexible_split, scenario_metrics
+from attitude_sil.core.analysis.metrics import scenario_metrics
 from attitude_sil.core.plant.plants import FLEXIBLE_CASES
-from attitude_sil.core.sim.engine import flexible_states, inertia_matrix, simulate
+from attitude_sil.core.sim.engine import flexible_settling, inertia_matrix, simulate
 from attitude_sil.core.sim.scenario import Scenario
 
 __all__ = ["INERTIA_ERRORS", "robustness", "format_robustness"]
@@ -35,10 +35,7 @@ def robustness(scn: Scenario) -> list[dict]:
         cases = list(FLEXIBLE_CASES)
         tr = simulate(scn, len(cases), schedule=[], episode_values={"plant.flex.case": cases})
         m = scenario_metrics(tr.t, tr.q_BN, tr.q_RN, tr.tau_c_B, s, step_time=step_time)
-        theta, alpha = flexible_states(scn, tr, flex_case=cases)
-        axis = scn.param("plant", "flex.axis")
-        target = float(np.radians(scn.param("guidance", "setpoint_rpy_deg")[axis]))
-        m.update(flexible_split(tr.t, theta, alpha, target, s["metrics.settling_band"]))
+        m.update(flexible_settling(scn, tr, flex_case=cases))
         return [{"case": case, **{k: float(m[k][i]) for k in _KEYS if k in m}} for i, case in enumerate(cases)]
     base = np.diagonal(inertia_matrix(scn.param("plant", "inertia")))
     inertias = base[None, :] * (1.0 + INERTIA_ERRORS[:, None])

@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from attitude_sil.core.analysis.metrics import step_summary, summarize
+from attitude_sil.core.analysis.metrics import flexible_split, step_summary, summarize
 from attitude_sil.core.control import registry
 from attitude_sil.core.control.bank import ControllerBank
 from attitude_sil.core.plant.actuators import RPM, SpeedLoopWheels, TorqueActuator
@@ -53,6 +53,7 @@ __all__ = [
     "EpisodeSummary",
     "check_episode",
     "flexible_states",
+    "flexible_settling",
     "build_sensing",
     "Sensing",
     "SENSING_FIELDS",
@@ -272,6 +273,17 @@ def flexible_states(scn: Scenario, tr, flex_case=None) -> tuple[np.ndarray, np.n
         states[:, k] = x
         x = np.einsum("pi,pij->pj", x, plant.phi_T) + u[:, k, None] * plant.gamma
     return states[:, :, 0], states[:, :, 2]
+
+
+def flexible_settling(scn: Scenario, tr, flex_case=None) -> dict[str, np.ndarray]:
+    """:func:`~attitude_sil.core.analysis.metrics.flexible_split` of a ``flexible_axis`` run: its rigid and
+    flexible settling toward the scenario's setpoint on the plant's axis, in the scenario's settling band.
+
+    ``flex_case``: the run's ``plant.flex.case`` per episode, if it had one (:func:`flexible_states`).
+    """
+    theta, alpha = flexible_states(scn, tr, flex_case=flex_case)
+    target = float(np.radians(scn.param("guidance", "setpoint_rpy_deg")[scn.param("plant", "flex.axis")]))
+    return flexible_split(tr.t, theta, alpha, target, scn.param("scenario", "metrics.settling_band"))
 
 
 def motor_params(values: dict) -> MotorParams:
