@@ -165,7 +165,7 @@ def test_a_controller_type_per_episode_gives_each_episode_its_own_laws_run(measu
 
 
 def test_disturbance_noise_is_the_stepwise_streams_in_any_grouping(hst):
-    # noise is drawn per group of episodes (256 and more); 300 episodes span two groups, on two threads
+    # noise is drawn per chunk of episodes, in the chunk's thread: 300 episodes, five chunks on one thread or two
     scn = hst.with_values("disturbance", models=["constant", "step", "noise"])
     kw = dict(duration=0.3, episode_values={"disturbance.noise.seed": np.arange(300) * 7 + 1})
     compiled = simulate(scn, 300, driver="compiled", threads=2, **kw)

@@ -177,3 +177,22 @@ def test_the_lvlh_frame_multiplied_out_is_the_quaternion_product_to_the_bit():
         assert np.array_equal(lvlh_attitude(t, q_LN0, 1.1e-3), want)
     assert np.array_equal(lvlh_attitude(100.0, frames, 1.1e-3), quat_multiply(frames, lvlh_attitude(100.0, np.array(
         [0.0, 0.0, 0.0, 1.0]), 1.1e-3)))  # many frames at once: the product as it is
+
+
+@pytest.mark.parametrize("n", [1, 10])
+def test_the_compiled_noise_means_are_numpys_draws_summed_in_order_with_the_power_as_set(n):
+    # step_means (the compiled driver's disturbance noise) against the numpy form DisturbanceModel.torque takes
+    # step by step: the same PCG64 stream, each step's (n, 3) block summed over the sample axis; and the
+    # band-limited white noise of paper 000 sec. 2.A: a held mean of n samples of variance power / T_s has
+    # variance power / dt (dt = n T_s), so the impulse it gives the body over a step is that of the power
+    from attitude_sil.core.plant.disturbance import step_means
+
+    steps, sample_time, power = 4000, 1e-3, np.array([2e-7, 5e-7, 1e-6])
+    std = np.sqrt(power / sample_time)
+    draws = np.random.Generator(np.random.PCG64(21)).standard_normal((steps * n, 3))
+    want = np.add.reduce(draws.reshape(steps, n, 3), axis=1) / n * std
+    got = np.empty((steps, 3))
+    step_means(np.random.Generator(np.random.PCG64(21)), n, std, got)
+    assert np.array_equal(got, want)
+    # sample variance of 4000 normals: relative standard error sqrt(2 / 4000) = 2.2 %; 12 % is over 5 of them
+    assert np.allclose(np.var(got, axis=0), power / (n * sample_time), rtol=0.12)

@@ -102,6 +102,25 @@ def aerodynamic_torque(R_BL: np.ndarray, density: float, drag_coefficient: float
     return 0.5 * density * drag_coefficient * area * speed**2 * cross(v_hat, cp_offset_B)
 
 
+@njit(cache=True, nogil=True)
+def step_means(rng: np.random.Generator, n: int, std: np.ndarray, out: np.ndarray) -> None:
+    """Each step's mean of ``n`` noise samples times the axis' standard deviation, into ``out`` (K + 1, 3).
+
+    ``rng``: the episode's stream (numpy PCG64; numba draws its normals with
+    numpy's algorithm, so the numbers are numpy's, one (n, 3) block of samples
+    per step, as :meth:`DisturbanceModel.torque` takes them). Each axis' sum
+    runs from the step's first sample to its last, as ``np.add.reduce`` over
+    the sample axis sums them there, so the means are those bits. ``std`` (3,).
+    """
+    for k in range(out.shape[0]):
+        s0, s1, s2 = rng.standard_normal(), rng.standard_normal(), rng.standard_normal()
+        for _ in range(1, n):
+            s0 += rng.standard_normal()
+            s1 += rng.standard_normal()
+            s2 += rng.standard_normal()
+        out[k, 0], out[k, 1], out[k, 2] = s0 / n * std[0], s1 / n * std[1], s2 / n * std[2]
+
+
 @njit(cache=True)
 def orbit_torques(q_BN: np.ndarray, q_LN: np.ndarray, inertia: np.ndarray, gg_gain: float, aero_gain: float,
                   cp_offset_B: np.ndarray, gg: bool, aero: bool, tau: np.ndarray) -> None:
@@ -211,13 +230,15 @@ class DisturbanceModel:
 
         Drawn from fresh streams of the episodes' seeds: the numbers
         :meth:`torque` adds step by step after a :meth:`reset` (the compiled
-        driver adds them in the same place of the sum).
+        driver adds them in the same place of the sum), drawn and averaged in
+        compiled code without the GIL (chunks on threads draw at once).
         """
-        n = self.samples_per_step
-        std = np.broadcast_to(self.noise_std, (self.n_episodes, 3))[lo:hi, None, :]
-        draws = np.stack([np.random.Generator(np.random.PCG64(s)).standard_normal(((n_steps + 1) * n, 3))
-                          for s in self.seeds[lo:hi]])
-        return np.add.reduce(draws.reshape(hi - lo, n_steps + 1, n, 3), axis=2) / n * std
+        std = np.broadcast_to(self.noise_std, (self.n_episodes, 3))
+        out = np.empty((hi - lo, n_steps + 1, 3))
+        for e in range(lo, hi):
+            step_means(np.random.Generator(np.random.PCG64(self.seeds[e])), self.samples_per_step,
+                       np.ascontiguousarray(std[e]), out[e - lo])
+        return out
 
     def torque(self, q_BN: np.ndarray, t_ns: int = 0) -> np.ndarray:
         """Disturbance torque held over the step that starts at ``t_ns``, (P, 3) N m.

@@ -220,9 +220,10 @@ def run_compiled(models: tuple, n_steps: int, dt: float, stride: int = 1, thread
     sim = _sim_arrays(models, n_steps, stride, dt, law0,
                       (np.array([k for k, _ in sw], dtype=np.int64),
                        np.array([ctrl.codes[law] for _, law in sw], dtype=np.int64)))
+    noise = (lambda lo, hi: dist.noise_torque(lo, hi, n_steps)) if "noise" in set(dist.models) else None
     run = _chunk_runner(ctrl, {str(x) for x in laws} | set(swaps.values()), sim,
-                        Outputs(*(out[f] for f in TRAJECTORY_FIELDS)), spec)
-    _run_chunks(run, dist, P, n_steps, threads, chunk)
+                        Outputs(*(out[f] for f in TRAJECTORY_FIELDS)), spec, noise)
+    _run_chunks(run, P, threads, chunk)
     trajectory = None
     if keep:
         got = {f: (a if f in keep else None) for f, a in out.items()}
@@ -233,28 +234,17 @@ def run_compiled(models: tuple, n_steps: int, dt: float, stride: int = 1, thread
     return trajectory, (None if sums is None else spec.out)
 
 
-def _run_chunks(run, dist, P: int, n_steps: int, threads: int | None, chunk: int) -> None:
-    """``run((lo, hi), noise, noise_lo)`` over chunks of the P episodes, on the pool's threads.
-
-    Disturbance noise is drawn in numpy (the stepwise driver's streams) for a
-    group of episodes at a time, so its memory is that of the group, not of the run.
-    """
+def _run_chunks(run, P: int, threads: int | None, chunk: int) -> None:
+    """``run(lo, hi)`` over chunks of the P episodes, on the pool's threads."""
     n_threads = _POOL_SIZE if threads is None else max(1, min(int(threads), _POOL_SIZE))
     size = max(1, min(int(chunk), -(-P // n_threads)))  # every thread gets work, chunks stay cache-sized
-    noisy = "noise" in set(dist.models)
-    group = max(size * n_threads, 256) if noisy else P
-    bounds = np.unique(np.append(np.arange(0, P, size), P)).astype(np.int64)
-    for g_lo in range(0, P, group):
-        g_hi = min(g_lo + group, P)
-        noise = dist.noise_torque(g_lo, g_hi, n_steps) if noisy else np.zeros((0, 0, 3))
-        b = bounds[(bounds >= g_lo) & (bounds <= g_hi)]
-        b = np.unique(np.concatenate(([g_lo], b, [g_hi]))).astype(np.int64).tolist()
-        spans = list(zip(b[:-1], b[1:], strict=True))
-        if n_threads > 1 and len(spans) > 1:  # the chunks on threads: the loop runs without the GIL
-            list(_pool().map(lambda span, n=noise, g=g_lo: run(span, n, g), spans))
-        else:  # one thread: the chunks one after another, no thread hand-off
-            for span in spans:
-                run(span, noise, g_lo)
+    b = np.unique(np.append(np.arange(0, P, size), P)).tolist()
+    spans = list(zip(b[:-1], b[1:], strict=True))
+    if n_threads > 1 and len(spans) > 1:  # the chunks on threads: the loop runs without the GIL
+        list(_pool().map(lambda span: run(*span), spans))
+    else:  # one thread: the chunks one after another, no thread hand-off
+        for span in spans:
+            run(*span)
 
 
 def _outputs(P: int, kept: int, n_wheels: int, keep) -> dict[str, np.ndarray]:
@@ -272,13 +262,20 @@ def _sums_spec(sums: tuple | None, P: int) -> SumsSpec:
                     np.empty((P, len(SUMMARY_COLUMNS))))
 
 
+#: the compiled loop's noise argument of a run without disturbance noise (no rows)
+_NO_NOISE = np.zeros((0, 0, 3))
+
 #: the laws' compiled loops' addresses by law set, laws run and the records' field kinds (what fixes their numba
 #: types once _rows has laid them out): typing the records took about 1 ms of a one-episode call
 _ADDRESSES: dict[tuple, np.ndarray] = {}
 
 
-def _chunk_runner(ctrl, used: set[str], sim: SimArrays, outputs: Outputs, spec: SumsSpec):
-    """``run((lo, hi), noise, noise_lo)``: the compiled loop on episodes lo..hi-1 of the bank's law set."""
+def _chunk_runner(ctrl, used: set[str], sim: SimArrays, outputs: Outputs, spec: SumsSpec, noise=None):
+    """``run(lo, hi)``: the compiled loop on episodes lo..hi-1 of the bank's law set.
+
+    ``noise(lo, hi)``: the disturbance noise torque of those episodes (``DisturbanceModel.noise_torque``),
+    drawn in the chunk's thread, so its memory is the chunk's; None: no noise.
+    """
     P = ctrl.n
     records = ctrl.records_for(used)
     loop = _loop(ctrl.names)
@@ -297,10 +294,10 @@ def _chunk_runner(ctrl, used: set[str], sim: SimArrays, outputs: Outputs, spec: 
         _ADDRESSES[key] = law_addresses(dispatch_module(ctrl.names), codes, *blocks(0, 1))
     at = _ADDRESSES[key]
 
-    def run(span, noise, noise_lo):
-        lo, hi = span
+    def run(lo, hi):
         pars, sts = blocks(lo, hi)
-        loop.chunk(lo, hi, sim, pars, sts, noise, noise_lo, outputs, spec, at)
+        tau_noise = _NO_NOISE if noise is None else noise(lo, hi)
+        loop.chunk(lo, hi, sim, pars, sts, tau_noise, lo, outputs, spec, at)
 
     return run
 
