@@ -8,10 +8,12 @@ and the runner, started together on a machine with fewer cores, each
 compiling the same kernels before the cache exists. ``python -m
 attitude_sil.tools.warm`` (run by ``make`` right after installing) compiles
 them first: every preset through both batch drivers and every control law,
-which are the signatures the nodes, the engine and the tuner use. The two
-drivers' kernels are compiled in two processes at once where the machine
-has two cores or more (they share little: the compiled loop is one large
-function, the stepwise driver's kernels the nodes' own).
+which are the signatures the nodes, the engine and the tuner use. Where the
+machine has two cores or more, a second process compiles the stepwise
+driver's kernels (the nodes' own) while the first compiles the compiled
+loop, then takes the laws' compiled-driver work from the other end of the
+list, so the two end together: the first law builds the loop (about 50 s
+alone), each other law its own loops (4-10 s each).
 """
 
 from __future__ import annotations
@@ -27,7 +29,8 @@ from attitude_sil.core.sim.engine import simulate
 from attitude_sil.core.sim.scenario import PRESETS, ScenarioError, default_config_dir, load_scenario
 
 
-def warm(config_dir: str | Path | None = None, say=None, drivers: tuple[str, ...] = ("auto", "stepwise")) -> float:
+def warm(config_dir: str | Path | None = None, say=None, drivers: tuple[str, ...] = ("auto", "stepwise"),
+         claim=None, reverse: bool = False) -> float:
     """Compile and cache the kernels; returns the wall seconds it took.
 
     Parameters
@@ -38,44 +41,83 @@ def warm(config_dir: str | Path | None = None, say=None, drivers: tuple[str, ...
         Told of each preset as it starts (a cold cache takes minutes).
     drivers : tuple of str
         The batch drivers whose kernels to compile (``auto``: the compiled loop where it runs the preset).
+    claim : callable(int) -> bool, optional
+        Asked before each (preset, law) item of the list, by its index: False, another process has it.
+    reverse : bool
+        Take the list from its end.
     """
     folder = Path(config_dir) if config_dir is not None else default_config_dir()
     t0 = time.perf_counter()
-    for i, name in enumerate(PRESETS, start=1):
-        if say is not None:
-            say(f"  compiling the kernels: preset {i} of {len(PRESETS)} ({name}), {time.perf_counter() - t0:.0f} s")
-        scn = load_scenario(folder / f"{name}.yaml")
+    items = list(enumerate((name, law) for name in PRESETS for law in registry.names()))
+    scenarios: dict[str, object] = {}
+    for i, (name, controller) in reversed(items) if reverse else items:
+        if claim is not None and not claim(i):
+            continue
+        if name not in scenarios:
+            if say is not None:
+                say(f"  compiling the kernels: preset {PRESETS.index(name) + 1} of {len(PRESETS)} ({name}), "
+                    f"{time.perf_counter() - t0:.0f} s")
+            scenarios[name] = load_scenario(folder / f"{name}.yaml")
+        scn = scenarios[name]
         first = scn.param("controller", "controller_type")
-        for controller in registry.names():
-            for driver in drivers:
-                try:  # the law alone, then a swap to it (the bumpless entry)
-                    simulate(scn, 1, duration=2 * scn.dt, controller=controller, driver=driver)
-                    if controller != first:
-                        simulate(scn, 1, duration=2 * scn.dt, controller=first, driver=driver,
-                                 schedule=[(1, controller)])
-                except ScenarioError:  # a law the preset's plant cannot take: nothing to compile for it
-                    break
+        for driver in drivers:
+            try:  # the law alone, then a swap to it (the bumpless entry)
+                simulate(scn, 1, duration=2 * scn.dt, controller=controller, driver=driver)
+                if controller != first:
+                    simulate(scn, 1, duration=2 * scn.dt, controller=first, driver=driver,
+                             schedule=[(1, controller)])
+            except ScenarioError:  # a law the preset's plant cannot take: nothing to compile for it
+                break
     return time.perf_counter() - t0
 
 
-def _warm_stepwise() -> None:
+def _claimer(flags):
+    """claim(i): True the first time any process asks for item i (flags: a shared byte per item)."""
+    def claim(i: int) -> bool:
+        with flags.get_lock():
+            if flags[i]:
+                return False
+            flags[i] = 1
+            return True
+    return claim
+
+
+def _helper(flags, loop_ready) -> None:
+    # the second core: the stepwise driver's kernels, then, once the compiled loop is in the cache (built by the
+    # first process's first item: compiled twice at once it would cost the most), the compiled driver's laws from
+    # the end of the list
     warm(drivers=("stepwise",))
+    loop_ready.wait()
+    warm(drivers=("auto",), claim=_claimer(flags), reverse=True)
 
 
 def main() -> int:
     print("attitude_sil: compiling the numba kernels into their cache (a few minutes the first time; cached after)",
           file=sys.stderr, flush=True)
     t0 = time.perf_counter()
-    helper = None
-    if (os.cpu_count() or 1) >= 2:  # the stepwise driver's kernels in a second process, on the second core
-        helper = multiprocessing.get_context("spawn").Process(target=_warm_stepwise, name="attitude_sil-warm")
+    say = lambda line: print(line, file=sys.stderr, flush=True)  # noqa: E731
+    if (os.cpu_count() or 1) < 2:
+        warm(say=say)
+    else:
+        ctx = multiprocessing.get_context("spawn")
+        flags, loop_ready = ctx.Array("b", len(PRESETS) * len(registry.names())), ctx.Event()
+        helper = ctx.Process(target=_helper, args=(flags, loop_ready), name="attitude_sil-warm")
         helper.start()
-    drivers = ("auto",) if helper is not None else ("auto", "stepwise")
-    warm(say=lambda line: print(line, file=sys.stderr, flush=True), drivers=drivers)
-    if helper is not None:
-        helper.join()
+        claim = _claimer(flags)
+
+        def first(i: int) -> bool:  # the first item builds the compiled loop: the helper may start after it
+            took = claim(i)
+            if i > 0:
+                loop_ready.set()
+            return took
+
+        try:
+            warm(say=say, drivers=("auto",), claim=first)
+        finally:
+            loop_ready.set()  # never leave the helper waiting
+            helper.join()
         if helper.exitcode != 0:
-            print(f"attitude_sil: compiling the stepwise driver's kernels failed (exit {helper.exitcode})",
+            print(f"attitude_sil: compiling the kernels in the second process failed (exit {helper.exitcode})",
                   file=sys.stderr)
             return 1
     print(f"attitude_sil kernels compiled and cached in {time.perf_counter() - t0:.1f} s", file=sys.stderr)
