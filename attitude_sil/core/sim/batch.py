@@ -18,8 +18,9 @@ and ``noise`` disturbance models (or none), and every law (``pid``,
 ``fuzzy_pid``, ``ga_flc``, ``geometric``): one per episode if asked, with
 scheduled swaps and the controller bank's bumpless transfer, per-episode gains,
 motor constants, wheel failures and sensor noise (the Monte Carlo's
-dispersions; the same kernels as the nodes'). Noise torques are drawn in numpy
-from the stepwise driver's streams, a group of episodes at a time.
+dispersions; the same kernels as the nodes'). Noise torques are drawn from the
+stepwise driver's streams by each chunk in its own thread
+(:meth:`~attitude_sil.core.plant.disturbance.DisturbanceModel.noise_torque`).
 :func:`attitude_sil.core.sim.engine.compiled_plan` says whether a run fits and, if
 not, why; everything else (the flexible and pitch plants, the torque actuator,
 LVLH guidance, the orbit disturbances) runs in the stepwise driver, which
