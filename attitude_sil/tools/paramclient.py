@@ -33,9 +33,10 @@ from rclpy.parameter_client import AsyncParameterClient
 
 from attitude_sil.core import yaml12
 from attitude_sil.core.sim.paramfile import sections_for
-from attitude_sil.errors import ParamClientError
+from attitude_sil.errors import ParamClientError, RunError
 from attitude_sil.ros.contract import check_node_name, check_parameter_name
 from attitude_sil.ros.environment import localhost_environment
+from attitude_sil.ros.services import ask_again
 
 __all__ = ["GraphParameters", "LoadReport", "ParamClientError", "file_values", "format_dump", "param_command",
            "param_dump", "param_load"]
@@ -113,6 +114,7 @@ class _Session:
             self.executor.spin_once(timeout_sec=0.05)
 
     def wait(self, future):
+        """The answer to a request sent once (a set: sent again, it would be applied twice)."""
         deadline = time.monotonic() + self.timeout
         while not future.done():
             if time.monotonic() > deadline:
@@ -120,18 +122,31 @@ class _Session:
             self.executor.spin_once(timeout_sec=0.05)
         return future.result()
 
+    def ask(self, send):
+        """The answer to a read (get, describe, list), sent again after 1, 2, 4 s while none comes
+        (:func:`attitude_sil.ros.services.ask_again`: a first answer can be lost while DDS matches the client)."""
+        try:
+            return ask_again(send, lambda t: self.executor.spin_once(timeout_sec=t),
+                             time.monotonic() + self.timeout, f"node {self.node_name}")
+        except RunError:
+            raise ParamClientError(f"node {self.node_name} did not answer within {self.timeout:g} s") from None
+
     def _each(self, ask, field: str, names: list[str]) -> dict[str, Any]:
         # rclpy's parameter services answer nothing at all for a batch when one name is not
         # declared (describe) or declared with a type but no value (get: an empty array
         # parameter here); such a batch is asked again name by name, None where nothing comes
-        got = getattr(self.wait(ask(names)), field)
+        got = getattr(self.ask(lambda: ask(names)), field)
         if len(got) == len(names):
             return dict(zip(names, got, strict=True))
         out = {}
         for name in names:
-            one = getattr(self.wait(ask([name])), field)
+            one = getattr(self.ask(lambda n=name: ask([n])), field)
             out[name] = one[0] if one else None
         return out
+
+    def names(self) -> list[str]:
+        """Every parameter the node has, sorted."""
+        return sorted(self.ask(self.client.list_parameters).result.names)
 
     def values(self, names: list[str]) -> dict[str, Any]:
         """``name -> ParameterValue``, ``None`` for one not declared or declared without a value."""
@@ -187,7 +202,7 @@ def param_command(action: str, node_name: str, name: str | None = None, value: s
         check_parameter_name(name)
     with _session(node_name, timeout) as s:
         if action == "list":
-            names = sorted(s.wait(s.client.list_parameters()).result.names)
+            names = s.names()
             return "\n".join(f"  {n}" for n in names)
         assert name is not None
         desc = s.descriptors([name])[name]
@@ -249,7 +264,7 @@ def param_dump(node_name: str, timeout: float = 10.0) -> str:
         Node not found or not answering.
     """
     with _session(node_name, timeout) as s:
-        names = sorted(s.wait(s.client.list_parameters()).result.names)
+        names = s.names()
         pvalues = s.values(names)
     # a parameter declared without a value has nothing to write (ros2 param dump cannot either)
     return format_dump(_fqn(node_name), {n: parameter_value_to_python(v) for n, v in pvalues.items()
@@ -382,10 +397,14 @@ class GraphParameters:
     nodes : sequence of str
         The graph's node names.
     timeout : float
-        Seconds to wait for a node and for each answer.
+        Seconds to wait for a node and for each answer. A client connects as
+        soon as the server is up, while the graph is still starting, and its
+        first get waits for the node: the default is the time the graph's own
+        discovery may take (``GraphSession``'s ``connect_timeout``); reads are
+        sent again while no answer comes.
     """
 
-    def __init__(self, namespace: str | None = None, nodes=(), timeout: float = 5.0) -> None:
+    def __init__(self, namespace: str | None = None, nodes=(), timeout: float = 20.0) -> None:
         localhost_environment()
         self.fqns = {_fqn(f"{namespace}/{n}" if namespace else n) for n in nodes}
         self.timeout = timeout
@@ -419,7 +438,7 @@ class GraphParameters:
                 if fqn not in self.fqns:
                     continue
                 session = self._session(fqn)
-                params = params or sorted(session.wait(session.client.list_parameters()).result.names)
+                params = params or session.names()
                 for name, pvalue in session.values(params).items():
                     if pvalue is not None and pvalue.type != T.PARAMETER_NOT_SET:
                         out[f"{fqn}.{name}"] = _plain(parameter_value_to_python(pvalue))

@@ -155,7 +155,8 @@ def test_the_official_client_reads_and_sets_parameters_and_swaps_the_law(tmp_pat
         "--updates", "1", duration=6.0, bag=bag)
     assert {"parameters", "parametersSubscribe"} <= set(got["capabilities"])
     values = {p["name"]: p["value"] for p in got["parameters"]}
-    assert values == {"/controller.controller_type": "pid", "/controller.pid.kp": [48.894, 48.894, 48.894]}
+    assert values == {"/controller.controller_type": "pid", "/controller.pid.kp": [48.894, 48.894, 48.894]}, (
+        got["statuses"])  # the server's reason, if a get failed
     after = {p["name"]: p["value"] for p in got["setResult"]}
     assert after["/controller.controller_type"] == "ga_flc"
     assert after["/controller.geometric.k"] != [1.0, 1.0, 2.0]  # refused: the node keeps its value

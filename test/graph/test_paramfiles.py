@@ -6,6 +6,7 @@ only); the loaders take ``/**/node``, ``/**``, ``node``, ``/node`` and
 ``/ns/node``; a node given a parameter file with no section for it says so.
 """
 
+import time
 from array import array
 
 import numpy as np
@@ -149,3 +150,30 @@ def test_param_dump_writes_ros2_form_that_param_load_and_the_loaders_read(tmp_pa
     path.write_text("/**/controller: 3\n")
     with pytest.raises(ParamClientError, match="ros__parameters"):
         file_values(path, "/controller")
+
+
+def test_a_parameter_read_is_asked_again_until_answered_and_a_silent_node_is_one_error():
+    # a get whose answer was lost (sent before DDS matched the client's reader) is sent again after 1 s and the
+    # second answer taken; a node that never answers is one ParamClientError naming it and the timeout
+    from concurrent.futures import Future
+    from types import SimpleNamespace
+
+    from attitude_sil.tools.paramclient import _Session
+
+    def answered(value):
+        f = Future()
+        f.set_result(value)
+        return f
+
+    waited = []
+    session = SimpleNamespace(node_name="/controller", timeout=10.0,
+                              executor=SimpleNamespace(spin_once=lambda timeout_sec: waited.append(timeout_sec)
+                                                       or time.sleep(timeout_sec)))
+    sent = []
+    lost_then_answered = lambda: sent.append(1) or (Future() if len(sent) == 1 else answered("values"))  # noqa: E731
+    assert _Session.ask(session, lost_then_answered) == "values" and len(sent) == 2
+    assert 0.9 < sum(waited) < 5.0  # the first wait (1 s) ran out, the second answer came at once
+    session.timeout, sent[:] = 1.5, []
+    with pytest.raises(ParamClientError, match=r"node /controller did not answer within 1\.5 s"):
+        _Session.ask(session, lambda: sent.append(1) or Future())
+    assert len(sent) == 2  # asked at 0 s and again at 1 s, then the 1.5 s were up
