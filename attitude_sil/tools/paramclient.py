@@ -36,7 +36,7 @@ from attitude_sil.core.sim.paramfile import sections_for
 from attitude_sil.errors import ParamClientError, RunError
 from attitude_sil.ros.contract import check_node_name, check_parameter_name
 from attitude_sil.ros.environment import localhost_environment
-from attitude_sil.ros.services import ask_again
+from attitude_sil.ros.services import ask_again, wait_future
 
 __all__ = ["GraphParameters", "LoadReport", "ParamClientError", "file_values", "format_dump", "param_command",
            "param_dump", "param_load"]
@@ -113,23 +113,22 @@ class _Session:
                                        "(is the graph running, on this ROS_DOMAIN_ID?)")
             self.executor.spin_once(timeout_sec=0.05)
 
+    def _answer(self, waiting):
+        """``waiting(spin, deadline, what)`` (a ros.services wait) within the timeout, as a ParamClientError."""
+        try:
+            return waiting(lambda t: self.executor.spin_once(timeout_sec=t), time.monotonic() + self.timeout,
+                           f"node {self.node_name}")
+        except RunError:
+            raise ParamClientError(f"node {self.node_name} did not answer within {self.timeout:g} s") from None
+
     def wait(self, future):
         """The answer to a request sent once (a set: sent again, it would be applied twice)."""
-        deadline = time.monotonic() + self.timeout
-        while not future.done():
-            if time.monotonic() > deadline:
-                raise ParamClientError(f"node {self.node_name} did not answer within {self.timeout:g} s")
-            self.executor.spin_once(timeout_sec=0.05)
-        return future.result()
+        return self._answer(lambda spin, deadline, what: wait_future(future, spin, deadline, what))
 
     def ask(self, send):
         """The answer to a read (get, describe, list), sent again after 1, 2, 4 s while none comes
         (:func:`attitude_sil.ros.services.ask_again`: a first answer can be lost while DDS matches the client)."""
-        try:
-            return ask_again(send, lambda t: self.executor.spin_once(timeout_sec=t),
-                             time.monotonic() + self.timeout, f"node {self.node_name}")
-        except RunError:
-            raise ParamClientError(f"node {self.node_name} did not answer within {self.timeout:g} s") from None
+        return self._answer(lambda spin, deadline, what: ask_again(send, spin, deadline, what))
 
     def _each(self, ask, field: str, names: list[str]) -> dict[str, Any]:
         # rclpy's parameter services answer nothing at all for a batch when one name is not

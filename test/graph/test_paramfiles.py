@@ -166,14 +166,15 @@ def test_a_parameter_read_is_asked_again_until_answered_and_a_silent_node_is_one
         return f
 
     waited = []
-    session = SimpleNamespace(node_name="/controller", timeout=10.0,
-                              executor=SimpleNamespace(spin_once=lambda timeout_sec: waited.append(timeout_sec)
-                                                       or time.sleep(timeout_sec)))
+    session = _Session.__new__(_Session)  # no rclpy context: the executor is a stand-in that only waits
+    session.node_name, session.timeout = "/controller", 10.0
+    session.executor = SimpleNamespace(spin_once=lambda timeout_sec: waited.append(timeout_sec)
+                                       or time.sleep(timeout_sec))
     sent = []
     lost_then_answered = lambda: sent.append(1) or (Future() if len(sent) == 1 else answered("values"))  # noqa: E731
-    assert _Session.ask(session, lost_then_answered) == "values" and len(sent) == 2
+    assert session.ask(lost_then_answered) == "values" and len(sent) == 2
     assert 0.9 < sum(waited) < 5.0  # the first wait (1 s) ran out, the second answer came at once
     session.timeout, sent[:] = 1.5, []
     with pytest.raises(ParamClientError, match=r"node /controller did not answer within 1\.5 s"):
-        _Session.ask(session, lambda: sent.append(1) or Future())
+        session.ask(lambda: sent.append(1) or Future())
     assert len(sent) == 2  # asked at 0 s and again at 1 s, then the 1.5 s were up
