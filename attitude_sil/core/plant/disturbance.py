@@ -106,11 +106,12 @@ def aerodynamic_torque(R_BL: np.ndarray, density: float, drag_coefficient: float
 def step_means(rng: np.random.Generator, n: int, std: np.ndarray, out: np.ndarray) -> None:
     """Each step's mean of ``n`` noise samples times the axis' standard deviation, into ``out`` (K + 1, 3).
 
-    ``rng``: the episode's stream (numpy PCG64; numba draws its normals with
-    numpy's algorithm, so the numbers are numpy's, one (n, 3) block of samples
-    per step, as :meth:`DisturbanceModel.torque` takes them). Each axis' sum
-    runs from the step's first sample to its last, as ``np.add.reduce`` over
-    the sample axis sums them there, so the means are those bits. ``std`` (3,).
+    ``rng``: the episode's stream, continued (numpy PCG64; numba draws its
+    normals with numpy's algorithm, so the numbers are numpy's), one (n, 3)
+    block of samples per step. Each axis' sum runs from the step's first
+    sample to its last, as ``np.add.reduce`` over the sample axis of the
+    blocks sums them (:meth:`DisturbanceModel.torque`, a step at a time), so the
+    means are those bits. ``std`` (3,).
     """
     for k in range(out.shape[0]):
         s0, s1, s2 = rng.standard_normal(), rng.standard_normal(), rng.standard_normal()
@@ -203,7 +204,8 @@ class DisturbanceModel:
         if "noise" in self.models and (self.samples_per_step < 1 or abs(ratio - self.samples_per_step) > 1e-9):
             raise ScenarioError(f"noise.sample_time {values['noise.sample_time']} s must divide the control "
                              f"period {self.dt} s")
-        self.noise_std = np.sqrt(np.asarray(values["noise.power"], dtype=float) / values["noise.sample_time"])
+        noise_std = np.sqrt(np.asarray(values["noise.power"], dtype=float) / values["noise.sample_time"])
+        self.noise_std = np.ascontiguousarray(np.broadcast_to(noise_std, (self.n_episodes, 3)))  # (P, 3) N m
         self.reset()
 
     def reset(self) -> None:
@@ -233,11 +235,10 @@ class DisturbanceModel:
         driver adds them in the same place of the sum), drawn and averaged in
         compiled code without the GIL (chunks on threads draw at once).
         """
-        std = np.broadcast_to(self.noise_std, (self.n_episodes, 3))
         out = np.empty((hi - lo, n_steps + 1, 3))
         for e in range(lo, hi):
-            step_means(np.random.Generator(np.random.PCG64(self.seeds[e])), self.samples_per_step,
-                       np.ascontiguousarray(std[e]), out[e - lo])
+            step_means(np.random.Generator(np.random.PCG64(self.seeds[e])), self.samples_per_step, self.noise_std[e],
+                       out[e - lo])
         return out
 
     def torque(self, q_BN: np.ndarray, t_ns: int = 0) -> np.ndarray:
@@ -258,7 +259,8 @@ class DisturbanceModel:
         if "impulse" in self.models:
             tau[:, v["impulse.axis"]] += self._impulse(k) * v["impulse.magnitude"] / self.dt
         if "noise" in self.models:
-            # the mean of the step's samples, summed in order (as ndarray.mean over the sample axis)
+            # the mean of the step's samples, summed in order (as ndarray.mean over the sample axis): step_means's
+            # numbers, here in numpy (a Generator passed into compiled code costs 20 us a call, once per episode)
             draws = np.add.reduce(self._noise(), axis=1) / self.samples_per_step
             tau += draws * self.noise_std
         if "gravity_gradient_linear" in self.models:
