@@ -22,8 +22,9 @@ from attitude_sil.core.plant.quaternion import euler_from_quat, quat_conjugate, 
 from attitude_sil.core.sim.engine import build_controller
 from attitude_sil.core.sim.lockstep import StepInputs, StepSequencer
 from attitude_sil.ros.contract import ATTITUDE, ATTITUDE_ERROR, ATTITUDE_SETPOINT, COMMAND_TOPIC, CONTROLLER_INPUTS
-from attitude_sil.ros.convert import message_to_array, stamp_to_ns, vector_msg
+from attitude_sil.ros.convert import message_to_array, stamp_to_ns
 from attitude_sil.ros.node import SchemaNode, run_node
+from attitude_sil.storage.cdr import stamped_vector_cdr
 
 INPUTS = CONTROLLER_INPUTS
 
@@ -62,8 +63,8 @@ class ControllerNode(SchemaNode):
             return
         u = self.core.compute(*(slot[name] for name in INPUTS), t // self.dt_ns)
         err = euler_from_quat(quat_conjugate(quat_error(slot[ATTITUDE], slot[ATTITUDE_SETPOINT])))
-        self.pub_cmd[self.core.kind].publish(vector_msg(u[0], t, "body"))
-        self.pub_err.publish(vector_msg(err[0], t, "body"))
+        self.pub_cmd[self.core.kind].publish(stamped_vector_cdr(u[0], t, "body"))
+        self.pub_err.publish(stamped_vector_cdr(err[0], t, "body"))
 
 
 def main(args: list[str] | None = None) -> int:

@@ -12,8 +12,9 @@ from attitude_sil.core.plant.quaternion import unit_or_none
 from attitude_sil.core.sim.engine import build_disturbance
 from attitude_sil.core.sim.lockstep import StepSequencer
 from attitude_sil.ros.contract import ATTITUDE, DISTURBANCE_TORQUE
-from attitude_sil.ros.convert import quaternion_to_array, stamp_to_ns, vector_msg
+from attitude_sil.ros.convert import quaternion_to_array, stamp_to_ns
 from attitude_sil.ros.node import SchemaNode, run_node
+from attitude_sil.storage.cdr import stamped_vector_cdr
 
 
 class DisturbanceNode(SchemaNode):
@@ -46,7 +47,7 @@ class DisturbanceNode(SchemaNode):
         elif kind != StepSequencer.NEXT:
             return
         tau = self.core.torque(q, t)[0]
-        self.pub.publish(vector_msg(tau, t, "body"))
+        self.pub.publish(stamped_vector_cdr(tau, t, "body"))
 
 
 def main(args: list[str] | None = None) -> int:

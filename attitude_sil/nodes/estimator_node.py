@@ -35,8 +35,9 @@ from attitude_sil.ros.contract import (
     IMU,
     STAR_TRACKER,
 )
-from attitude_sil.ros.convert import imu_orientation, imu_rate, quaternion_msg, stamp_to_ns, vector_msg
+from attitude_sil.ros.convert import imu_orientation, imu_rate, stamp_to_ns
 from attitude_sil.ros.node import SchemaNode, run_node
+from attitude_sil.storage.cdr import stamped_vector_cdr
 
 
 class EstimatorNode(SchemaNode):
@@ -128,10 +129,10 @@ class EstimatorNode(SchemaNode):
                 self.get_logger().error(str(exc), throttle_duration_sec=1.0)
                 return
             self.k = k + 1
-            self.pub_q.publish(quaternion_msg(est.q_BN[0], t, "inertial"))
-            self.pub_w.publish(vector_msg(est.omega_BN_B[0], t, "body"))
-            self.pub_b.publish(vector_msg(est.gyro_bias[0], t, "body"))
-            self.pub_s.publish(vector_msg(est.attitude_sigma[0], t, "body"))
+            self.pub_q.publish(stamped_vector_cdr(est.q_BN[0], t, "inertial"))
+            self.pub_w.publish(stamped_vector_cdr(est.omega_BN_B[0], t, "body"))
+            self.pub_b.publish(stamped_vector_cdr(est.gyro_bias[0], t, "body"))
+            self.pub_s.publish(stamped_vector_cdr(est.attitude_sigma[0], t, "body"))
 
 
 def main(args: list[str] | None = None) -> int:

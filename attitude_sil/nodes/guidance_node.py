@@ -11,8 +11,9 @@ from __future__ import annotations
 
 from attitude_sil.core.sim.engine import build_guidance
 from attitude_sil.ros.contract import ATTITUDE_SETPOINT, CLOCK, RATE_SETPOINT
-from attitude_sil.ros.convert import quaternion_msg, stamp_to_ns, vector_msg
+from attitude_sil.ros.convert import stamp_to_ns
 from attitude_sil.ros.node import SchemaNode, run_node
+from attitude_sil.storage.cdr import stamped_vector_cdr
 
 
 class GuidanceNode(SchemaNode):
@@ -33,8 +34,8 @@ class GuidanceNode(SchemaNode):
     def _on_clock(self, msg) -> None:
         t = stamp_to_ns(msg.clock)
         q_RN, w_RN = self.core.setpoint(t * 1e-9)
-        self.pub_q.publish(quaternion_msg(q_RN[0], t, "inertial"))
-        self.pub_w.publish(vector_msg(w_RN[0], t, "reference"))
+        self.pub_q.publish(stamped_vector_cdr(q_RN[0], t, "inertial"))
+        self.pub_w.publish(stamped_vector_cdr(w_RN[0], t, "reference"))
 
 
 def main(args: list[str] | None = None) -> int:

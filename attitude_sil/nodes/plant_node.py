@@ -29,15 +29,15 @@ from __future__ import annotations
 import time
 
 import numpy as np
-from rosgraph_msgs.msg import Clock
 from std_srvs.srv import Trigger
 
 from attitude_sil.core.sim.engine import build_plant
 from attitude_sil.core.sim.lockstep import Action, PlantLockstep
 from attitude_sil.errors import AttitudeSilError
 from attitude_sil.ros.contract import ATTITUDE, BODY_RATE, CLOCK, FLEXIBLE_MODE, PLANT_INPUTS
-from attitude_sil.ros.convert import ns_to_stamp, quaternion_msg, stamp_to_ns, vector_msg, vector_to_array
+from attitude_sil.ros.convert import stamp_to_ns, vector_to_array
 from attitude_sil.ros.node import SchemaNode, run_node, steady_clock
+from attitude_sil.storage.cdr import clock_cdr, stamped_vector_cdr
 
 
 class PlantNode(SchemaNode):
@@ -121,11 +121,11 @@ class PlantNode(SchemaNode):
     def _publish_state(self) -> None:
         t_ns = self.lockstep.t_ns
         s = self.core.state
-        self.pub_clock.publish(Clock(clock=ns_to_stamp(t_ns)))
-        self.pub_attitude.publish(quaternion_msg(s.q_BN[0], t_ns, "inertial"))
-        self.pub_rate.publish(vector_msg(s.omega_BN_B[0], t_ns, "body"))
+        self.pub_clock.publish(clock_cdr(t_ns))
+        self.pub_attitude.publish(stamped_vector_cdr(s.q_BN[0], t_ns, "inertial"))
+        self.pub_rate.publish(stamped_vector_cdr(s.omega_BN_B[0], t_ns, "body"))
         if self.pub_flex is not None and hasattr(self.core, "alpha"):
-            self.pub_flex.publish(vector_msg(self.core.alpha[0], t_ns, "body"))
+            self.pub_flex.publish(stamped_vector_cdr(self.core.alpha[0], t_ns, "body"))
 
     def fail(self, reason: str) -> None:
         """Stop the episode with an error the runner reports."""

@@ -13,8 +13,9 @@ from __future__ import annotations
 from attitude_sil.core.sim.engine import build_wheels
 from attitude_sil.core.sim.lockstep import StepSequencer
 from attitude_sil.ros.contract import TORQUE_CMD, VOLTAGE_CMD, WHEEL_MOMENTUM, WHEEL_STATE, WHEEL_TORQUE
-from attitude_sil.ros.convert import joint_state_msg, stamp_to_ns, vector_msg, vector_to_array
+from attitude_sil.ros.convert import stamp_to_ns, vector_to_array
 from attitude_sil.ros.node import SchemaNode, run_node
+from attitude_sil.storage.cdr import joint_state_cdr, stamped_vector_cdr
 
 
 class WheelsNode(SchemaNode):
@@ -55,9 +56,9 @@ class WheelsNode(SchemaNode):
                                     throttle_duration_sec=1.0)
             return
         out = self.core.advance(v, torque_mode)
-        self.pub_torque.publish(vector_msg(out.tau_c_B[0], t, "body"))
-        self.pub_momentum.publish(vector_msg(out.h_wheels_B[0], t, "body"))
-        self.pub_state.publish(joint_state_msg(self.core.names, out.position[0], out.velocity[0], out.effort[0], t))
+        self.pub_torque.publish(stamped_vector_cdr(out.tau_c_B[0], t, "body"))
+        self.pub_momentum.publish(stamped_vector_cdr(out.h_wheels_B[0], t, "body"))
+        self.pub_state.publish(joint_state_cdr(self.core.names, out.position[0], out.velocity[0], out.effort[0], t))
 
 
 def main(args: list[str] | None = None) -> int:

@@ -1,4 +1,5 @@
-"""The numpy CDR encoders of storage/cdr.py give rclpy's messages exactly.
+"""The CDR encoders of storage/cdr.py give rclpy's messages exactly: the numpy ones (a bag's series) and the
+one-message ones the nodes publish, which must also be the series' bytes.
 
 rclpy leaves its alignment padding uninitialised (stray bytes of other data show
 up there), so the bytes are compared where they carry data: the same length,
@@ -13,7 +14,15 @@ from rclpy.serialization import deserialize_message, serialize_message
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
 
-from attitude_sil.storage.cdr import encode_clocks, encode_joint_states, encode_stamped_vectors, stamp_from_cdr
+from attitude_sil.storage.cdr import (
+    clock_cdr,
+    encode_clocks,
+    encode_joint_states,
+    encode_stamped_vectors,
+    joint_state_cdr,
+    stamp_from_cdr,
+    stamped_vector_cdr,
+)
 
 RNG = np.random.default_rng(3)
 STAMPS = np.array([0, 10_000_000, 1_999_999_999, 7 * 10**9 + 5, 2**31 * 10**9 - 1], dtype=np.int64)
@@ -41,16 +50,21 @@ def test_stamped_vectors_and_quaternions(frame):
         m.vector.x, m.vector.y, m.vector.z = (float(x) for x in vec)
         _same(data, m)
         assert stamp_from_cdr(data) == t
+        assert stamped_vector_cdr(vec, int(t), frame) == data
     for t, data, q in zip(STAMPS, encode_stamped_vectors(STAMPS, frame, q4), q4, strict=True):
         m = QuaternionStamped()
         m.header.stamp, m.header.frame_id = _time(t), frame
         m.quaternion.x, m.quaternion.y, m.quaternion.z, m.quaternion.w = (float(x) for x in q)
         _same(data, m)
+        assert stamped_vector_cdr(q, int(t), frame) == data
+    # a planar value (2,) goes out with z = 0, as vector_msg sends it
+    assert stamped_vector_cdr(v3[0, :2], 5, frame) == stamped_vector_cdr([v3[0, 0], v3[0, 1], 0.0], 5, frame)
 
 
 def test_clocks():
     for t, data in zip(STAMPS, encode_clocks(STAMPS), strict=True):
         assert data == serialize_message(Clock(clock=_time(t)))
+        assert clock_cdr(int(t)) == data
 
 
 @pytest.mark.parametrize("names", [[], ["wheel_1"], ["wheel_1", "wheel_2", "wheel_3", "wheel_4"], ["a", "bb", "ccc"]])
@@ -63,6 +77,10 @@ def test_joint_states(names):
         m.name = list(names)
         m.position, m.velocity, m.effort = pos[k].tolist(), vel[k].tolist(), eff[k].tolist()
         _same(data, m)
+        assert joint_state_cdr(names, pos[k], vel[k], eff[k], int(STAMPS[k])) == data
+    if names:
+        with pytest.raises(ValueError, match="names"):
+            joint_state_cdr(names, pos[0], vel[0, :-1], eff[0], 0)
 
 
 @pytest.mark.parametrize("frame", ["", "body", "inertial", "reference"])
