@@ -88,7 +88,7 @@ class ControllerBank:
             registry.get(self.active)  # the error names the known laws
         self.pending: str | None = None
         self.u_last: np.ndarray | None = None
-        self._law_rows: tuple[str, np.ndarray, np.ndarray] | None = None
+        self._law_rows: tuple[str, np.ndarray] | None = None
         self.offset = np.zeros((self.n, 3))
         self.has_offset = np.zeros(self.n, dtype=np.bool_)
         self.reset()
@@ -106,7 +106,6 @@ class ControllerBank:
         v.update(self.per_episode)
         self.values = v
         self._records: dict[str, tuple] = {}  # built on first use (record, records_for)
-        self._stage_records: tuple | None = None  # (active law, records_for it)
         self.command = v["command"]
         tau_b = float(v["bumpless_time_constant"])
         self.decay = float(np.exp(-self.dt / tau_b)) if tau_b > 0.0 else 0.0
@@ -152,19 +151,11 @@ class ControllerBank:
         return measure(np.ascontiguousarray(q_BN, dtype=float), np.ascontiguousarray(omega_BN_B, dtype=float),
                        int(k), self.sensor_seeds, self.sensor_att_std, self.sensor_rate_std)
 
-    def _active_records(self) -> tuple:
-        # the records the stage takes: the active law's real, the others stand-ins; rebuilt after a swap or configure
-        if self._stage_records is None or self._stage_records[0] != self.active:
-            self._stage_records = (self.active, self.records_for((self.active,)))
-        return self._stage_records[1]
-
-    def _codes_of(self, name: str) -> tuple[np.ndarray, np.ndarray]:
-        """Every row's law code (the active law's) and which laws run, as the compiled stage takes them."""
+    def _codes_of(self, name: str) -> np.ndarray:
+        """Every row's law code (the active law's), as the law's compiled ``rows_<code>`` takes them."""
         if self._law_rows is None or self._law_rows[0] != name:
-            present = np.zeros(len(self.names), dtype=np.bool_)
-            present[self.codes[name]] = True
-            self._law_rows = (name, np.full(self.n, self.codes[name], dtype=np.int64), present)
-        return self._law_rows[1], self._law_rows[2]
+            self._law_rows = (name, np.full(self.n, self.codes[name], dtype=np.int64))
+        return self._law_rows[1]
 
     def _zero_state(self, name: str) -> None:
         for a in self.states[self.codes[name]]:
@@ -216,11 +207,18 @@ class ControllerBank:
             self.offset[...] = 0.0
             self.has_offset[...] = False
             if self.u_last is not None and self.kind == old_kind:
-                d.lanes_enter(self.codes[self.active], (q, w, q_r, w_r), self._active_records(), self.states,
-                              self.dt, self.decay, c(self.u_last, dtype=float), self.offset, self.has_offset)
+                # the law's compiled bumpless entry (generated ``enter_<code>``), row by row: a swap is rare
+                code = self.codes[self.active]
+                enter, par, st = getattr(d, f"enter_{code}"), self.record(self.active), self.states[code]
+                u_last = c(self.u_last, dtype=float)
+                xfer, scratch = (u_last, self.offset, self.has_offset), u_last.copy()
+                for p in range(q.shape[0]):
+                    enter(q, w, q_r, w_r, p, par, st, self.dt, self.decay, xfer, scratch)
+        # the active law's compiled step over the rows, with the transfer offset and the clip (generated
+        # ``rows_<code>``): compiled for this law alone, so a node loads only its own law's code
         u = np.empty((q.shape[0], 3))
-        law, present = self._codes_of(self.active)
-        d.lanes_stage(law, present, (q, w, q_r, w_r), self._active_records(), self.states, self.dt, u,
-                      self.offset, self.has_offset, self.decay)
+        code = self.codes[self.active]
+        getattr(d, f"rows_{code}")(self._codes_of(self.active), q, w, q_r, w_r, self.record(self.active),
+                                   self.states[code], self.dt, u, self.offset, self.has_offset, self.decay)
         self.u_last = u
         return u

@@ -9,20 +9,17 @@ named by a hash of the laws' source, into the user cache folder
 beside it like any other module, and an edited law gets a new hash. The
 generated module holds:
 
-* ``law_stage(law, present, ...)``: every row's command, as one loop per law
-  over the rows whose code (``law[p]``, the law's index in the set) is that
-  law's, calling the law's step directly, for the laws ``present`` says run.
-  A per-row if-chain over the laws, inlined into one loop, ran the PID 2.7x
-  slower than the same loop with the PID alone, and taking an absent law's
-  records out of their tuple every step cost P = 1 another 3x (bench/README.md);
-* ``law_enter``, ``law_reset``, ``law_is_torque``: an if-chain over the codes,
+* ``law_reset``, ``law_is_torque``, ``enter_at``: an if-chain over the codes,
   for the rare swap;
-* ``lanes_stage``, ``lanes_enter``: the same as compiled entry points over P
-  rows, for the controller bank (the nodes with P = 1 and the stepwise driver);
-* for the batch engine, each law's compiled loops, each compiled on its own
-  and called at its address (:func:`law_addresses`, :func:`call_at`), so that
+* each law's compiled loops, each compiled on its own: the batch engine calls
+  them at their addresses (:func:`law_addresses`, :func:`call_at`), so that
   they are compiled once, not again inside every variant of the engine's
-  loop: ``vector_<code>(q, w, q_r, w_r, par, st, dt, u)``, the law's step on
+  loop, and the controller bank (the nodes with P = 1 and the stepwise
+  driver) calls ``rows_<code>`` and ``enter_<code>`` of its active law from
+  Python (one law's code to compile and load: an entry point inlining every
+  law's step, as the bank had, took 73 s of a cold cache's compiling here,
+  the package's costliest functions after the batch loop):
+  ``vector_<code>(q, w, q_r, w_r, par, st, dt, u)``, the law's step on
   every row, with the arrays in column-major order (the episodes contiguous
   in every column) so that LLVM packs the episodes into SIMD lanes (the
   law's own step, unchanged, inlined by LLVM (:data:`VECTOR_STEP`) into a
@@ -291,33 +288,26 @@ def _rows_lines(i: int, law: Law, names: dict[str, str]) -> list[str]:
     return out
 
 
-def _stage_lines(laws: list[Law], names: dict[str, str], fast: bool = True) -> list[str]:
-    """Every row's command: the law's loop over its rows, for each law present.
+def _stage_lines(laws: list[Law], names: dict[str, str]) -> list[str]:
+    """The batch engine's command stage: each law's compiled loops called at their addresses.
 
-    Then the transfer offset and, for a law that does not saturate, the clip.
-    ``names`` renames the loop's variables (:data:`_STAGE_NAMES`). ``fast``:
-    the batch engine's stage, which calls the law's compiled loops at their
-    addresses (``at``, :func:`law_addresses`): ``vector_<code>`` when every
-    row runs one law with no transfer pending (its arrays column-major),
-    else ``rows_<code>``; without it, each law's step is written out in the
-    stage (the bank's: one row in a node).
+    ``at`` (:func:`law_addresses`): ``vector_<code>`` when every row runs one
+    law with no transfer pending (its arrays column-major), then the clip for a
+    law that does not saturate; else ``rows_<code>`` for each law present (its
+    step, the transfer offset and the clip, row by row). ``names`` renames the
+    loop's variables (:data:`_STAGE_NAMES`).
     """
     n = {k: names.get(k, k) for k in _STAGE_NAMES}
     view = f"{n['q']}, {n['w']}, {n['q_r']}, {n['w_r']}"
-    out = []
-    if fast:
-        # the common case first: every row runs one law with no transfer offset pending; then the law's step
-        # runs in a loop of its own with no test per row (a test per row kept the PID's loop from being
-        # optimised: bench/README.md)
-        out = ["only = " + n["law"] + "[0] if " + n["law"] + ".shape[0] > 0 else -1",
-               f"for p in range({n['law']}.shape[0]):",
-               f"    if {n['law']}[p] != only or {n['has_off']}[p]:",
-               "        only = -1",
-               "        break"]
+    # the common case first: every row runs one law with no transfer offset pending; then the law's step
+    # runs in a loop of its own with no test per row (a test per row kept the PID's loop from being
+    # optimised: bench/README.md)
+    out = ["only = " + n["law"] + "[0] if " + n["law"] + ".shape[0] > 0 else -1",
+           f"for p in range({n['law']}.shape[0]):",
+           f"    if {n['law']}[p] != only or {n['has_off']}[p]:",
+           "        only = -1",
+           "        break"]
     for i, law in enumerate(laws):
-        if not fast:
-            out += [f"if {n['present']}[{i}]:", *("    " + x for x in _rows_lines(i, law, names))]
-            continue
         out += [f"if only == {i}:",
                 f"    call_at({n['at']}[0, {i}], ({view}, par_{i}, st_{i}, {n['dt']}, {n['u']}))"]
         if not law.saturated:
@@ -375,7 +365,7 @@ def _dispatch_source(laws: list[Law]) -> str:
         return out
 
     jit = "@njit(cache=True, inline='always')"
-    own = "@njit(cache=True, error_model='numpy')"  # compiled on their own, called at their address (batch loop)
+    own = "@njit(cache=True, error_model='numpy')"  # compiled on their own (called at their address, or by the bank)
     loops = []
     for i, law in enumerate(laws):
         loops += ["", "", f"_lane_step_{i} = njit(**VECTOR_STEP)(_step_{i}.py_func)", "", "",
@@ -400,35 +390,15 @@ def _dispatch_source(laws: list[Law]) -> str:
                   f"    has_off[p] = _entry_{i}(q, w, q_r, w_r, p, par_{i}, st_{i}, dt, decay, u_last, offset, "
                   "scratch)"]
     torque = " or ".join(f"code == {i}" for i, x in enumerate(laws) if x.output == "torque") or "False"
-    stages = ["    " + x for x in _record_lines(laws) + _stage_lines(laws, {}, fast=False)]
-    lines += ["", "", jit, "def law_stage(law, present, view, pars, sts, dt, u, offset, has_off, decay):",
-              "    # every row's command: one loop per law present over the rows that run it (each law's step",
-              "    # called directly, so its loop compiles as if it were alone; an absent law costs one test);",
-              "    # view: the laws' inputs (q, w, q_r, w_r)",
-              "    q, w, q_r, w_r = view",
-              *stages,
-              "", "", jit, "def law_reset(code, p, sts):", "    # zero row p of the law's state",
+    lines += ["", "", jit, "def law_reset(code, p, sts):", "    # zero row p of the law's state",
               *chain(lambda i, law: [f"st = sts[{i}]", *_zero_lines(law, "st")]),
-              "", "", jit, "def law_enter(code, view, p, pars, sts, dt, decay, u_last, offset, scratch):",
-              "    # bumpless entry of row p; True when a decaying offset remains", "    q, w, q_r, w_r = view",
-              *chain(lambda i, law: [f"par_{i}, st_{i} = pars[{i}], sts[{i}]",
-                                     f"return _entry_{i}(q, w, q_r, w_r, p, par_{i}, st_{i}, dt, decay, u_last, "
-                                     "offset, scratch)"]),
-              "    return False",
               "", "", jit, "def enter_at(code, at, view, p, pars, sts, dt, decay, xfer, scratch):",
-              "    # law_enter, the law's entry called at its address (at: law_addresses): has_off[p] (xfer[2])",
+              "    # the law's bumpless entry of row p called at its address (at: law_addresses): has_off[p]",
               "    q, w, q_r, w_r = view",
               *chain(lambda i, law: [f"call_at(at[2, {i}], (q, w, q_r, w_r, p, pars[{i}], sts[{i}], dt, decay, "
                                      "xfer, scratch))"]),
               "", "", jit, "def law_is_torque(code):", f"    return {torque}",
               *loops,
-              "", "", "@njit(cache=True)",
-              "def lanes_stage(law, present, view, pars, sts, dt, u, offset, has_off, decay):",
-              "    law_stage(law, present, view, pars, sts, dt, u, offset, has_off, decay)",
-              "", "", "@njit(cache=True)",
-              "def lanes_enter(code, view, pars, sts, dt, decay, u_last, offset, has_off):",
-              "    scratch = u_last.copy()", "    for p in range(u_last.shape[0]):",
-              "        has_off[p] = law_enter(code, view, p, pars, sts, dt, decay, u_last, offset, scratch)",
               ""]
     return "\n".join(lines)
 
