@@ -16,9 +16,9 @@ def plugins(monkeypatch):
     def use(*eps):
         monkeypatch.setattr(registry, "entry_points", lambda group: [e for e in eps if e.group == group])
         monkeypatch.setattr(registry, "_PROBLEMS", [])
-        registry.laws.cache_clear()
+        registry.refresh()
     yield use
-    registry.laws.cache_clear()
+    registry.refresh()
 
 
 def _ep(name: str, value: str) -> EntryPoint:
