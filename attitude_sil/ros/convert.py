@@ -3,6 +3,10 @@
 Every node, the recorder's episode decoder, replay, verify and the bag plots
 use these functions. The ``*_to_array`` readers only read attributes, so they
 take rclpy messages and the messages ``mcap_ros2`` decodes from a bag alike.
+The nodes publish their step messages as CDR bytes
+(:func:`attitude_sil.storage.cdr.stamped_vector_cdr`, the same bytes on the
+wire, a fourth of the cost); the ``*_msg`` builders here make rclpy messages
+for everything else (tools, tests that publish as a foreign node would).
 
 Conventions (docs/architecture.md, "ROS contract"): quaternions in ROS order
 ``(x, y, z, w)``, Hamilton; vectors in SI units; stamps are integer
