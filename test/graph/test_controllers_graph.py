@@ -286,6 +286,8 @@ def test_a_failed_node_process_ends_the_run_with_one_line_and_a_readable_bag(tmp
     assert run.returncode == 2, err
     last = [ln for ln in err.splitlines() if ln.startswith("attitude-sil:")]
     assert len(last) == 1 and "error:" in last[0] and "Traceback" not in err
+    if fault == signal.SIGKILL:  # seen as the exit it is, not later as a stall by the watchdog
+        assert f"node process attitude_sil.nodes.{victim}_node exited" in last[0], last[0]
     assert not left  # no node process left behind
     info = yaml.safe_load((bag / "metadata.yaml").read_text())["rosbag2_bagfile_information"]
     assert info["message_count"] > 0
