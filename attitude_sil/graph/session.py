@@ -560,6 +560,14 @@ def spin_episode(recorder: Recorder, spin, plant, children, k_steps: int, scn: S
     def commands() -> int:
         return sum(counts[t] for t in COMMAND_TOPICS)
 
+    final_ns = k_steps * int(round(dt * 1e9))
+
+    def last_command() -> int:
+        # the stamp of the newest command taken: the episode's last step has its command when this reaches it (a
+        # count of commands took a foreign command stamped steps back, finite and in order on its own topic, for
+        # one of the episode's, and ended it before its last real command came: the metrics missed that step)
+        return max(recorder.last_stamp.get(t, -1) for t in COMMAND_TOPICS)
+
     while True:
         spin(0.1)
         n = counts[WHEEL_TORQUE]
@@ -569,7 +577,7 @@ def spin_episode(recorder: Recorder, spin, plant, children, k_steps: int, scn: S
             set_remote_parameters(recorder, spin, "controller", {"controller_type": kind})
             set_remote_parameters(recorder, spin, "plant", {"hold_at": pending[0][0] if pending else -1.0})
             last_change = time.monotonic()
-        if n >= needed and commands() >= needed and all(counts[t] >= needed for t in step_topics):
+        if n >= needed and last_command() >= final_ns and all(counts[t] >= needed for t in step_topics):
             return
         if plant is not None and plant.error:
             raise RunError(plant.error)

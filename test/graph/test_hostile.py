@@ -114,3 +114,41 @@ def test_nan_stale_and_future_messages_on_every_input_change_nothing(tmp_path):
     assert "second publisher" not in q_err
     reader = open_bag(tmp_path / "attacked")
     assert math.isclose(reader.end_ns * 1e-9, 4.0, abs_tol=0.02)  # no stray stamp stretched the bag
+
+
+def test_the_episode_ends_on_its_last_command_not_on_a_count_a_foreign_one_can_fill():
+    # the race the attack above could lose (1 run in 4 here): a foreign node's finite commands stamped five steps
+    # back, in order on their own topic, are taken by the recorder; counted, they made "every command of the
+    # episode is in" true before the last real one came, and the run's metrics missed its last step
+    from collections import Counter
+
+    from attitude_sil.core.sim.scenario import load_scenario
+    from attitude_sil.graph.session import spin_episode
+    from attitude_sil.ros.contract import COMMAND_TOPICS, episode_topics
+
+    scn = load_scenario(ROOT / "config" / "hst_roll_step.yaml")
+    K, dt_ns = 100, int(round(scn.dt * 1e9))
+    voltage, torque = COMMAND_TOPICS
+
+    class Recorder:
+        counts, last_stamp, error, qos_problems, plant_input_timeout = Counter(), {}, "", [], None
+
+    class Progress:
+        def update(self, t):
+            pass
+
+    rec = Recorder()
+    spins = []
+
+    def spin(timeout):
+        spins.append(timeout)
+        if len(spins) == 1:  # every step topic complete, the last command not yet in, three foreign ones taken
+            rec.counts.update({t: K + 1 for t in episode_topics()})
+            rec.counts.update({voltage: K, torque: 3})
+            rec.last_stamp.update({voltage: (K - 1) * dt_ns, torque: 7 * dt_ns})
+        elif len(spins) == 2:  # the last command
+            rec.counts[voltage] += 1
+            rec.last_stamp[voltage] = K * dt_ns
+
+    spin_episode(rec, spin, None, [], K, scn, Progress(), [])
+    assert len(spins) == 2
