@@ -563,10 +563,11 @@ def spin_episode(recorder: Recorder, spin, plant, children, k_steps: int, scn: S
     final_ns = k_steps * int(round(dt * 1e9))
 
     def last_command() -> int:
-        # the stamp of the newest command taken: the episode's last step has its command when this reaches it (a
+        # the greatest command stamp taken: the episode's last step has its command when this reaches it (a
         # count of commands took a foreign command stamped steps back, finite and in order on its own topic, for
-        # one of the episode's, and ended it before its last real command came: the metrics missed that step)
-        return max(recorder.last_stamp.get(t, -1) for t in COMMAND_TOPICS)
+        # one of the episode's, and ended it before its last real command came: the metrics missed that step;
+        # the latest stamp would not do either, a stray taken after the last command being older)
+        return max(recorder.newest_stamp.get(t, -1) for t in COMMAND_TOPICS)
 
     while True:
         spin(0.1)

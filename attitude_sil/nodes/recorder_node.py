@@ -104,6 +104,7 @@ class Recorder(Node):
         self._attitude_at: dict[int, float] = {}
         self.counts: dict[str, int] = defaultdict(int)
         self.last_stamp: dict[str, int] = {}  # the latest stamp taken per topic, ns
+        self.newest_stamp: dict[str, int] = {}  # the greatest stamp taken per topic, ns (a stray can be older)
         self.refused: dict[str, int] = defaultdict(int)  # stray messages not recorded, per topic
         self.clock_ns = 0  # the latest /clock, ns
         self.sim_now = 0  # latest lockstep stamp seen, ns
@@ -143,6 +144,7 @@ class Recorder(Node):
         self.sink = sink
         self.counts.clear()
         self.last_stamp.clear()
+        self.newest_stamp.clear()
         self.refused.clear()
         self.sim_now = 0
         self.newest_ns = 0
@@ -224,6 +226,8 @@ class Recorder(Node):
             self.sim_now = max(self.sim_now, t)
         self.counts[name] += 1
         self.last_stamp[name] = t
+        if t > self.newest_stamp.get(name, -1):
+            self.newest_stamp[name] = t
         if self.latency is not None:
             self._time_controller(name, t)
         self.newest_ns = max(self.newest_ns, t)

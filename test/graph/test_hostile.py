@@ -131,7 +131,7 @@ def test_the_episode_ends_on_its_last_command_not_on_a_count_a_foreign_one_can_f
     voltage, torque = COMMAND_TOPICS
 
     class Recorder:
-        counts, last_stamp, error, qos_problems, plant_input_timeout = Counter(), {}, "", [], None
+        counts, newest_stamp, error, qos_problems, plant_input_timeout = Counter(), {}, "", [], None
 
     class Progress:
         def update(self, t):
@@ -145,10 +145,33 @@ def test_the_episode_ends_on_its_last_command_not_on_a_count_a_foreign_one_can_f
         if len(spins) == 1:  # every step topic complete, the last command not yet in, three foreign ones taken
             rec.counts.update({t: K + 1 for t in episode_topics()})
             rec.counts.update({voltage: K, torque: 3})
-            rec.last_stamp.update({voltage: (K - 1) * dt_ns, torque: 7 * dt_ns})
+            rec.newest_stamp.update({voltage: (K - 1) * dt_ns, torque: 7 * dt_ns})
         elif len(spins) == 2:  # the last command
             rec.counts[voltage] += 1
-            rec.last_stamp[voltage] = K * dt_ns
+            rec.newest_stamp[voltage] = K * dt_ns
 
     spin_episode(rec, spin, None, [], K, scn, Progress(), [])
     assert len(spins) == 2
+
+
+def test_the_recorder_keeps_each_topics_greatest_stamp_whatever_comes_after():
+    from attitude_sil.nodes.recorder_node import Recorder
+    from attitude_sil.ros.contract import COMMAND_TOPICS
+    from attitude_sil.storage.cdr import clock_cdr, stamped_vector_cdr
+
+    voltage = COMMAND_TOPICS[0]
+    dt = 10_000_000
+    context = rclpy.Context()
+    rclpy.init(context=context)
+    try:
+        rec = Recorder(None, context=context)
+        for k in range(8):
+            rec._on_message(CLOCK, clock_cdr(k * dt))
+            rec._on_message(voltage, stamped_vector_cdr((1.0, 0.0, 0.0), k * dt, "body"))
+        rec._on_message(voltage, stamped_vector_cdr((1e9, 0.0, 0.0), 2 * dt, "body"))  # a stray, five steps back
+        assert rec.last_stamp[voltage] == 2 * dt and rec.newest_stamp[voltage] == 7 * dt
+        rec.start_episode(None)
+        assert rec.newest_stamp == {}
+        rec.destroy_node()
+    finally:
+        rclpy.try_shutdown(context=context)
