@@ -562,12 +562,15 @@ def spin_episode(recorder: Recorder, spin, plant, children, k_steps: int, scn: S
 
     final_ns = k_steps * int(round(dt * 1e9))
 
+    newest = recorder.newest_stamp
+
     def last_command() -> int:
-        # the greatest command stamp taken: the episode's last step has its command when this reaches it (a
-        # count of commands took a foreign command stamped steps back, finite and in order on its own topic, for
-        # one of the episode's, and ended it before its last real command came: the metrics missed that step;
-        # the latest stamp would not do either, a stray taken after the last command being older)
-        return max(recorder.newest_stamp.get(t, -1) for t in COMMAND_TOPICS)
+        # the greatest stamp taken on the command topics. The episode is complete when every step topic's
+        # greatest stamp is the last step's: counts were fooled, a foreign node's finite messages stamped steps
+        # back (in order on their topic, so taken) filling them before the last real ones came, and the run's
+        # metrics missed its last step (1 hostile run in 4); the latest stamp would not do either, a stray taken
+        # after the last step being older
+        return max(newest.get(t, -1) for t in COMMAND_TOPICS)
 
     while True:
         spin(0.1)
@@ -578,7 +581,7 @@ def spin_episode(recorder: Recorder, spin, plant, children, k_steps: int, scn: S
             set_remote_parameters(recorder, spin, "controller", {"controller_type": kind})
             set_remote_parameters(recorder, spin, "plant", {"hold_at": pending[0][0] if pending else -1.0})
             last_change = time.monotonic()
-        if n >= needed and last_command() >= final_ns and all(counts[t] >= needed for t in step_topics):
+        if last_command() >= final_ns and all(newest.get(t, -1) >= final_ns for t in step_topics):
             return
         if plant is not None and plant.error:
             raise RunError(plant.error)

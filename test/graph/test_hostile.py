@@ -142,16 +142,21 @@ def test_the_episode_ends_on_its_last_command_not_on_a_count_a_foreign_one_can_f
 
     def spin(timeout):
         spins.append(timeout)
-        if len(spins) == 1:  # every step topic complete, the last command not yet in, three foreign ones taken
-            rec.counts.update({t: K + 1 for t in episode_topics()})
+        if len(spins) == 1:  # the counts full, three foreign messages each taken, the last step not yet in
+            for t in episode_topics():
+                rec.counts[t], rec.newest_stamp[t] = K + 1, (K - 1) * dt_ns
             rec.counts.update({voltage: K, torque: 3})
             rec.newest_stamp.update({voltage: (K - 1) * dt_ns, torque: 7 * dt_ns})
-        elif len(spins) == 2:  # the last command
+        elif len(spins) == 2:  # the last command, the other topics' last step not yet
             rec.counts[voltage] += 1
             rec.newest_stamp[voltage] = K * dt_ns
+        elif len(spins) == 3:  # the last step on every topic
+            for t in episode_topics():
+                rec.counts[t] += 1
+                rec.newest_stamp[t] = K * dt_ns
 
     spin_episode(rec, spin, None, [], K, scn, Progress(), [])
-    assert len(spins) == 2
+    assert len(spins) == 3
 
 
 def test_the_recorder_keeps_each_topics_greatest_stamp_whatever_comes_after():
