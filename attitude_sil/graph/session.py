@@ -521,6 +521,20 @@ class ForeignPublishers:
         return new
 
 
+def episode_complete(newest_stamp: dict[str, int], step_topics: list[str], final_ns: int) -> bool:
+    """Every step topic, and one of the command topics, holds the episode's last step (stamp ``final_ns``).
+
+    By the greatest stamp taken on each topic (``Recorder.newest_stamp``):
+    counts were fooled, a foreign node's finite messages stamped steps back
+    (in order on their own topic, so taken) filling them before the last real
+    ones came, and the run's metrics missed its last step (1 hostile run in 4);
+    the latest stamp would not do either, a stray taken after the last step
+    being older.
+    """
+    return (max(newest_stamp.get(t, -1) for t in COMMAND_TOPICS) >= final_ns
+            and all(newest_stamp.get(t, -1) >= final_ns for t in step_topics))
+
+
 def spin_episode(recorder: Recorder, spin, plant, children, k_steps: int, scn: Scenario, prog: Progress,
                  schedule: list[tuple[float, int, str]], foreign: ForeignPublishers | None = None,
                  topics: list[str] | None = None, restart: Callable[[], None] | None = None) -> None:
@@ -562,15 +576,6 @@ def spin_episode(recorder: Recorder, spin, plant, children, k_steps: int, scn: S
 
     final_ns = k_steps * int(round(dt * 1e9))
 
-    newest = recorder.newest_stamp
-
-    def last_command() -> int:
-        # the greatest stamp taken on the command topics. The episode is complete when every step topic's
-        # greatest stamp is the last step's: counts were fooled, a foreign node's finite messages stamped steps
-        # back (in order on their topic, so taken) filling them before the last real ones came, and the run's
-        # metrics missed its last step (1 hostile run in 4); the latest stamp would not do either, a stray taken
-        # after the last step being older
-        return max(newest.get(t, -1) for t in COMMAND_TOPICS)
 
     while True:
         spin(0.1)
@@ -581,7 +586,7 @@ def spin_episode(recorder: Recorder, spin, plant, children, k_steps: int, scn: S
             set_remote_parameters(recorder, spin, "controller", {"controller_type": kind})
             set_remote_parameters(recorder, spin, "plant", {"hold_at": pending[0][0] if pending else -1.0})
             last_change = time.monotonic()
-        if last_command() >= final_ns and all(newest.get(t, -1) >= final_ns for t in step_topics):
+        if episode_complete(recorder.newest_stamp, step_topics, final_ns):
             return
         if plant is not None and plant.error:
             raise RunError(plant.error)
