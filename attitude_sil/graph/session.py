@@ -66,7 +66,7 @@ from attitude_sil.ros.signals import STOP_SIGNALS, Interrupted, StopSignals
 from attitude_sil.storage.writer import PARAMETERS_KEY, SCENARIO_KEY, BagWriter, check_bag_dir
 
 __all__ = ["RunError", "RunResult", "GraphSession", "Interrupted", "Progress", "STOP_SIGNALS", "run_graph",
-           "extra_parameters", "spin_episode"]
+           "extra_parameters", "spin_episode", "episode_complete"]
 
 
 @dataclass
@@ -524,11 +524,12 @@ class ForeignPublishers:
 def episode_complete(newest_stamp: dict[str, int], step_topics: list[str], final_ns: int) -> bool:
     """Every step topic, and one of the command topics, holds the episode's last step (stamp ``final_ns``).
 
-    By the greatest stamp taken on each topic (``Recorder.newest_stamp``):
-    counts were fooled, a foreign node's finite messages stamped steps back
-    (in order on their own topic, so taken) filling them before the last real
-    ones came, and the run's metrics missed its last step (1 hostile run in 4);
-    the latest stamp would not do either, a stray taken after the last step
+    By the greatest stamp taken on each topic (``Recorder.newest_stamp``), on
+    top of the counts (:func:`spin_episode` asks both): counts alone were
+    fooled, a foreign node's finite messages stamped steps back (in order on
+    their own topic, so taken) filling them before the last real ones came,
+    and the run's metrics missed its last step (1 hostile run in 4); the
+    latest stamp would not do either, a stray taken after the last step
     being older.
     """
     return (max(newest_stamp.get(t, -1) for t in COMMAND_TOPICS) >= final_ns
@@ -586,7 +587,8 @@ def spin_episode(recorder: Recorder, spin, plant, children, k_steps: int, scn: S
             set_remote_parameters(recorder, spin, "controller", {"controller_type": kind})
             set_remote_parameters(recorder, spin, "plant", {"hold_at": pending[0][0] if pending else -1.0})
             last_change = time.monotonic()
-        if episode_complete(recorder.newest_stamp, step_topics, final_ns):
+        if (n >= needed and commands() >= needed and all(counts[t] >= needed for t in step_topics)
+                and episode_complete(recorder.newest_stamp, step_topics, final_ns)):
             return
         if plant is not None and plant.error:
             raise RunError(plant.error)
