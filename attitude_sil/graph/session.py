@@ -577,7 +577,6 @@ def spin_episode(recorder: Recorder, spin, plant, children, k_steps: int, scn: S
 
     final_ns = k_steps * int(round(dt * 1e9))
 
-
     while True:
         spin(0.1)
         n = counts[WHEEL_TORQUE]

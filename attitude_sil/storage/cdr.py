@@ -87,11 +87,17 @@ class _Layout:
             self.doubles.append((self.size, count))
             self._raw(b"\x00" * (8 * count))
 
+    @functools.cached_property
+    def _template(self) -> bytes:
+        # the message's bytes with zeros where the stamp and the float64 runs go; a layout is complete before
+        # it first encodes, and the nodes' cached layouts encode every step
+        return _ENCAPSULATION + b"".join(self.parts)
+
     def encode(self, stamps_ns: np.ndarray, columns: list[np.ndarray]) -> list[bytes]:
         """Messages with these stamps (n,) ns and float64 runs, each (n, count)."""
         n = len(stamps_ns)
         buf = np.empty((n, 4 + self.size), dtype=np.uint8)
-        buf[:] = np.frombuffer(_ENCAPSULATION + b"".join(self.parts), dtype=np.uint8)
+        buf[:] = np.frombuffer(self._template, dtype=np.uint8)
         if self.stamp_at is not None:
             t = np.asarray(stamps_ns, dtype=np.int64)
             stamp = np.empty((n, 2), dtype="<u4")
@@ -105,8 +111,7 @@ class _Layout:
 
     def encode_one(self, t_ns: int, *runs: Sequence[float]) -> bytes:
         """One message: :meth:`encode` for a single stamp, written with ``struct`` (no arrays to build)."""
-        buf = bytearray(_ENCAPSULATION)
-        buf += b"".join(self.parts)
+        buf = bytearray(self._template)
         if self.stamp_at is not None:
             sec, nsec = divmod(int(t_ns), 1_000_000_000)
             _STAMP.pack_into(buf, 4 + self.stamp_at, sec, nsec)
