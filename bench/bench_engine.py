@@ -262,13 +262,15 @@ def jax_table(scn) -> None:
     set_num_threads(config.NUMBA_NUM_THREADS)
 
 
-def law_lanes(scn, n_episodes: int = 64, steps: int = 2000) -> None:
+def law_lanes(scn, n_episodes: int = 64, steps: int = 2000) -> dict[str, tuple[float, float, float]]:
     """Each law on the episode axis: ns per episode and step of its ``vector_<code>`` loop (the batch
     engine's one-law case, column-major arrays, on a block of the engine's 64 episodes) against the same step
     in the controller bank's row loop
     (row-major, a law test per row), on the same inputs; and how much of the vector loop's arithmetic LLVM
-    packed (ymm instructions among the double-precision ones). A law whose branches LLVM cannot turn into
-    selects stays scalar: its speed-up near 1 and its packed share near 0 are what it loses to them."""
+    packed (ymm or zmm instructions among the double-precision ones). A law whose branches LLVM cannot turn into
+    selects stays scalar: its speed-up near 1 and its packed share near 0 are what it loses to them.
+
+    Returns each law's (row loop ns, vector loop ns, packed share), as printed."""
     import re
 
     from attitude_sil.core.control.compiled import dispatch_module
@@ -281,6 +283,7 @@ def law_lanes(scn, n_episodes: int = 64, steps: int = 2000) -> None:
     fortran = [np.asfortranarray(a) for a in (q, w, q_r, w_r)]
     print(f"each law on {n_episodes} episodes, ns per episode step (vector loop: the engine's one-law case):")
     print(f"{'law':<12} {'row loop':>9} {'vector loop':>12} {'speed-up':>9} {'packed share':>13}")
+    table = {}
     for kind in law_names():
         bank = build_controller(scn, n_episodes)
         code = bank.codes[kind]
@@ -291,26 +294,26 @@ def law_lanes(scn, n_episodes: int = 64, steps: int = 2000) -> None:
         vec = getattr(d, f"vector_{code}")
         vec(*fortran, par, st, scn.dt, u)
         law = np.full(n_episodes, code, dtype=np.int64)
-        present = np.zeros(len(bank.names), dtype=np.bool_)
-        present[code] = True
-        pars = bank.records_for(bank.names)
-        sts = bank.new_states(n_episodes)
         u_row, offset, has_off = np.zeros((n_episodes, 3)), np.zeros((n_episodes, 3)), np.zeros(n_episodes, bool)
-        row_args = (law, present, (q, w, q_r, w_r), pars, sts, scn.dt, u_row, offset, has_off, 0.0)
+        row_args = (law, q, w, q_r, w_r, rec, bank.new_states(n_episodes)[code], scn.dt, u_row, offset, has_off, 0.0)
         vec_args = (*fortran, par, st, scn.dt, u)
-        t_row = _best(lambda a=row_args: _repeat_stage(d.lanes_stage, steps, *a), 3) / steps / n_episodes * 1e9
+        rows = getattr(d, f"rows_{code}")
+        t_row = _best(lambda r=rows, a=row_args: _repeat_stage(r, steps, *a), 3) / steps / n_episodes * 1e9
         t_vec = _best(lambda f=vec, a=vec_args: _repeat_vector(f, steps, *a), 3) / steps / n_episodes * 1e9
         asm = _vector_asm(d, code, (*fortran, par, st, scn.dt, u))
-        packed = len(re.findall(r"\bv\w+pd\s+%ymm", asm))
+        packed = len(re.findall(r"\bv\w+pd\s+%[yz]mm", asm))
         scalar = len(re.findall(r"\bv\w+sd\s", asm))
-        print(f"{kind:<12} {t_row:9.1f} {t_vec:12.1f} {t_row / t_vec:9.2f} {packed / max(1, packed + scalar):13.0%}")
+        table[kind] = (t_row, t_vec, packed / max(1, packed + scalar))
+        print(f"{kind:<12} {t_row:9.1f} {t_vec:12.1f} {t_row / t_vec:9.2f} {table[kind][2]:13.0%}")
+    return table
 
 
 @njit
-def _repeat_stage(stage, reps, law, present, view, pars, sts, dt, u, offset, has_off, decay):
-    # the row loop called reps times from compiled code (a call from Python costs more than the loop)
+def _repeat_stage(rows, reps, law, q, w, q_r, w_r, par, st, dt, u, offset, has_off, decay):
+    # the bank's row loop (``rows_<code>``) called reps times from compiled code (a call from Python costs
+    # more than the loop)
     for _ in range(reps):
-        stage(law, present, view, pars, sts, dt, u, offset, has_off, decay)
+        rows(law, q, w, q_r, w_r, par, st, dt, u, offset, has_off, decay)
 
 
 @njit
