@@ -288,11 +288,15 @@ def _accumulate_checks(acc, m, k, t, n_steps, dt, b, xw):
 @njit(cache=True, inline="always")
 def _accumulate_response(state, m, ta, n_after, b, response, lo):
     # one sample (time ta after the step) of the step response sums, as metrics.summarize computes them: the
-    # angle of every episode first (a libm call each), then the sums in a loop of plain arithmetic
+    # angle of every episode first (roll and yaw in arithmetic, packed; pitch a libm call each), then the sums
     acc, last_out, prev, y = state
     axis, band, y0, r_fin = response
-    for p in range(m):
-        y[p] = euler_axis(b[Q, p], b[Q + 1, p], b[Q + 2, p], b[Q + 3, p], axis)
+    if axis == 1:
+        for p in range(m):
+            y[p] = euler_axis(b[Q, p], b[Q + 1, p], b[Q + 2, p], b[Q + 3, p], 1)
+    else:  # the loop knows axis != 1: no call in it
+        for p in range(m):
+            y[p] = euler_axis(b[Q, p], b[Q + 1, p], b[Q + 2, p], b[Q + 3, p], axis)
     first = n_after == 0
     for p in range(m):
         span = r_fin[lo + p] - y0[lo + p]
