@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 
 from attitude_sil.core.analysis.metrics import summarize
+from attitude_sil.core.sim.batch import CHUNK
 from attitude_sil.core.sim.engine import flexible_states, simulate, simulate_summary
 from attitude_sil.core.sim.scenario import load_scenario
 from attitude_sil.errors import ScenarioError
@@ -66,10 +67,10 @@ def test_any_thread_count_and_chunking_gives_the_same_numbers(hst):
 
 
 def test_an_episode_gives_the_same_numbers_in_any_lane(hst):
-    # the plant runs with the episodes as the vector axis (core/plant/lanes.py): in a chunk of 64, an episode
-    # goes through the packed loops; alone, or among the last few of a run, through the loops' scalar
-    # remainder. Both must compute the same bits (no reassociation, no contraction into FMAs)
-    n = 70
+    # the plant runs with the episodes as the vector axis (core/plant/lanes.py): in a full chunk, an episode
+    # goes through the packed loops; alone, or in the short chunk at the end of a run, through the loops'
+    # scalar remainder. Both must compute the same bits (no reassociation, no contraction into FMAs)
+    n = CHUNK + 6
     rng = np.random.default_rng(11)
     inertia = np.array([[31.046, 77.217, 78.754]]) * rng.uniform(0.8, 1.2, (n, 3))
     values = {"plant.inertia": inertia, "disturbance.inertia": inertia,
@@ -77,7 +78,7 @@ def test_an_episode_gives_the_same_numbers_in_any_lane(hst):
     gains = {"pid.kp": rng.uniform(20, 80, (n, 3))}
     batch = simulate(hst, n, duration=1.5, driver="compiled", threads=1, controller_params=gains,
                      episode_values=values)
-    for p in (0, 5, 63, 64, 69):
+    for p in (0, 5, CHUNK - 1, CHUNK, CHUNK + 5):
         alone = simulate(hst, 1, duration=1.5, driver="compiled", controller_params={k: v[p:p + 1] for k, v in
                                                                                       gains.items()},
                          episode_values={k: v[p:p + 1] for k, v in values.items()})
@@ -165,7 +166,7 @@ def test_a_controller_type_per_episode_gives_each_episode_its_own_laws_run(measu
 
 
 def test_disturbance_noise_is_the_stepwise_streams_in_any_grouping(hst):
-    # noise is drawn per chunk of episodes, in the chunk's thread: 300 episodes, five chunks on one thread or two
+    # noise is drawn per chunk of episodes, in the chunk's thread: 300 episodes, three chunks on one thread or two
     scn = hst.with_values("disturbance", models=["constant", "step", "noise"])
     kw = dict(duration=0.3, episode_values={"disturbance.noise.seed": np.arange(300) * 7 + 1})
     compiled = simulate(scn, 300, driver="compiled", threads=2, **kw)

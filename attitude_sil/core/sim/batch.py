@@ -113,6 +113,12 @@ class SumsSpec(NamedTuple):
 
 _LOOPS: dict[tuple[str, ...], object] = {}
 
+#: episodes per chunk, the block the plant's lanes span (at most; fewer where the threads would idle). Each
+#: step of a chunk costs about 0.2 us whatever its size (the stages' loop set-up, the law's call at its
+#: address), so a larger block spreads it thinner while the block stays in L2: on the HST roll step, two
+#: threads, 128 ran 1-5 % faster than 64 in six alternated pairs (bench/README.md), 256 slower
+CHUNK = 128
+
 
 def _loop(law_names: tuple[str, ...]):
     """The compiled loop of :mod:`attitude_sil.core.sim.batch_loop` for the bank's law set."""
@@ -164,7 +170,7 @@ def _kinds(ctrl, laws: np.ndarray, swaps: dict, kept_steps: np.ndarray) -> list[
 
 
 def run_compiled(models: tuple, n_steps: int, dt: float, stride: int = 1, threads: int | None = None,
-                 chunk: int = 64, keep=TRAJECTORY_FIELDS, sums: tuple | None = None, swaps: dict | None = None,
+                 chunk: int = CHUNK, keep=TRAJECTORY_FIELDS, sums: tuple | None = None, swaps: dict | None = None,
                  laws=None) -> tuple[Trajectory | None, np.ndarray | None]:
     """Run built models (fresh, as the stepwise driver gets them) in the compiled loop.
 
