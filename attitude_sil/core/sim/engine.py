@@ -82,13 +82,21 @@ def _per_episode(value, n: int, width: int) -> np.ndarray:
     return np.array(np.broadcast_to(a, (n, width)))
 
 
+def _inverse(m: np.ndarray) -> np.ndarray:
+    """``np.linalg.inv(m)`` for a stack (..., 3, 3), the same bits, inverted once where every matrix is the
+    first (the common case: one inertia for all episodes; LAPACK per 3 x 3 costs 6 ms at P = 16,384)."""
+    if m.ndim == 3 and m.shape[0] > 1 and np.array_equal(m, np.broadcast_to(m[:1], m.shape)):
+        return np.repeat(np.linalg.inv(m[:1]), m.shape[0], axis=0)
+    return np.linalg.inv(m)
+
+
 class Plant:
     """Spacecraft body: RK4 over each held-input interval (paper 000 eq. 4, 10-11)."""
 
     def __init__(self, inertia: np.ndarray, dt: float, substeps: int,
                  q0: np.ndarray, omega0: np.ndarray) -> None:
         self.inertia = np.asarray(inertia, dtype=float)
-        self.inertia_inv = np.linalg.inv(self.inertia)
+        self.inertia_inv = _inverse(self.inertia)
         self.dt = float(dt)
         self.substeps = int(substeps)
         self.q0 = np.asarray(q0, dtype=float)
