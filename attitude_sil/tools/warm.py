@@ -13,8 +13,8 @@ machine has two cores or more, a second process compiles the stepwise
 driver's kernels (the nodes' own) while the first compiles the compiled
 loop, then takes the laws' compiled-driver work from the other end of the
 list, so the two end together: the first item, each preset's own law
-first, builds the loop (about 50 s alone), each other law its own loops
-(4-20 s each).
+first, builds the loop in its two forms (for one episode and for a
+block), each other law its own loops (4-20 s each).
 """
 
 from __future__ import annotations
@@ -69,6 +69,8 @@ def warm(config_dir: str | Path | None = None, say=None, drivers: tuple[str, ...
         for driver in drivers:
             try:  # the law alone, then a swap to it (the bumpless entry)
                 simulate(scn, 1, duration=2 * scn.dt, controller=controller, driver=driver)
+                if driver == "auto":  # a block of two: the compiled loop's general form (one episode: chunk_one)
+                    simulate(scn, 2, duration=2 * scn.dt, controller=controller, driver=driver, threads=1)
                 if controller != first:
                     simulate(scn, 1, duration=2 * scn.dt, controller=first, driver=driver,
                              schedule=[(1, controller)])

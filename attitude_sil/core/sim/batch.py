@@ -309,7 +309,7 @@ def _chunk_runner(ctrl, used: set[str], sim: SimArrays, outputs: Outputs, spec: 
     def run(lo, hi):
         pars, sts = blocks(lo, hi)
         tau_noise = _NO_NOISE if noise is None else noise(lo, hi)
-        loop.chunk(lo, hi, sim, pars, sts, tau_noise, lo, outputs, spec, at)
+        (loop.chunk_one if hi - lo == 1 else loop.chunk)(lo, hi, sim, pars, sts, tau_noise, lo, outputs, spec, at)
 
     return run
 
