@@ -67,16 +67,24 @@ def warm(config_dir: str | Path | None = None, say=None, drivers: tuple[str, ...
         scn = scenarios[name]
         first = own[name]
         for driver in drivers:
+            # the compiled loop's block form (chunk) takes two episodes on one thread; its one-episode form
+            # (chunk_one), the same for every law, is compiled once by warm_one_episode
+            n, threads = (2, 1) if driver == "auto" else (1, None)
             try:  # the law alone, then a swap to it (the bumpless entry)
-                simulate(scn, 1, duration=2 * scn.dt, controller=controller, driver=driver)
-                if driver == "auto":  # a block of two: the compiled loop's general form (one episode: chunk_one)
-                    simulate(scn, 2, duration=2 * scn.dt, controller=controller, driver=driver, threads=1)
+                simulate(scn, n, duration=2 * scn.dt, controller=controller, driver=driver, threads=threads)
                 if controller != first:
-                    simulate(scn, 1, duration=2 * scn.dt, controller=first, driver=driver,
+                    simulate(scn, n, duration=2 * scn.dt, controller=first, driver=driver, threads=threads,
                              schedule=[(1, controller)])
             except ScenarioError:  # a law the preset's plant cannot take: nothing to compile for it
                 break
     return time.perf_counter() - t0
+
+
+def warm_one_episode(config_dir: str | Path | None = None) -> None:
+    """Compile the compiled loop's one-episode form (``chunk_one``: every run of a single episode)."""
+    folder = Path(config_dir) if config_dir is not None else default_config_dir()
+    scn = load_scenario(folder / f"{PRESETS[0]}.yaml")
+    simulate(scn, 1, duration=2 * scn.dt, driver="auto")
 
 
 def _claimer(flags):
@@ -91,10 +99,11 @@ def _claimer(flags):
 
 
 def _helper(flags, loop_ready) -> None:
-    # the second core: the stepwise driver's kernels, then, once the compiled loop is in the cache (built by the
-    # first process's first item: compiled twice at once it would cost the most), the compiled driver's laws from
-    # the end of the list
+    # the second core: the stepwise driver's kernels and the compiled loop's one-episode form, then, once the
+    # loop's block form is in the cache (built by the first process's first item: compiled twice at once it would
+    # cost the most), the compiled driver's laws from the end of the list
     warm(drivers=("stepwise",))
+    warm_one_episode()  # beside the first process's block form: both take about a minute from nothing
     loop_ready.wait()
     warm(drivers=("auto",), claim=_claimer(flags), reverse=True)
 
@@ -106,6 +115,7 @@ def main() -> int:
     say = lambda line: print(line, file=sys.stderr, flush=True)  # noqa: E731
     if (os.cpu_count() or 1) < 2:
         warm(say=say)
+        warm_one_episode()
     else:
         ctx = multiprocessing.get_context("spawn")
         flags, loop_ready = ctx.Array("b", len(PRESETS) * len(registry.names())), ctx.Event()
