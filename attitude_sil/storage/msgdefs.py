@@ -21,7 +21,12 @@ mcap-ros2-support and rosbags parse this format.
 
 The ``.msg`` files are looked up through ament_index_python and, when the
 ament index is not set up (a plain virtualenv with ROS wheels), under
-``<sys.prefix>/share/<pkg>/msg/``.  This module does not import rclpy.
+``<sys.prefix>/share/<pkg>/msg/``.  A type the project writes whose package
+has no wheel on PyPI, ``tf2_msgs/msg/TFMessage`` (the bags' and the live
+view's ``/tf``), is bundled here: its standard ``.msg`` text and RIHS01 hash
+(:data:`BUNDLED_MESSAGES`), used where no installed file is found, so a bag
+carries the definition ``ros2 bag play`` on a full install republishes.
+This module does not import rclpy.
 """
 
 from __future__ import annotations
@@ -33,6 +38,7 @@ import sys
 from pathlib import Path
 
 __all__ = [
+    'BUNDLED_MESSAGES',
     'SEPARATOR',
     'message_definition',
     'normalize_type_name',
@@ -41,6 +47,16 @@ __all__ = [
 
 #: The line rosbag2 puts between two concatenated definitions.
 SEPARATOR = '=' * 80
+
+#: Types without a wheel on PyPI: ``pkg/msg/Name`` -> (the ``.msg`` text of
+#: ROS 2 Jazzy, its RIHS01 type hash). tf2_msgs (ros2/geometry2) defines
+#: TFMessage as this one line; the hash is the one rosidl generates for it.
+BUNDLED_MESSAGES: dict[str, tuple[str, str]] = {
+    'tf2_msgs/msg/TFMessage': (
+        'geometry_msgs/TransformStamped[] transforms\n',
+        'RIHS01_e369d0f05a23ae52508854b66f6aa0437f3449d652e8cbf22d5abe85d020f087',
+    ),
+}
 
 # Primitive .msg types: the ones rosbag2 knows plus wstring, which rosbag2
 # would otherwise mistake for a message type of the referring package.
@@ -177,8 +193,12 @@ def _load_spec(package: str, namespace: str, name: str) -> tuple[str, tuple[str,
     """Text and sorted dependency names of one ``.msg`` file, or None if absent."""
     path, _ = _find_interface_file(package, namespace, name, '.msg')
     if path is None:
-        return None
-    text = path.read_text(encoding='utf-8')
+        bundled = BUNDLED_MESSAGES.get(f'{package}/{namespace}/{name}')
+        if bundled is None:
+            return None
+        text = bundled[0]
+    else:
+        text = path.read_text(encoding='utf-8')
     return text, tuple(sorted(_parse_dependencies(text, package)))
 
 
@@ -243,7 +263,7 @@ def _type_description_hash(full_name: str) -> str:
     package, namespace, name = _split_type_name(full_name)
     path, _ = _find_interface_file(package, namespace, name, '.json')
     if path is None:
-        return ''
+        return BUNDLED_MESSAGES.get(full_name, ('', ''))[1]
     try:
         description = json.loads(path.read_text(encoding='utf-8'))
         for entry in description.get('type_hashes', []):
