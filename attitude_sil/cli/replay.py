@@ -53,7 +53,8 @@ def execute(args: argparse.Namespace) -> int:
             print(f"\rreplay t={t:8.2f} s  {sent} messages", end="", file=sys.stderr, flush=True)
 
     with StopSignals() as stop:
-        sent = replay_bag(args.bag, options, on_progress=progress, should_stop=lambda: stop.requested)
+        sent = replay_bag(args.bag, options, on_progress=progress, should_stop=lambda: stop.requested,
+                          say=lambda line: print(line, file=sys.stderr, flush=True))
     if show:
         print(file=sys.stderr)
     print(f"replayed {sent} messages" + (" (interrupted)" if stop.requested else ""))

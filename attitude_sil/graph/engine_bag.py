@@ -6,7 +6,8 @@ episode (graph == batch to 1e-9, tested), so :func:`record_episode` writes its
 :class:`~attitude_sil.core.trajectory.Trajectory` straight to a rosbag2 MCAP bag
 with the graph's topics, types, frames, stamps (sim time t_k = k dt), QoS
 profiles, the controller's parameter change as a ``/parameter_events`` entry,
-and the same parameter snapshot in ``metadata.yaml``. test_engine_bag.py checks
+the 3D view's ``/tf`` and ``/body_model`` as the recorder writes them, and the
+same parameter snapshot in ``metadata.yaml``. test_engine_bag.py checks
 it against a graph-recorded bag of the same design, message for message. The
 final best of a tuning run is still recorded through the graph: a true SIL
 record.
@@ -23,6 +24,7 @@ from rclpy.parameter import Parameter
 from rclpy.serialization import serialize_message
 
 from attitude_sil.core.plant.quaternion import euler_from_quat, quat_conjugate, quat_error
+from attitude_sil.core.plant.scene import BODY, body_scene
 from attitude_sil.core.sim.scenario import Scenario
 from attitude_sil.core.trajectory import Trajectory
 from attitude_sil.errors import RunError
@@ -31,12 +33,15 @@ from attitude_sil.ros.contract import (
     ATTITUDE,
     ATTITUDE_ERROR,
     ATTITUDE_SETPOINT,
+    BODY_MODEL,
     BODY_RATE,
     CLOCK,
     COMMAND_TOPIC,
     DISTURBANCE_TORQUE,
     PARAMETER_EVENTS,
     RATE_SETPOINT,
+    TF,
+    VIEW_TOPICS,
     WHEEL_MOMENTUM,
     WHEEL_STATE,
     WHEEL_TORQUE,
@@ -44,7 +49,13 @@ from attitude_sil.ros.contract import (
 )
 from attitude_sil.ros.convert import ns_to_stamp
 from attitude_sil.ros.qos import offered_qos_yaml
-from attitude_sil.storage.cdr import encode_clocks, encode_joint_states, encode_stamped_vectors
+from attitude_sil.storage.cdr import (
+    TfLayout,
+    encode_clocks,
+    encode_joint_states,
+    encode_stamped_vectors,
+    marker_array_cdr,
+)
 from attitude_sil.storage.writer import PARAMETERS_KEY, SCENARIO_KEY, BagWriter
 
 __all__ = ["record_episode"]
@@ -65,6 +76,20 @@ def _graph_stamps(scn: Scenario, tr: Trajectory) -> np.ndarray:
     if not np.array_equal(stamps, np.arange(stamps.size) * dt_ns):
         raise RunError("record_episode: the trajectory must keep every step (stride 1)")
     return stamps
+
+
+def _write_design(writer: BagWriter, params: dict[str, Any]) -> None:
+    """The design's parameter change at t = 0 as the controller's parameter service logs it (none: nothing)."""
+    if params:
+        event = ParameterEvent(stamp=ns_to_stamp(0), node="/controller",
+                               changed_parameters=[Parameter(k, value=v).to_parameter_msg() for k, v in params.items()])
+        writer.write(PARAMETER_EVENTS, serialize_message(event), 0)
+
+
+def _frames(scn: Scenario, stamps: np.ndarray, q_BN: np.ndarray) -> list[bytes]:
+    """The recorder's ``/tf`` of every step: stamps (n,) ns, attitude (n, 4)."""
+    scene = body_scene(scn.values)
+    return TfLayout(scene.frames).encode(stamps, scene.rotation_series(stamps * 1e-9, q_BN))
 
 
 def record_episode(scn: Scenario, tr: Trajectory, run_dir: str | Path, *, episode: int = 0,
@@ -117,13 +142,9 @@ def record_episode(scn: Scenario, tr: Trajectory, run_dir: str | Path, *, episod
     try:
         # every topic, as the recorder registers them (the sensing loop's not yet: an engine bag of a run with
         # sensors holds the lockstep's topics only; docs/sensors.md)
-        for topic, type_name in recorded_topics(False).items():
+        for topic, type_name in {**recorded_topics(False), **VIEW_TOPICS}.items():
             writer.add_topic(_absolute(topic), type_name, offered_qos_yaml(topic), wait=False)
-        if params:
-            event = ParameterEvent(stamp=ns_to_stamp(0), node="/controller",
-                                   changed_parameters=[Parameter(k, value=v).to_parameter_msg()
-                                                       for k, v in params.items()])
-            writer.write(PARAMETER_EVENTS, serialize_message(event), 0)
+        _write_design(writer, params)
         # each topic's whole series encoded at once (storage/cdr.py, equal to rclpy's messages, tested)
         series = {
             CLOCK: encode_clocks(stamps),
@@ -138,12 +159,15 @@ def record_episode(scn: Scenario, tr: Trajectory, run_dir: str | Path, *, episod
             WHEEL_MOMENTUM: encode_stamped_vectors(stamps, "body", tr.h_wheels_B[p]),
             WHEEL_STATE: encode_joint_states(stamps, "", names, tr.wheel_angle[p], tr.wheel_speed[p],
                                              tr.wheel_effort[p]),
+            TF: _frames(scn, stamps, q),
         }
         topics = {name: _absolute(name) for name in series if name != "command"}
         commands = [_absolute(COMMAND_TOPIC[kind]) for kind in tr.kind]
         writer.write_many([(commands[k] if name == "command" else topics[name], data[k], t)
                            for k, t in enumerate(stamps.tolist())  # step by step, as the graph publishes
                            for name, data in series.items()])
+        t0 = int(stamps[0])  # the body model goes with the first attitude, as the recorder writes it
+        writer.write(_absolute(BODY_MODEL), marker_array_cdr(t0, BODY, body_scene(scn.values).markers), t0)
     finally:
         writer.close()
     return writer.run_dir

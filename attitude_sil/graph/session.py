@@ -32,6 +32,7 @@ from rclpy.signals import SignalHandlerOptions
 from attitude_sil.core.analysis.metrics import episode_report
 from attitude_sil.core.analysis.running_metrics import EpisodeAccumulator
 from attitude_sil.core.control import registry
+from attitude_sil.core.plant.scene import body_scene
 from attitude_sil.core.sim.engine import check_episode, schedule_from_scenario, simulate
 from attitude_sil.core.sim.params import spec_for
 from attitude_sil.core.sim.scenario import Scenario
@@ -66,7 +67,7 @@ from attitude_sil.ros.signals import STOP_SIGNALS, Interrupted, StopSignals
 from attitude_sil.storage.writer import PARAMETERS_KEY, SCENARIO_KEY, BagWriter, check_bag_dir
 
 __all__ = ["RunError", "RunResult", "GraphSession", "Interrupted", "Progress", "STOP_SIGNALS", "run_graph",
-           "extra_parameters", "spin_episode", "episode_complete"]
+           "extra_parameters", "spin_episode", "episode_complete", "hold_for_viewer"]
 
 
 @dataclass
@@ -175,12 +176,16 @@ class GraphSession:
         Wall seconds to wait for the external nodes.
     quiet : bool
         The graph's nodes log warnings and errors only (``run --quiet``).
+    wait_for_viewer : float, optional
+        With ``live``: hold the first episode's step 0 until a client has
+        subscribed to a channel (:meth:`FoxgloveLive.viewer_ready`) or this
+        many wall seconds have passed (``math.inf``: no limit); None: do not wait.
     """
 
     def __init__(self, scn: Scenario, *, duration: float | None = None, controller: str | None = None,
                  processes: bool = False, real_time: bool = False, namespace: str | None = None,
                  connect_timeout: float = 20.0, live=None, external=(), external_timeout: float = 60.0,
-                 quiet: bool = False) -> None:
+                 quiet: bool = False, wait_for_viewer: float | None = None) -> None:
         if controller is not None:
             spec_for("controller", "controller_type").validate(controller, "controller")
         self.external = check_external(external, controller, scn)
@@ -200,6 +205,7 @@ class GraphSession:
         self.controller = EXTERNAL if "controller" in self.external else (
             controller or scn.param("controller", "controller_type"))
         self.live = live  # a FoxgloveLive that serves every message, or None
+        self.wait_for_viewer = wait_for_viewer  # hold step 0 of the first episode for a live client, s (None: no)
 
     def __enter__(self) -> GraphSession:
         isolated_domain()  # a graph of its own unless the user chose a domain
@@ -228,6 +234,7 @@ class GraphSession:
             self.recorder = Recorder(None, keep=KEPT_TOPICS, topics=recorded_topics(self.scn.has_sensors),
                                      live=self.live, context=self.context, volatile_topics=outside, **kw)
             self.recorder.latency = [] if "controller" in self.external else None
+            self.recorder.set_scene(body_scene(self.scn.values))  # the 3D view's frames and body model
             self.executor = EventsExecutor(context=self.context)
             self.executor.add_node(self.recorder)
             self.plant = None
@@ -290,6 +297,9 @@ class GraphSession:
                 set_remote_parameters(self.recorder, self.spin, "controller", controller_params)
             if schedule:  # a scheduled swap ends with the plant released: hold it again
                 set_remote_parameters(self.recorder, self.spin, "plant", {"hold_at": schedule[0][0]})
+            if self.live is not None and self.wait_for_viewer is not None:
+                hold_for_viewer(self.live, self.spin, self.wait_for_viewer)
+                self.wait_for_viewer = None  # the first episode only
             call_reset(self.recorder, self.spin, self.connect_timeout)
             wall0 = time.monotonic()
             prog.t0 = wall0
@@ -424,6 +434,22 @@ def run_graph(
     with session as graph:
         return graph.run_episode(record_dir=record_dir, controller_params=controller_params, progress=progress,
                                  keep_trajectory=keep_trajectory)
+
+
+def hold_for_viewer(live, spin: Callable[[float], None], timeout_s: float) -> bool:
+    """Spin the graph until a client of ``live`` watches (:meth:`FoxgloveLive.viewer_ready`) or ``timeout_s`` wall
+    seconds have passed (``math.inf``: no limit); says on stderr what it waits for and, at a timeout, that the run
+    starts unwatched. True if a client came."""
+    limit = "" if timeout_s == float("inf") else f" (at most {timeout_s:g} s)"
+    print(f"Foxglove: holding step 0 until a client subscribes{limit}", file=sys.stderr, flush=True)
+    deadline = time.monotonic() + timeout_s
+    while not live.viewer_ready():
+        if time.monotonic() >= deadline:
+            print(f"Foxglove: no client subscribed within {timeout_s:g} s; the run starts", file=sys.stderr,
+                  flush=True)
+            return False
+        spin(0.02)  # the graph's callbacks (parameters, Ctrl-C) go on while the client is awaited
+    return True
 
 
 def _live_swaps(accumulator: EpisodeAccumulator, schedule: list[tuple[float, int, str]], dt_ns: int):

@@ -18,6 +18,16 @@ first publisher appears, with the QoS its publishers offer (``qos_from_graph``),
 as ``ros2 bag record`` does. A ``live`` sink
 (:class:`~attitude_sil.storage.foxglove.FoxgloveLive`) gets every recorded
 message too, and the active ``controller_type`` from ``/parameter_events``.
+
+The 3D view's topics (:data:`~attitude_sil.ros.contract.VIEW_TOPICS`) are
+written here, to the bag and the live sink, since no node can publish
+``tf2_msgs/msg/TFMessage`` (no wheel on PyPI): ``tf`` with each recorded
+``attitude``, at its stamp (``body`` in ``inertial``, and ``lvlh`` in
+``inertial`` where the scene has an orbit), and ``body_model`` with the
+episode's first attitude (to the live sink again every
+:data:`MODEL_PERIOD_NS` of sim time, for clients that connect later). The
+frames and the model are the scene's (:func:`attitude_sil.core.plant.scene.body_scene`,
+:meth:`Recorder.set_scene`); without one, ``tf`` carries the body alone.
 """
 
 from __future__ import annotations
@@ -33,8 +43,19 @@ from rclpy.parameter import parameter_value_to_python
 from rclpy.serialization import deserialize_message
 
 from attitude_sil.core.plant.quaternion import unit_or_none
+from attitude_sil.core.plant.scene import BODY, INERTIAL, BodyScene
 from attitude_sil.errors import BagWriteError
-from attitude_sil.ros.contract import ATTITUDE, CLOCK, COMMAND_TOPICS, PARAMETER_EVENTS, RECORDED_TOPICS, message_class
+from attitude_sil.ros.contract import (
+    ATTITUDE,
+    BODY_MODEL,
+    CLOCK,
+    COMMAND_TOPICS,
+    PARAMETER_EVENTS,
+    RECORDED_TOPICS,
+    TF,
+    VIEW_TOPICS,
+    message_class,
+)
 from attitude_sil.ros.qos import (
     INPUT_QOS,
     LOCKSTEP_QOS,
@@ -43,13 +64,15 @@ from attitude_sil.ros.qos import (
     publishers_qos_yaml,
     qos_event_callbacks,
 )
-from attitude_sil.storage.cdr import stamp_from_cdr, stamped_values
+from attitude_sil.storage.cdr import TfLayout, marker_array_cdr, stamp_from_cdr, stamped_values
 from attitude_sil.storage.writer import BagWriter
 
 #: the most the clock may jump forward between two /clock messages (a control step is far less)
 MAX_CLOCK_JUMP_NS = 10_000_000_000
 #: how far ahead of the latest /clock a message may be stamped and still be recorded
 MAX_CLOCK_LEAD_NS = 1_000_000_000
+#: sim time between two body models sent to the live sink, ns
+MODEL_PERIOD_NS = 1_000_000_000
 
 
 class Recorder(Node):
@@ -123,9 +146,17 @@ class Recorder(Node):
             self.subs[name] = sub
         self.resolved = {name: sub.topic_name for name, sub in self.subs.items()}
         self.types = dict(topics or RECORDED_TOPICS)
+        # the 3D view's topics go with the attitude: their full names, and the frames of the scene (none yet)
+        self.view = {name: self.resolve_topic_name(name) for name in VIEW_TOPICS} if ATTITUDE in self.subs else {}
+        self.scene: BodyScene | None = None
+        self._tf = TfLayout(((INERTIAL, BODY),))
+        self._model_in_bag = False  # this episode's body model is in the bag
+        self._model_live_ns: int | None = None  # stamp of the last body model sent live
         if live is not None:  # advertised at once, so a client can subscribe before the first episode
             for name, sub in self.subs.items():
                 live.add_topic(sub.topic_name, self.types[name])
+            for name, full in self.view.items():
+                live.add_topic(full, VIEW_TOPICS[name])
             live.serve()
         # topics whose values are checked before recording: float64 count per message
         self._widths = {name: 4 if t.endswith("QuaternionStamped") else 3 for name, t in self.types.items()
@@ -155,6 +186,8 @@ class Recorder(Node):
             kept.clear()
         self.writer = writer
         self._registered = set()
+        self._model_in_bag = False
+        self._model_live_ns = None
         if writer is not None and not self.qos_from_graph:
             for name, sub in self.subs.items():
                 # a node outside the package offers its own QoS: the bag states what its publishers offer
@@ -165,6 +198,13 @@ class Recorder(Node):
         if self.live is not None:
             for name, sub in self.subs.items():
                 self.live.add_topic(sub.topic_name, self.types[name])
+
+    def set_scene(self, scene: BodyScene | None) -> None:
+        """The frames and body model the view topics carry from now on (None: ``tf`` of the body alone)."""
+        self.scene = scene
+        self._tf = TfLayout(scene.frames if scene is not None else ((INERTIAL, BODY),))
+        self._model_in_bag = False
+        self._model_live_ns = None
 
     def register_discovered(self) -> list[str]:
         """Register in the bag each topic whose publishers this recorder has matched now, with the QoS they offer;
@@ -243,12 +283,49 @@ class Recorder(Node):
             self._on_parameter_event(data, t)
         if self.live is not None:
             self._to_live(name, data, t)
+        if name == ATTITUDE and self.view and (self.writer is not None or self.live is not None):
+            self._write_view(data, t)
         kept = self.kept.get(name)
         if kept is not None:
             if self.keeping:
                 kept.append((t, data))
             if self.sink is not None:
                 self.sink(name, t, data)
+
+    def _write_view(self, attitude: bytes, t: int) -> None:
+        """The view topics of a recorded attitude stamped ``t``: its frames, and the body model when it is due."""
+        scene = self.scene
+        q = stamped_values(attitude, 4)
+        tf = self._tf.encode_one(t, [q] if scene is None else scene.rotations(t * 1e-9, q))
+        model = None
+        if scene is not None:
+            live_due = self.live is not None and (self._model_live_ns is None or t < self._model_live_ns
+                                                  or t - self._model_live_ns >= MODEL_PERIOD_NS)
+            if live_due or (self.writer is not None and not self._model_in_bag):
+                model = marker_array_cdr(t, BODY, scene.markers)
+            if live_due:
+                self._model_live_ns = t
+        else:
+            live_due = False
+        if self.writer is not None:
+            try:
+                self._write_derived(TF, tf, t)
+                if model is not None and not self._model_in_bag:
+                    self._write_derived(BODY_MODEL, model, t)
+                    self._model_in_bag = True
+            except BagWriteError as exc:
+                self.error = f"recording stopped at t={t * 1e-9:.3f} s: {exc}"
+                self.writer = None
+        if self.live is not None:
+            self.live.write(self.view[TF], tf, t)
+            if live_due:
+                self.live.write(self.view[BODY_MODEL], model, t)
+
+    def _write_derived(self, name: str, data: bytes, t: int) -> None:
+        if name not in self._registered:
+            self.writer.add_topic(self.view[name], VIEW_TOPICS[name], offered_qos_yaml(name), wait=False)
+            self._registered.add(name)
+        self.writer.write(self.view[name], data, t)
 
     def _time_controller(self, name: str, t: int) -> None:
         if name == ATTITUDE:

@@ -22,7 +22,7 @@ __all__ = ["CLOCK", "ATTITUDE", "BODY_RATE", "ATTITUDE_SETPOINT", "RATE_SETPOINT
            "check_parameter_name", "ROLE_OUTPUTS", "OPTIONAL_TOPICS", "ROLE_INPUTS", "episode_topics", "EXTERNAL",
            "UNKNOWN_NODE", "IMU", "STAR_TRACKER", "WHEEL_SPEED", "ESTIMATE_ATTITUDE", "ESTIMATE_BODY_RATE",
            "ESTIMATE_GYRO_BIAS", "ESTIMATE_ATTITUDE_SIGMA", "SENSING_TOPICS", "SENSING_STEP_TOPICS", "FEEDBACK_REMAP",
-           "feedback_remap", "recorded_topics", "SENSING_ROLES"]
+           "feedback_remap", "recorded_topics", "SENSING_ROLES", "TF", "BODY_MODEL", "VIEW_TOPICS"]
 
 # -- name rules (ROS 2: a token is a letter or _ then letters, digits, _) -----------------
 _TOKEN = re.compile(r"[A-Za-z_][A-Za-z0-9_]*")
@@ -208,6 +208,15 @@ def episode_topics(external=()) -> list[str]:
 
 #: published only by some plant models (paper 002's flexible mode: x = alpha rad, y = d alpha/dt rad/s)
 MODEL_TOPICS: dict[str, str] = {FLEXIBLE_MODE: "geometry_msgs/msg/Vector3Stamped"}
+
+#: the 3D view's topics (relative names): the frames (``tf2_msgs/msg/TFMessage``: ``body`` in ``inertial`` each
+#: step, and ``lvlh`` in ``inertial`` where the scenario has an orbit) and the body model drawn in ``body``
+#: (``visualization_msgs/msg/MarkerArray``). No node publishes them on the graph (tf2_msgs has no wheel on PyPI):
+#: the recorder writes them, from each step's ``attitude`` and the scenario (core/plant/scene.py), to the bag and
+#: the live view
+TF = "tf"
+BODY_MODEL = "body_model"
+VIEW_TOPICS: dict[str, str] = {TF: "tf2_msgs/msg/TFMessage", BODY_MODEL: "visualization_msgs/msg/MarkerArray"}
 
 #: everything a run records
 RECORDED_TOPICS: dict[str, str] = {**STEP_TOPICS, **MODEL_TOPICS, **SENSING_TOPICS,

@@ -36,7 +36,7 @@ from rclpy.qos import (
     qos_profile_parameter_events,
 )
 
-from attitude_sil.ros.contract import PARAMETER_EVENTS, UNKNOWN_NODE
+from attitude_sil.ros.contract import BODY_MODEL, PARAMETER_EVENTS, TF, UNKNOWN_NODE
 from attitude_sil.storage.writer import parse_qos_profiles, qos_profiles_yaml
 
 __all__ = ["LOCKSTEP_QOS", "INPUT_QOS", "PARAMETER_EVENTS_QOS", "offered_qos_yaml", "publishers_qos_yaml",
@@ -182,6 +182,10 @@ def offered_qos_yaml(topic: str) -> str:
     """The ``offered_qos_profiles`` string a bag records for ``topic``."""
     if topic == PARAMETER_EVENTS:
         return qos_profiles_yaml(depth=1000)
+    if topic == TF:  # what tf2's broadcasters offer: reliable, volatile, keep-last 100
+        return qos_profiles_yaml(depth=100)
+    if topic == BODY_MODEL:  # latched, as a robot model is: a subscriber joining a replay gets it
+        return qos_profiles_yaml(durability="transient_local", depth=1)
     return qos_profiles_yaml(durability="transient_local", depth=LOCKSTEP_QOS.depth)
 
 

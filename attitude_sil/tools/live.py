@@ -5,7 +5,9 @@
   signal or (``episode=True``) the end of the next episode. Each topic is
   registered when its first publisher appears, with the QoS its publishers
   offer; the bag also keeps a parameter snapshot of the graph's nodes,
-  asked through their parameter services as soon as they answer.
+  asked through their parameter services as soon as they answer, and the 3D
+  view's ``/tf`` (from the snapshot on, with ``lvlh`` where the graph flies an
+  orbit) and ``/body_model`` (the recorder's, :mod:`attitude_sil.nodes.recorder_node`).
 * :func:`play_episode` (``attitude-sil episode``): starts an episode through
   ``plant/reset``, follows it on the step topics until the plant's duration is
   reached (every step topic holds K + 1 messages; the plant then stops
@@ -34,6 +36,7 @@ from rclpy.signals import SignalHandlerOptions
 
 from attitude_sil.core import yaml12
 from attitude_sil.core.analysis.metrics import episode_report
+from attitude_sil.core.plant.scene import body_scene
 from attitude_sil.core.sim.paramfile import node_key, section_node
 from attitude_sil.core.sim.params import NODE_PARAMS, SCENARIO_NODE
 from attitude_sil.core.sim.scenario import GRAPH_NODES, Scenario, load_scenario, scenario_from_dict, yaml_problem
@@ -401,6 +404,7 @@ def record_graph(bag: str | Path, topics: list[str] | None = None, namespace: st
                         asked, ask_at = True, time.monotonic() + 1.0
                         continue
                     scn = graph_scenario(values, None, f"the graph{where}")
+                    rec.set_scene(body_scene(values))  # the 3D view: lvlh and the body model from here on
                     writer.set_custom_data(PARAMETERS_KEY, scn.parameters_yaml(nodes=list(values)))
                     result.snapshot = True
                     say(f"parameter snapshot of {', '.join(_target(ns, n) for n in values)}")

@@ -7,7 +7,10 @@ offered with the QoS its bag recorded (``offered_qos_profiles``, adapted as
 ``ros2 bag play`` does: :func:`attitude_sil.ros.qos.recorded_qos`). Timing follows the
 log times (the recorded sim-time stamps) scaled by ``rate``; ``rate = 0`` sends
 as fast as possible. ``/parameter_events`` is not republished unless asked for
-(a replayed parameter event would look like a change of the live nodes).
+(a replayed parameter event would look like a change of the live nodes). A
+topic whose message type is not installed is left out with a note (the 3D
+view's ``/tf``: tf2_msgs has no wheel on PyPI; ``ros2 bag play`` on a full
+ROS 2 install replays it); named in ``--topics``, it is an error.
 """
 
 from __future__ import annotations
@@ -88,10 +91,28 @@ def remap_topic(topic: str, namespace: str | None) -> str:
     return "/" + namespace.strip("/") + "/" + topic.split("/")[-1]
 
 
-def _select(reader, wanted: list[str] | None) -> list[str]:
+def _installed(type_name: str) -> bool:
+    try:
+        message_class(type_name)
+    except AttitudeSilError:
+        return False
+    return True
+
+
+def _select(reader, wanted: list[str] | None, say: Callable[[str], None] | None = None) -> list[str]:
     names = list(reader.topics)
     if wanted is None:
-        return [n for n in names if n != PARAMETER_EVENTS]
+        chosen = []
+        for n in names:
+            if n == PARAMETER_EVENTS:
+                continue
+            if not _installed(reader.topics[n].type):
+                if say is not None:
+                    say(f"note: {n} ({reader.topics[n].type}) is not replayed: its message type is not installed "
+                        "(ros2 bag play on a full ROS 2 install replays it)")
+                continue
+            chosen.append(n)
+        return chosen
     chosen = []
     for w in wanted:
         match = w if w in reader.topics else reader.find_topic(w.strip("/"))
@@ -110,7 +131,7 @@ def _topic_qos(reader, topic: str):
 
 def replay_bag(path: str | Path, options: ReplayOptions, context=None,
                on_progress: Callable[[float, int], None] | None = None,
-               should_stop: Callable[[], bool] | None = None) -> int:
+               should_stop: Callable[[], bool] | None = None, say: Callable[[str], None] | None = None) -> int:
     """Publish the bag's messages with their timing; return how many were sent.
 
     Parameters
@@ -122,6 +143,8 @@ def replay_bag(path: str | Path, options: ReplayOptions, context=None,
     on_progress : callable(sim_time_s, sent), optional
     should_stop : callable() -> bool, optional
         Polled between messages (Ctrl-C handling of the caller).
+    say : callable(str), optional
+        Where a note on a topic left out goes (its message type is not installed).
 
     Raises
     ------
@@ -130,7 +153,7 @@ def replay_bag(path: str | Path, options: ReplayOptions, context=None,
     """
     options.check()
     reader = open_bag(path)
-    topics = _select(reader, options.topics)
+    topics = _select(reader, options.topics, say)
     own = context is None
     if own:
         localhost_environment()

@@ -9,6 +9,7 @@ from attitude_sil.core.sim.engine import simulate
 from attitude_sil.core.sim.scenario import load_scenario
 from attitude_sil.graph.session import run_graph
 from attitude_sil.ros.contract import RECORDED_TOPICS, STEP_TOPICS
+from attitude_sil.storage.msgdefs import message_definition
 from conftest import CONFIG
 
 
@@ -69,6 +70,54 @@ def test_bag_holds_every_topic_with_types_and_counts(roll_run):
         assert types[topic] == type_name
     assert types["/parameter_events"] == RECORDED_TOPICS["/parameter_events"]
     assert stamps["att"] == [k * 10_000_000 for k in range(steps)]
+
+
+def test_bag_carries_the_frames_and_the_body_model(roll_run):
+    # /tf (tf2_msgs/msg/TFMessage: no wheel on PyPI, its definition and CDR are the storage layer's) and
+    # /body_model, read by two independent readers: mcap-ros2-support and rosbags
+    from rosbags.highlevel import AnyReader
+
+    _, result = roll_run
+    steps = 2001
+    attitude, frames, models = {}, [], []
+    with open(result.bag / f"{result.bag.name}_0.mcap", "rb") as f:
+        reader = make_reader(f, decoder_factories=[DecoderFactory()])
+        for schema, channel, message, decoded in reader.iter_decoded_messages(
+                topics=["/attitude", "/tf", "/body_model"]):
+            if channel.topic == "/attitude":
+                q = decoded.quaternion
+                attitude[message.log_time] = (q.x, q.y, q.z, q.w)
+            elif channel.topic == "/tf":
+                # the full ros2msg definition, dependencies included, as rosbag2 writes it
+                assert schema.name == "tf2_msgs/msg/TFMessage"
+                assert schema.data.decode() == message_definition("tf2_msgs/msg/TFMessage")
+                frames.append((message.log_time, decoded.transforms))
+            else:
+                assert schema.data.decode() == message_definition("visualization_msgs/msg/MarkerArray")
+                models.append((message.log_time, decoded.markers))
+    assert len(frames) == steps and len(attitude) == steps
+    for t, transforms in frames:
+        (tf,) = transforms  # no orbit in this scenario: the body in inertial alone
+        assert (tf.header.frame_id, tf.child_frame_id) == ("inertial", "body")
+        assert tf.header.stamp.sec * 10**9 + tf.header.stamp.nanosec == t
+        r, p = tf.transform.rotation, tf.transform.translation
+        assert (r.x, r.y, r.z, r.w) == attitude[t]  # the attitude itself, to the bit
+        assert (p.x, p.y, p.z) == (0.0, 0.0, 0.0)
+    (t0, markers), = models  # once, with step 0
+    assert t0 == 0 and all(m.header.frame_id == "body" and m.frame_locked for m in markers)
+    kinds = [m.type for m in markers]
+    assert kinds.count(1) == 1 and kinds.count(0) == 4  # the body's box, the four HST wheels' axes
+    # rosbags reads the same transforms from the metadata's type hash and the schema
+    with AnyReader([result.bag]) as any_reader:
+        (conn,) = [c for c in any_reader.connections if c.topic == "/tf"]
+        assert conn.msgtype == "tf2_msgs/msg/TFMessage"
+        last = None
+        for connection, _t, raw in any_reader.messages(connections=[conn]):
+            last = any_reader.deserialize(raw, connection.msgtype)
+        r = last.transforms[0].transform.rotation
+        assert (r.x, r.y, r.z, r.w) == attitude[20 * 10**9]
+    metadata = (result.bag / "metadata.yaml").read_text()
+    assert "RIHS01_e369d0f05a23ae52508854b66f6aa0437f3449d652e8cbf22d5abe85d020f087" in metadata
 
 
 def test_graph_with_disturbances_matches_batch(tmp_path):
@@ -153,6 +202,6 @@ def test_three_runs_at_once_with_default_settings_do_not_see_each_other(tmp_path
     assert metrics[0] == metrics[1] == metrics[2] == metrics[3]
     for name in ("run0", "run1", "run2", "solo"):
         reader = open_bag(tmp_path / name)
-        counts = {t: info.count for t, info in reader.topics.items() if t not in ("/parameter_events",
-                                                                                 "/flexible_mode", "/torque_cmd")}
+        counts = {t: info.count for t, info in reader.topics.items() if t not in (
+            "/parameter_events", "/flexible_mode", "/torque_cmd", "/body_model")}  # the body model: once
         assert set(counts.values()) == {301}, counts  # exactly one message per step on every topic
