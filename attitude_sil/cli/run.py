@@ -7,10 +7,12 @@ builds every parser without loading numba, rclpy or the tuner.
 from __future__ import annotations
 
 import argparse
+import math
 
 from attitude_sil.core.control import registry
+from attitude_sil.errors import AttitudeSilError
 from attitude_sil.ros.contract import ROLE_OUTPUTS
-from attitude_sil.storage.foxglove import DEFAULT_HOST, DEFAULT_PORT
+from attitude_sil.storage.foxglove import DEFAULT_HOST, DEFAULT_PORT, check_port
 
 
 def port_number(text: str) -> int:
@@ -59,22 +61,45 @@ def add(sub: argparse._SubParsersAction) -> None:
                      help=f"address the Foxglove server listens on (default {DEFAULT_HOST}: this machine only)")
     run.add_argument("--foxglove-fast", action="store_true",
                      help="with --foxglove: do not pace the run at real time")
+    run.add_argument("--wait-for-viewer", nargs="?", const=math.inf, type=float, metavar="S",
+                     help="with --foxglove: hold step 0 until a client has subscribed, or S seconds have passed "
+                     "(no S: no limit)")
     run.set_defaults(func=execute)
+
+
+def _live_options(args: argparse.Namespace) -> tuple[str, float | None]:
+    """The live view's flags checked (before any graph starts): (host, ``--wait-for-viewer`` s or None).
+
+    Raises
+    ------
+    AttitudeSilError
+        A live-view flag without ``--foxglove``, a limit that is not a
+        number of seconds > 0, a port in use.
+    """
+    if args.foxglove is None and (args.foxglove_fast or args.foxglove_host is not None
+                                  or args.wait_for_viewer is not None):
+        raise AttitudeSilError("--foxglove-fast, --foxglove-host and --wait-for-viewer go with --foxglove [PORT]")
+    wait = args.wait_for_viewer
+    if wait is not None and wait != math.inf and not (math.isfinite(wait) and wait > 0):
+        raise AttitudeSilError(f"--wait-for-viewer must be a finite number of seconds > 0 (or no value: no limit), "
+                               f"got {wait}")
+    host = DEFAULT_HOST if args.foxglove_host is None else args.foxglove_host
+    if args.foxglove is not None:
+        check_port(args.foxglove, host)
+    return host, wait
 
 
 def execute(args: argparse.Namespace) -> int:
     """Run the verb; returns the exit code."""
     import json
-    import math
     import sys
     from datetime import datetime
     from pathlib import Path
 
     from attitude_sil.cli.common import announce_domain, load_with_params
     from attitude_sil.cli.format import format_segments, format_table
-    from attitude_sil.errors import AttitudeSilError
     from attitude_sil.graph.session import run_graph
-    from attitude_sil.storage.foxglove import FoxgloveLive, check_port
+    from attitude_sil.storage.foxglove import FoxgloveLive
     from attitude_sil.tools.paramclient import GraphParameters
 
     scn = load_with_params(args.scenario, args.params)
@@ -103,11 +128,7 @@ def execute(args: argparse.Namespace) -> int:
     if not (math.isfinite(args.external_timeout) and args.external_timeout > 0):
         raise AttitudeSilError(f"--external-timeout must be a finite number of seconds > 0, got "
                                f"{args.external_timeout}")
-    if args.foxglove is None and (args.foxglove_fast or args.foxglove_host is not None):
-        raise AttitudeSilError("--foxglove-fast and --foxglove-host go with --foxglove [PORT]")
-    host = DEFAULT_HOST if args.foxglove_host is None else args.foxglove_host
-    if args.foxglove is not None:
-        check_port(args.foxglove, host)
+    host, wait = _live_options(args)
     record = None
     if not args.no_record:
         record = Path(args.record) if args.record else Path("bags") / (
@@ -132,7 +153,7 @@ def execute(args: argparse.Namespace) -> int:
                                args.foxglove is not None and not args.foxglove_fast),
                            progress=not args.quiet, namespace=args.namespace, before_start=start,
                            live=lambda: live, external=args.external or (), external_timeout=args.external_timeout,
-                           quiet=args.quiet)
+                           quiet=args.quiet, wait_for_viewer=wait)
     finally:
         if live is not None:
             live.close()

@@ -14,6 +14,10 @@ so a client that connects at any moment sees the active law within 0.1 s of
 sim time (``/parameter_events`` only shows a swap when it happens). It is a
 Foxglove channel only, not a ROS topic: the graph and the bags are unchanged.
 
+The server counts the channel subscriptions its clients hold, so a run can
+hold its first step until somebody watches (:meth:`FoxgloveLive.viewer_ready`,
+``run --wait-for-viewer``).
+
 Clients connect through :class:`~attitude_sil.storage.subprotocol.SubprotocolRelay`:
 ``foxglove-sdk`` accepts only the subprotocol name ``foxglove.sdk.v1``, and
 the open-source clients (``@foxglove/ws-protocol``, Lichtblick) ask for
@@ -27,6 +31,8 @@ from __future__ import annotations
 import errno
 import json
 import socket
+import threading
+import time
 
 import foxglove
 import foxglove.websocket
@@ -37,7 +43,7 @@ from attitude_sil.errors import AttitudeSilError
 from .msgdefs import message_definition, normalize_type_name
 from .subprotocol import SubprotocolRelay
 
-__all__ = ["DEFAULT_PORT", "DEFAULT_HOST", "STATUS_TOPIC", "FoxgloveLive", "check_port"]
+__all__ = ["DEFAULT_PORT", "DEFAULT_HOST", "STATUS_TOPIC", "VIEWER_SETTLE_S", "FoxgloveLive", "check_port"]
 
 #: Foxglove's usual WebSocket port
 DEFAULT_PORT = 8765
@@ -51,6 +57,11 @@ STATUS_TOPIC = "/attitude_sil/status"
 STATUS_PERIOD_NS = 100_000_000
 #: how long (s) closing waits for relayed connections to forward what the server sent before it stopped
 RELAY_DRAIN_S = 2.0
+#: a viewer is ready once it holds a subscription and has added none for this long (s): the subscriptions a client
+#: sends together (one per panel's topic) are all in place before the run starts
+VIEWER_SETTLE_S = 0.3
+#: ... or once this long (s) has passed since its first subscription, whatever it still adds
+VIEWER_SETTLE_MAX_S = 3.0
 
 _STATUS_SCHEMA = {
     "type": "object",
@@ -113,6 +124,12 @@ class FoxgloveLive:
         self._context = foxglove.Context()
         self.parameters = None  # the graph's parameters (get, set), once the graph is up: see _Parameters
         self._subscribed: set[str] = set()
+        # channel subscriptions the clients hold, and when the first and the latest of them came (monotonic s);
+        # written by the server's thread, read by the runner's
+        self._lock = threading.Lock()
+        self._subscriptions = 0
+        self._first_subscribe: float | None = None
+        self._last_subscribe: float | None = None
         try:  # the SDK's server on this machine only, behind the relay that clients reach
             self._server = foxglove.start_server(name=name, host="127.0.0.1", port=0, context=self._context,
                                                  capabilities=[Capability.Parameters],
@@ -147,6 +164,29 @@ class FoxgloveLive:
         except OSError as exc:
             raise AttitudeSilError(f"--foxglove {self._requested_port}: cannot listen on {self.host}:"
                                    f"{self._requested_port}: {exc.strerror or exc}") from None
+
+    def viewer_ready(self, now: float | None = None) -> bool:
+        """A client subscribes to a channel, and its subscriptions have settled.
+
+        Settled: no subscription added for :data:`VIEWER_SETTLE_S`, or
+        :data:`VIEWER_SETTLE_MAX_S` since the first one. ``now``: monotonic
+        s (default: the clock now).
+        """
+        now = time.monotonic() if now is None else now
+        with self._lock:
+            if self._subscriptions <= 0:
+                return False
+            return (now - self._last_subscribe >= VIEWER_SETTLE_S
+                    or now - self._first_subscribe >= VIEWER_SETTLE_MAX_S)
+
+    def _subscription(self, change: int) -> None:
+        """A client subscribed to a channel (+1) or left one (-1)."""
+        with self._lock:
+            self._subscriptions = max(self._subscriptions + change, 0)
+            if change > 0:
+                self._last_subscribe = time.monotonic()
+                if self._first_subscribe is None:
+                    self._first_subscribe = self._last_subscribe
 
     @property
     def port(self) -> int:
@@ -232,10 +272,17 @@ def _parameter(name: str, value) -> foxglove.websocket.Parameter:
 
 class _Parameters(ServerListener):
     """The Parameters capability: get, set and subscribe, through ``live.parameters`` (``get(names) -> dict``,
-    ``set(values) -> (dict, errors)``: :class:`attitude_sil.tools.paramclient.GraphParameters`)."""
+    ``set(values) -> (dict, errors)``: :class:`attitude_sil.tools.paramclient.GraphParameters`); and the count of
+    channel subscriptions (:meth:`FoxgloveLive.viewer_ready`)."""
 
     def __init__(self, live: FoxgloveLive) -> None:
         self.live = live
+
+    def on_subscribe(self, client, channel) -> None:
+        self.live._subscription(+1)
+
+    def on_unsubscribe(self, client, channel) -> None:
+        self.live._subscription(-1)
 
     def on_get_parameters(self, client, param_names, request_id=None):
         source = self.live.parameters

@@ -383,7 +383,14 @@ def _flag_cases() -> list:
     cases += [_case("run-foxglove-fast-alone", [*run, "--foxglove-fast"], {}, ("--foxglove",)),
               _case("run-foxglove-host-alone", [*run, "--foxglove-host", "127.0.0.1"], {}, ("--foxglove",)),
               _case("run-foxglove-host-not-here", [*run, "--foxglove", "8765", "--foxglove-host", "192.0.2.1"], {},
-                    ("192.0.2.1",))]
+                    ("192.0.2.1",)),
+              _case("run-wait-for-viewer-alone", [*run, "--wait-for-viewer", "5"], {}, ("--foxglove",)),
+              # an optional value that looks like a flag is not taken as the value: named as an unknown argument
+              _case("run-wait-for-viewer--inf", [*run, "--foxglove", "8765", "--wait-for-viewer", "-inf"], {},
+                    ("-inf",))]
+    # no value (or inf) is no limit; a limit must be seconds > 0
+    cases += _number_flag_cases([*run, "--foxglove", "8765"], "--wait-for-viewer",
+                                {"nan": "nan", **GARBLED, "negative": "-1", "zero": "0"}, "--wait-for-viewer")
     cases += [_case("record-no-bag", ["record"], {}, ("bag",)),
               _case("record-unknown-topic", ["record", "{tmp}/b", "--topics", "nope"], {}, ("nope",)),
               _case("record-topics-then-bag-unknown", ["record", "--topics", "nope", "{tmp}/b"], {}, ("nope",)),

@@ -1,13 +1,16 @@
 // The official Foxglove WebSocket protocol client (@foxglove/ws-protocol, pinned in package.json) against
 // `attitude-sil run --foxglove`: what Lichtblick and older Foxglove releases connect with.
 //
-//   node client.mjs URL [--attitude N] [--get NAME,...] [--set NAME=JSON ...] [--updates N] [--timeout S]
+//   node client.mjs URL [--attitude N] [--tf N] [--get NAME,...] [--set NAME=JSON ...] [--set-after N] [--updates N]
+//                   [--timeout S]
 //
 // Connects asking for the subprotocol the client library supports (foxglove.websocket.v1), subscribes to
 // every advertised channel, decodes /attitude (geometry_msgs/msg/QuaternionStamped, CDR) until N messages
-// came, optionally gets and sets parameters (subscribing to the got ones' updates, waiting for N of them),
+// came and /tf (tf2_msgs/msg/TFMessage) until N came, optionally gets and sets parameters (subscribing to the
+// got ones' updates, waiting for N of them; the sets once --set-after N attitude messages came, default at once),
 // and prints one JSON object:
-// {subprotocol, capabilities, channels, counts, attitude: [[sec, nanosec, x, y, z, w], ...], parameters,
+// {subprotocol, capabilities, channels, counts, attitude: [[sec, nanosec, x, y, z, w], ...],
+//  tf: [[[sec, nanosec, frame_id, child_frame_id, tx, ty, tz, qx, qy, qz, qw], ...], ...], parameters,
 //  setResult, updates, statuses}. Exit 0 when everything asked for arrived, 1 otherwise (the JSON says what is missing).
 import cdr from "@foxglove/cdr";
 import wsProtocol from "@foxglove/ws-protocol";
@@ -23,12 +26,15 @@ const opt = (name, fallback) => {
   return i >= 0 ? args[i + 1] : fallback;
 };
 const wantAttitude = Number(opt("--attitude", "20"));
+const wantTf = Number(opt("--tf", "0"));
 const getNames = opt("--get", "") ? opt("--get", "").split(",") : [];
 const setArgs = args.flatMap((a, i) => (a === "--set" ? [args[i + 1]] : []));
 const wantUpdates = Number(opt("--updates", "0"));
+const setAfter = Number(opt("--set-after", "0"));
+let setSent = false;
 const deadline = Date.now() + 1000 * Number(opt("--timeout", "60"));
 
-const out = { subprotocol: null, capabilities: [], channels: [], counts: {}, attitude: [], parameters: null,
+const out = { subprotocol: null, capabilities: [], channels: [], counts: {}, attitude: [], tf: [], parameters: null,
               setResult: null, updates: [], statuses: [] };
 const subscriptions = new Map(); // subscription id -> channel
 let client;
@@ -41,7 +47,8 @@ function finish(code) {
 }
 
 function done() {
-  return out.attitude.length >= wantAttitude && getDone && setDone && out.updates.length >= wantUpdates;
+  return out.attitude.length >= wantAttitude && out.tf.length >= wantTf && getDone && setDone
+    && out.updates.length >= wantUpdates;
 }
 
 function decodeAttitude(data) {
@@ -50,6 +57,33 @@ function decodeAttitude(data) {
   const nanosec = reader.uint32();
   reader.string(); // frame_id
   return [sec, nanosec, reader.float64(), reader.float64(), reader.float64(), reader.float64()];
+}
+
+function decodeTf(data) {
+  // geometry_msgs/TransformStamped[] transforms: header (stamp, frame_id), child_frame_id, translation, rotation
+  const reader = new CdrReader(new DataView(data.buffer, data.byteOffset, data.byteLength));
+  const transforms = [];
+  for (let n = reader.sequenceLength(); n > 0; n--) {
+    const sec = reader.int32();
+    const nanosec = reader.uint32();
+    const frame = reader.string();
+    const child = reader.string();
+    const values = [];
+    for (let i = 0; i < 7; i++) {
+      values.push(reader.float64());
+    }
+    transforms.push([sec, nanosec, frame, child, ...values]);
+  }
+  return transforms;
+}
+
+function sendSets() {
+  if (setSent || setArgs.length === 0 || out.attitude.length < setAfter) {
+    return;
+  }
+  setSent = true;
+  const params = setArgs.map((a) => ({ name: a.slice(0, a.indexOf("=")), value: JSON.parse(a.slice(a.indexOf("=") + 1)) }));
+  client.setParameters(params, "set");
 }
 
 function connect() {
@@ -71,10 +105,7 @@ function connect() {
         client.subscribeParameterUpdates(getNames);
         client.getParameters(getNames, "get");
       }
-      if (setArgs.length > 0) {
-        const params = setArgs.map((a) => ({ name: a.slice(0, a.indexOf("=")), value: JSON.parse(a.slice(a.indexOf("=") + 1)) }));
-        client.setParameters(params, "set");
-      }
+      sendSets();
     });
     client.on("parameterValues", ({ parameters, id }) => {
       if (id === "get") {
@@ -102,8 +133,12 @@ function connect() {
       const ch = subscriptions.get(subscriptionId);
       const topic = ch ? ch.topic : `?${subscriptionId}`;
       out.counts[topic] = (out.counts[topic] ?? 0) + 1;
-      if (topic === "/attitude" && out.attitude.length < wantAttitude) {
+      if (topic === "/attitude" && out.attitude.length < Math.max(wantAttitude, setAfter)) {
         out.attitude.push(decodeAttitude(data));
+        sendSets();
+      }
+      if (topic === "/tf" && out.tf.length < wantTf) {
+        out.tf.push(decodeTf(data));
       }
       if (done()) {
         finish(0);
