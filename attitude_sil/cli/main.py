@@ -16,6 +16,7 @@ import sys
 
 from attitude_sil.cli import (
     bag,
+    engine,
     episode,
     fidelity,
     linearize,
@@ -34,7 +35,8 @@ from attitude_sil.errors import AttitudeSilError
 __all__ = ["build_parser", "main", "VERBS"]
 
 #: the verbs in the order ``--help`` lists them
-VERBS = (run, record, episode, metrics, linearize, robustness, fidelity, param, bag, plot, replay, tune, montecarlo)
+VERBS = (run, record, episode, metrics, linearize, robustness, fidelity, param, bag, plot, replay, tune, montecarlo,
+         engine)
 
 #: the tuner's dependencies (the ``tune`` extra): a node-only install lacks them
 _TUNE_EXTRA = ("pymoo", "control", "matplotlib")

@@ -35,7 +35,8 @@ from typing import NamedTuple
 import numba
 import numpy as np
 
-from attitude_sil.core.control.compiled import dispatch_module, from_template, law_addresses
+from attitude_sil.core.control import registry
+from attitude_sil.core.control.compiled import dispatch_module, law_addresses
 from attitude_sil.core.plant.kernels import WheelFailure, WheelParams
 from attitude_sil.core.plant.wheels import no_failure
 from attitude_sil.core.sim import batch_loop
@@ -71,6 +72,7 @@ class SimArrays(NamedTuple):
     inertia: np.ndarray
     inertia_inv: np.ndarray
     law0: np.ndarray  # (P,) each episode's law code
+    law_torque: np.ndarray  # (n_laws,) whether the law of each code always commands a torque
     sw_k: np.ndarray  # swap steps, sorted
     sw_law: np.ndarray  # the law code each swap goes to
     command_torque: bool
@@ -111,20 +113,11 @@ class SumsSpec(NamedTuple):
     out: np.ndarray
 
 
-_LOOPS: dict[tuple[str, ...], object] = {}
-
 #: episodes per chunk, the block the plant's lanes span (at most; fewer where the threads would idle). Each
 #: step of a chunk costs about 0.2 us whatever its size (the stages' loop set-up, the law's call at its
 #: address), so a larger block spreads it thinner while the block stays in L2: on the HST roll step, two
 #: threads, 128 ran 1-5 % faster than 64 in six alternated pairs (bench/README.md), 256 slower
 CHUNK = 128
-
-
-def _loop(law_names: tuple[str, ...]):
-    """The compiled loop of :mod:`attitude_sil.core.sim.batch_loop` for the bank's law set."""
-    if law_names not in _LOOPS:
-        _LOOPS[law_names] = from_template(batch_loop, law_names)
-    return _LOOPS[law_names]
 
 
 #: threads of the compiled driver: one per core (numba's count, which NUMBA_NUM_THREADS sets)
@@ -290,7 +283,6 @@ def _chunk_runner(ctrl, used: set[str], sim: SimArrays, outputs: Outputs, spec: 
     """
     P = ctrl.n
     records = ctrl.records_for(used)
-    loop = _loop(ctrl.names)
 
     def blocks(lo, hi):
         # each chunk gets its own rows of the law records and a fresh state, column-major (the episodes
@@ -307,9 +299,10 @@ def _chunk_runner(ctrl, used: set[str], sim: SimArrays, outputs: Outputs, spec: 
     at = _ADDRESSES[key]
 
     def run(lo, hi):
-        pars, sts = blocks(lo, hi)
+        recs = tuple(zip(*blocks(lo, hi), strict=True))
         tau_noise = _NO_NOISE if noise is None else noise(lo, hi)
-        (loop.chunk_one if hi - lo == 1 else loop.chunk)(lo, hi, sim, pars, sts, tau_noise, lo, outputs, spec, at)
+        (batch_loop.chunk_one if hi - lo == 1 else batch_loop.chunk)(lo, hi, sim, recs, tau_noise, lo, outputs, spec,
+                                                                     at)
 
     return run
 
@@ -347,7 +340,9 @@ def _sim_arrays(models: tuple, n_steps: int, stride: int, dt: float, law0: np.nd
     sim = SimArrays(
         int(n_steps), int(stride), float(dt), int(round(dt * 1e9)), int(plant.substeps), float(guide.step_time),
         _c(plant.q0), _c(plant.omega0), np.ascontiguousarray(wheels.x), _c(guide.q_initial), _c(guide.q_final),
-        _c(guide.omega, (P, 3)), _c(plant.inertia), _c(plant.inertia_inv), law0, swaps[0], swaps[1],
+        _c(guide.omega, (P, 3)), _c(plant.inertia), _c(plant.inertia_inv), law0,
+        np.array([registry.output_of(n) == "torque" for n in ctrl.names]),
+        swaps[0], swaps[1],
         ctrl.command == "torque", float(ctrl.decay), WheelParams(*(_writable(a) for a in asm.params)),
         WheelFailure(*(_writable(a) for a in failure)), ctrl.noisy, ctrl.sensor_seeds,
         ctrl.sensor_att_std, ctrl.sensor_rate_std,

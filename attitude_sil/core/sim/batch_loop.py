@@ -1,21 +1,19 @@
-"""The batch engine's compiled loop, as a template over the set of laws.
+"""The batch engine's compiled loop: every step of a chunk of episodes, in stages over its episodes.
 
-:func:`attitude_sil.core.control.compiled.from_template` copies this source
-into a generated module with the law dispatch of the registered laws in
-place of the stubs below (numba cannot call a run-time choice of function
-otherwise), and :mod:`attitude_sil.core.sim.batch` runs that module's
-:func:`chunk` (:func:`chunk_one` for a chunk of one episode). Read it as
-ordinary code where the ``# @laws stage`` line
-runs every law's compiled loop on the episodes whose code is that law's
-(called at its address, written out there by the generator), and
-``enter_at`` & co. do the bumpless swap (:mod:`attitude_sil.core.control.law`).
-The loop runs in stages over the chunk's episodes (swaps, commands, wheels,
-body), each episode's arithmetic in the order of the stepwise driver. The
-plant's state lives in blocks (:mod:`attitude_sil.core.plant.lanes`: the
-episodes as the vector axis, a row per quantity), where the wheels' and the
-body's stages run as packed instructions; the laws, the swaps and the
-metrics read row-major copies (m, width) made once per step.
-Its imports are absolute because the copy lives outside the package.
+:mod:`attitude_sil.core.sim.batch` runs :func:`chunk` (:func:`chunk_one` for
+a chunk of one episode). Each step runs the stages swaps, commands, wheels
+and body over the chunk's episodes, each episode's arithmetic in the order
+of the stepwise driver. The command stage
+(:func:`attitude_sil.core.control.dispatch.command_stage`) runs each law's
+compiled loop, called at its address, on the episodes whose code is that
+law's; :func:`~attitude_sil.core.control.dispatch.reset_row` and
+:func:`~attitude_sil.core.control.dispatch.enter_at` do the bumpless swap
+(:mod:`attitude_sil.core.control.law`). The laws' records come in as one
+tuple ``recs`` of ``(par, st)`` pairs in code order. The plant's state lives
+in blocks (:mod:`attitude_sil.core.plant.lanes`: the episodes as the vector
+axis, a row per quantity), where the wheels' and the body's stages run as
+packed instructions; the laws, the swaps and the metrics read row-major
+copies (m, width) made once per step.
 """
 
 from __future__ import annotations
@@ -24,6 +22,7 @@ import numpy as np
 from numba import njit
 
 from attitude_sil.core.analysis.metric_rows import euler_axis, first_crossing
+from attitude_sil.core.control.dispatch import command_stage, enter_at, reset_row
 from attitude_sil.core.plant.kernels import WheelFailure, measure_row, wheel_params_copy
 from attitude_sil.core.plant.lanes import (
     TC,
@@ -43,37 +42,22 @@ from attitude_sil.core.plant.lanes import (
     wheels_to_lanes,
 )
 
-# >>> law dispatch stubs (replaced by the generated dispatch; see the module docstring)
-
-
-def law_reset(code, p, sts):  # pragma: no cover - a stand-in
-    raise NotImplementedError
-
-
-def enter_at(code, at, view, p, pars, sts, dt, decay, xfer, scratch):  # pragma: no cover - a stand-in
-    raise NotImplementedError
-
-
-def law_is_torque(code):  # pragma: no cover - a stand-in
-    raise NotImplementedError
-# <<< law dispatch stubs
-
 #: number of running-sum columns (batch.SUMMARY_COLUMNS)
 N_SUMS = 13
 
 
 @njit(cache=True, inline="always")
-def _swap_row(k, p, swap, law, view, pars, sts, sim, xfer, u, at):
+def _swap_row(k, p, swap, law, view, recs, sim, xfer, u, at):
     # ControllerBank.compute with a swap pending, for row p: reset, then the bumpless entry (the law's
     # enter_<code>, at its address). view: the law's inputs (q, w, q_r, w_r); xfer: the transfer's
     # (u_last, offset, has_off)
     has_off = xfer[2]
-    same_kind = law_is_torque(law[p]) == law_is_torque(swap) or sim.command_torque
+    same_kind = sim.law_torque[law[p]] == sim.law_torque[swap] or sim.command_torque
     law[p] = swap
-    law_reset(swap, p, sts)
+    reset_row(swap, p, recs)
     has_off[p] = False
     if k > 0 and same_kind:
-        enter_at(swap, at, view, p, pars, sts, sim.dt, sim.decay, xfer, u)
+        enter_at(swap, at, view, p, recs, sim.dt, sim.decay, xfer, u)
 
 
 @njit(cache=True, inline="always")
@@ -135,37 +119,36 @@ def _plant_start(sim, lo, m):
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
-def chunk(lo, hi, sim, pars, sts, noise, noise_lo, out, sums, at):
+def chunk(lo, hi, sim, recs, noise, noise_lo, out, sums, at):
     """Episodes ``lo..hi-1`` from step 0 to K, the stepwise driver's order of calls, kept every ``stride``.
 
-    ``sim`` (batch.SimArrays): the models' arrays; ``pars``, ``sts``: each law's parameter and state records
-    for these episodes (rows 0..hi-lo-1); ``noise`` (rows from episode ``noise_lo``, K + 1, 3): the noise
+    ``sim`` (batch.SimArrays): the models' arrays; ``recs``: each law's ``(par, st)``, its parameter and
+    state records for these episodes (rows 0..hi-lo-1); ``noise`` (rows from episode ``noise_lo``, K + 1, 3): the noise
     torque, or no rows; ``out`` (batch.Outputs): the kept trajectory arrays (no rows: not kept); ``sums``
     (batch.SumsSpec): the running sums' axis, start and final values, band and output (no rows: none). Each
     episode runs its own law (``sim.law0``) and takes the swaps ``sim.sw_law[s]`` before the command of
     step ``sim.sw_k[s]`` (sorted), with the controller bank's bumpless transfer. ``at`` (3, n_laws): the
     addresses of each law's compiled loops (``compiled.law_addresses``).
     """
-    _chunk(lo, hi, hi - lo, sim, pars, sts, noise, noise_lo, out, sums, at)
+    _chunk(lo, hi, hi - lo, sim, recs, noise, noise_lo, out, sums, at)
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
-def chunk_one(lo, hi, sim, pars, sts, noise, noise_lo, out, sums, at):
+def chunk_one(lo, hi, sim, recs, noise, noise_lo, out, sums, at):
     """:func:`chunk` for one episode (``hi == lo + 1``): the block's width is a constant there, so LLVM
     drops every stage's loop over the episodes (a loop of one pays its vector preamble: 0.37 us a step)."""
-    _chunk(lo, lo + 1, 1, sim, pars, sts, noise, noise_lo, out, sums, at)
+    _chunk(lo, lo + 1, 1, sim, recs, noise, noise_lo, out, sums, at)
 
 
 @njit(cache=True, inline="always")
-def _chunk(lo, hi, m, sim, pars, sts, noise, noise_lo, out, sums, at):
+def _chunk(lo, hi, m, sim, recs, noise, noise_lo, out, sums, at):
     # chunk's body, m = hi - lo episodes
     # what the laws read, (m, 4) and (m, 3) in column-major order (a law's one-law loop runs on packed lanes)
     q, w = column_major(sim.q0, lo, m), column_major(sim.w0, lo, m)
     qi, qf = column_major(sim.q_initial, lo, m), column_major(sim.q_final, lo, m)
     omega_r = column_major(sim.omega_ref, lo, m)
     law = sim.law0[lo:hi].copy()
-    # @laws records
-    present = np.zeros(len(pars), dtype=np.bool_)  # the laws some episode of the chunk runs
+    present = np.zeros(len(recs), dtype=np.bool_)  # the laws some episode of the chunk runs
     for p in range(m):
         present[law[p]] = True
     offset, has_off, u_last = np.zeros((m, 3)), np.zeros(m, dtype=np.bool_), np.zeros((m, 3))
@@ -200,10 +183,10 @@ def _chunk(lo, hi, m, sim, pars, sts, noise, noise_lo, out, sums, at):
             present[swap] = True
             for p in range(m):
                 if law[p] != swap:
-                    _swap_row(k, p, swap, law, (qs, ws, q_r, omega_r), pars, sts, sim, xfer, u, at)
-        # @laws stage q=qs w=ws w_r=omega_r dt=sim.dt decay=sim.decay
+                    _swap_row(k, p, swap, law, (qs, ws, q_r, omega_r), recs, sim, xfer, u, at)
+        command_stage(law, present, (qs, ws, q_r, omega_r), recs, sim.dt, u, xfer, sim.decay, at)
         for p in range(m):
-            torque[p] = sim.command_torque or law_is_torque(law[p])
+            torque[p] = sim.command_torque or sim.law_torque[law[p]]
             for i in range(3):
                 u_last[p, i] = u[p, i]
         rows_to_lanes(u, 0, b, U, m)

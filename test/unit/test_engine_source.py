@@ -1,0 +1,56 @@
+"""The compiled engine that runs is the package's own source: the loop, the laws' loops, and a table of names."""
+
+from __future__ import annotations
+
+import ast
+import inspect
+from pathlib import Path
+
+import numpy as np
+
+from attitude_sil.cli.main import main
+from attitude_sil.core.control import compiled, dispatch, registry
+from attitude_sil.core.sim import batch_loop
+from attitude_sil.core.sim.engine import simulate
+from attitude_sil.core.sim.scenario import load_scenario
+
+PACKAGE = Path(__file__).resolve().parents[2] / "attitude_sil"
+CONFIG = Path(__file__).resolve().parents[2] / "config"
+
+
+def test_the_loop_that_runs_is_the_file_of_the_package():
+    tr = simulate(load_scenario(CONFIG / "hst_roll_step.yaml"), n_episodes=3, duration=0.05, driver="compiled")
+    assert np.isfinite(tr.q_BN).all()
+    # the batch engine ran batch_loop.chunk itself (its dispatcher compiled or loaded a signature), from the file
+    assert batch_loop.chunk.signatures, "the compiled driver did not run batch_loop.chunk"
+    assert Path(inspect.getsourcefile(batch_loop.chunk.py_func)).resolve() == PACKAGE / "core/sim/batch_loop.py"
+
+
+def test_the_generated_table_holds_names_not_behaviour():
+    source = compiled.dispatch_source([registry.get(n) for n in registry.names()])
+    tree = ast.parse(source)
+    defs = [node for node in tree.body if isinstance(node, ast.FunctionDef)]
+    assert len(defs) == 3 * len(registry.names())  # vector_, rows_, enter_ per law
+    for node in defs:
+        # one statement: a call of a loop of core/control/dispatch.py with the law's step bound
+        assert len(node.body) == 1 and isinstance(node.body[0], ast.Expr), node.name
+        callee = node.body[0].value.func.id
+        assert callee in dispatch.__all__, (node.name, callee)
+    assert not [n for n in tree.body if isinstance(n, (ast.For, ast.While, ast.If, ast.ClassDef))]
+
+
+def test_engine_source_prints_the_table(capsys):
+    assert main(["engine", "--source"]) == 0
+    out = capsys.readouterr().out
+    assert out == compiled.dispatch_source([registry.get(n) for n in registry.names()])
+    assert main(["engine"]) == 0
+    out = capsys.readouterr().out
+    assert str(PACKAGE / "core/sim/batch_loop.py") in out and "attitude_sil_laws_" in out
+
+
+def test_no_stub_that_raises_in_the_package():
+    found = [f"{path.relative_to(PACKAGE.parent)}:{node.lineno}"
+             for path in sorted(PACKAGE.rglob("*.py"))
+             for node in ast.walk(ast.parse(path.read_text()))
+             if isinstance(node, ast.Raise) and "NotImplementedError" in ast.unparse(node)]
+    assert not found, f"stubs that raise: {found}"
