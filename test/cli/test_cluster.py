@@ -75,7 +75,7 @@ def _spec_file(tmp_path, name: str, runs: int, chunk: int, duration: float):
 
 
 def _same(a: dict, b: dict) -> None:
-    assert a.keys() == b.keys()
+    assert a and a.keys() == b.keys()
     for key in a:
         assert np.array_equal(a[key], b[key], equal_nan=a[key].dtype.kind == "f"), key
 

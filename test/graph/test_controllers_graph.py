@@ -217,6 +217,8 @@ def test_sigterm_and_sighup_close_the_bag_and_end_every_node(tmp_path, sig, code
     try:
         assert "real time" in run.stderr.readline()  # the episode runs
         nodes = _children(run.pid)
+        # --processes: one process per node, each of which must be gone at the end (`left`, below); in one
+        # process the nodes are the runner's own and end with it (its exit code, below)
         assert len(nodes) == (5 if processes else 0)
         run.send_signal(sig)
         _, err = run.communicate(timeout=60)
@@ -274,6 +276,7 @@ def test_a_failed_node_process_ends_the_run_with_one_line_and_a_readable_bag(tmp
                                   stdin=subprocess.DEVNULL)
             assert fast.returncode == 0, fast.stderr
         nodes = _children(run.pid)
+        assert len(nodes) == 5, nodes  # every node process, so that none left behind is missed below
         target = next(pid for pid in nodes if _node_of(pid) == victim)
         os.kill(target, fault)
         _, err = run.communicate(timeout=60)  # bounded: the watchdogs, not the hour of sim time, end it
@@ -303,6 +306,7 @@ def test_ctrl_c_in_a_terminal_stops_every_process_with_one_line(tmp_path):
     try:
         assert "real time" in run.stderr.readline()
         nodes = _children(run.pid)
+        assert len(nodes) == 5, nodes  # every node process, so that none left behind is missed below
         os.killpg(run.pid, signal.SIGINT)
         _, err = run.communicate(timeout=60)
         left = [pid for pid in nodes if _alive(pid)]  # looked at before the clean-up below kills anything

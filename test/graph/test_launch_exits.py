@@ -23,6 +23,7 @@ import rclpy
 import rclpy.executors
 from rclpy.signals import SignalHandlerOptions
 
+from attitude_sil.core.sim.scenario import GRAPH_NODES, SENSOR_NODES
 from conftest import CONFIG, launch_actions
 
 BIN = Path(sys.executable).parent
@@ -64,6 +65,7 @@ def test_every_node_of_the_launch_file_exits_0_on_a_requested_shutdown(monkeypat
     # every node (the sensing ones too: feedback:=estimate), the controller once (controller_type not given)
     nodes = [a for a in launch_actions(monkeypatch) if type(a).__name__ == "Node"
              and not (a.kwargs["name"] == "controller" and type(a.kwargs["condition"]).__name__ == "IfCondition")]
+    assert {n.kwargs["name"] for n in nodes} >= set(GRAPH_NODES + SENSOR_NODES), nodes  # none missed below
     procs = [subprocess.Popen(_command(n, CONFIG / "hst_roll_step.yaml"), stdin=subprocess.DEVNULL,
                               stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True, start_new_session=True)
              for n in nodes]

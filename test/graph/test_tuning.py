@@ -51,6 +51,7 @@ def test_nsga2_front_improves_and_is_non_dominated(tmp_path):
         assert not np.any(np.all(front <= p, axis=1) & np.any(front < p, axis=1))
     rows = json.loads((spec.output / "evaluations.json").read_text())
     gen1 = np.array([r["cost"] for r in rows if r["generation"] == 1 and not r["failure"]])
+    assert len(gen1) > 0, "no valid start point to compare the front with"
     # every valid start point is dominated by (or on) the final front
     for p in gen1:
         assert np.any(np.all(front <= p + 1e-12, axis=1))
