@@ -51,7 +51,8 @@ from soa_reference import LANES, lanes_args, lanes_run  # noqa: E402
 
 from attitude_sil.core.control.registry import names as law_names  # noqa: E402
 from attitude_sil.core.plant.quaternion import quat_from_euler  # noqa: E402
-from attitude_sil.core.sim.engine import build_controller, simulate, simulate_summary  # noqa: E402
+from attitude_sil.core.sim.build import build_controller  # noqa: E402
+from attitude_sil.core.sim.engine import simulate, simulate_summary  # noqa: E402
 from attitude_sil.core.sim.scenario import load_scenario  # noqa: E402
 from attitude_sil.graph.session import run_graph  # noqa: E402
 from attitude_sil.tuning.evaluate import evaluate  # noqa: E402

@@ -31,7 +31,8 @@ sys.path.insert(0, str(ROOT))
 from attitude_sil.core.analysis.metrics import flexible_split  # noqa: E402
 from attitude_sil.core.plant.plants import FLEXIBLE_CASES  # noqa: E402
 from attitude_sil.core.plant.quaternion import euler_from_quat  # noqa: E402
-from attitude_sil.core.sim.engine import flexible_states, simulate, simulate_summary  # noqa: E402
+from attitude_sil.core.sim.build import flexible_states  # noqa: E402
+from attitude_sil.core.sim.engine import simulate, simulate_summary  # noqa: E402
 from attitude_sil.core.sim.scenario import load_scenario  # noqa: E402
 from attitude_sil.tuning.fidelity import PAPER_000_GAINS, PAPER_002_GAINS, PAPER_002_SETTLING  # noqa: E402
 from attitude_sil.tuning.linearize import (  # noqa: E402

@@ -15,7 +15,7 @@ import numpy as np
 from numba import njit, prange
 
 from attitude_sil.core.control.kernels import error3_row
-from attitude_sil.core.sim.engine import build_controller, build_guidance, build_plant, build_wheels
+from attitude_sil.core.sim.build import build_controller, build_guidance, build_plant, build_wheels
 
 
 @njit(cache=True, inline="always")

@@ -111,7 +111,7 @@ def count_step_ops(scn) -> dict[str, int]:
     from attitude_sil.core.control.laws import pid
     from attitude_sil.core.plant import lanes
     from attitude_sil.core.plant.kernels import WheelFailure, WheelParams
-    from attitude_sil.core.sim.engine import build_controller, build_guidance, build_plant, build_wheels
+    from attitude_sil.core.sim.build import build_controller, build_guidance, build_plant, build_wheels
 
     plant, wheels, guide = build_plant(scn, 1), build_wheels(scn, 1), build_guidance(scn, 1)
     par = build_controller(scn, 1).record("pid")

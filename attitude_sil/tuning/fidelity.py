@@ -55,7 +55,8 @@ from attitude_sil.core.papers import PAPERS
 from attitude_sil.core.plant.actuators import SpeedLoopWheels
 from attitude_sil.core.plant.plants import FLEXIBLE_CASES
 from attitude_sil.core.plant.quaternion import euler_from_quat
-from attitude_sil.core.sim.engine import flexible_settling, simulate
+from attitude_sil.core.sim.build import flexible_settling
+from attitude_sil.core.sim.engine import simulate
 from attitude_sil.core.sim.scenario import PRESETS, Scenario, default_config_dir, load_scenario
 from attitude_sil.errors import AttitudeSilError
 from attitude_sil.tuning.linearize import PAPER_000_TABLE_1, PAPER_000_TABLE_1_DURATION, rmse_table

@@ -45,7 +45,8 @@ import numpy as np
 from attitude_sil.core import yaml12
 from attitude_sil.core.analysis.pointing import POINTING_COLUMNS
 from attitude_sil.core.control import registry
-from attitude_sil.core.sim.engine import check_episode, simulate_summary
+from attitude_sil.core.sim.build import check_episode
+from attitude_sil.core.sim.engine import simulate_summary
 from attitude_sil.core.sim.params import NODE_PARAMS
 from attitude_sil.core.sim.scenario import Scenario, load_scenario, with_parameter_file
 from attitude_sil.errors import ScenarioError, SpecError

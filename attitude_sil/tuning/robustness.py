@@ -16,7 +16,9 @@ import numpy as np
 
 from attitude_sil.core.analysis.metrics import scenario_metrics
 from attitude_sil.core.plant.plants import FLEXIBLE_CASES
-from attitude_sil.core.sim.engine import flexible_settling, inertia_matrix, simulate
+from attitude_sil.core.plant.rigid_body import inertia_matrix
+from attitude_sil.core.sim.build import flexible_settling
+from attitude_sil.core.sim.engine import simulate
 from attitude_sil.core.sim.scenario import Scenario
 
 __all__ = ["INERTIA_ERRORS", "robustness", "format_robustness"]

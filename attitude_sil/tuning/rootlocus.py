@@ -22,8 +22,9 @@ the root locus through the design (``control.root_locus_map`` of the loop
 with the PID's overall gain as the locus parameter) is plotted next to the results.
 
 python-control and matplotlib are imported in the functions that use them:
-with scipy.signal they took 3-4 s of the start of every process that tunes
-(the tuner imports this module for every method) or reads the fidelity rows.
+with scipy.signal they are the slowest imports of the package, and every
+process that tunes (the tuner imports this module for every method) or reads
+the fidelity rows would pay for them at its start.
 """
 
 from __future__ import annotations
@@ -34,7 +35,9 @@ import numpy as np
 
 from attitude_sil.core.analysis.metrics import scenario_metrics
 from attitude_sil.core.plant.linear import linear_model
-from attitude_sil.core.sim.engine import build_wheels, inertia_matrix, simulate
+from attitude_sil.core.plant.rigid_body import inertia_matrix
+from attitude_sil.core.sim.build import build_wheels
+from attitude_sil.core.sim.engine import simulate
 from attitude_sil.errors import SpecError
 
 from .results import TuningResult, write_best_yaml

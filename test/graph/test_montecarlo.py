@@ -14,7 +14,8 @@ import json
 import numpy as np
 import pytest
 
-from attitude_sil.core.sim.engine import build_wheels, simulate
+from attitude_sil.core.sim.build import build_wheels
+from attitude_sil.core.sim.engine import simulate
 from attitude_sil.core.sim.scenario import load_scenario
 from attitude_sil.graph.session import run_graph
 from attitude_sil.tuning.dispersions import check_dispersions, episode_values, run_scenario

@@ -6,7 +6,8 @@ import pytest
 from attitude_sil.core.analysis.metrics import tracking_metrics
 from attitude_sil.core.plant.plants import FlexibleAxisPlant, PitchNormalizedPlant
 from attitude_sil.core.plant.quaternion import euler_from_quat, quat_from_euler
-from attitude_sil.core.sim.engine import build_disturbance, simulate
+from attitude_sil.core.sim.build import build_disturbance
+from attitude_sil.core.sim.engine import simulate
 from attitude_sil.core.sim.scenario import load_scenario
 from attitude_sil.graph.session import run_graph
 from attitude_sil.tuning.linearize import rmse_table

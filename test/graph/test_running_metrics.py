@@ -16,7 +16,8 @@ import pytest
 
 from attitude_sil.core.analysis.metrics import episode_report
 from attitude_sil.core.analysis.running_metrics import EpisodeAccumulator
-from attitude_sil.core.sim.engine import schedule_from_scenario, simulate
+from attitude_sil.core.sim.build import schedule_from_scenario
+from attitude_sil.core.sim.engine import simulate
 from attitude_sil.core.sim.scenario import load_scenario
 from attitude_sil.graph.session import GraphSession
 from conftest import CONFIG

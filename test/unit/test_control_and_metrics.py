@@ -5,7 +5,8 @@ import pytest
 
 from attitude_sil.core.analysis.metrics import metrics_from_trajectory, step_metrics
 from attitude_sil.core.plant.quaternion import quat_from_euler
-from attitude_sil.core.sim.engine import law_bank, simulate
+from attitude_sil.core.sim.build import law_bank
+from attitude_sil.core.sim.engine import simulate
 from attitude_sil.core.sim.scenario import load_scenario
 from conftest import CONFIG
 

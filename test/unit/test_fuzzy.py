@@ -16,7 +16,7 @@ from attitude_sil.core.control.fuzzy import (
 )
 from attitude_sil.core.control.kernels import fuzzy_infer
 from attitude_sil.core.control.laws.fuzzy_pid import mix
-from attitude_sil.core.sim.engine import law_bank
+from attitude_sil.core.sim.build import law_bank
 
 DATA = Path(__file__).resolve().parents[1] / "data"
 CODES = {"NL": 1, "NB": 1, "NM": 2, "NS": 3, "ZR": 4, "ZO": 4, "PS": 5, "PM": 6, "PL": 7, "PB": 7}

@@ -6,8 +6,9 @@ import pytest
 from attitude_sil.core.control.bank import ControllerBank
 from attitude_sil.core.control.laws.geometric import skew_vee, torque_reference
 from attitude_sil.core.plant.quaternion import quat_derivative, quat_from_euler, quat_multiply, quat_to_dcm
-from attitude_sil.core.sim.engine import law_bank
+from attitude_sil.core.sim.build import law_bank
 from attitude_sil.core.sim.params import spec_for
+from attitude_sil.errors import ScenarioError
 
 J = np.diag([5.69, 5.69, 4.26])  # Hawai'iSat-1
 K = np.array([0.06, 0.02, 0.03])
@@ -129,14 +130,20 @@ def test_inertia_values_become_one_matrix_per_episode():
 
     Issue 22 found ``np.diag`` taking the diagonal of a (P, 3) array instead of building P matrices.
     """
-    from attitude_sil.core.control.laws.geometric import inertia_matrix
+    from attitude_sil.core.plant.rigid_body import inertia_matrix
 
     rows = np.array([[1.0, 2.0, 3.0], [4.0, 5.0, 6.0]])
     assert np.array_equal(inertia_matrix(rows), np.stack([np.diag(r) for r in rows]))
     assert np.array_equal(inertia_matrix([1.0, 2.0, 3.0]), np.diag([1.0, 2.0, 3.0]))
-    full = np.arange(18.0).reshape(2, 9)
+    a = np.arange(18.0).reshape(2, 3, 3)
+    full = (a @ np.swapaxes(a, 1, 2) + 10.0 * np.eye(3)).reshape(2, 9)  # symmetric positive definite
     assert np.array_equal(inertia_matrix(full), full.reshape(2, 3, 3))
     assert np.array_equal(inertia_matrix(full[0]), full[0].reshape(3, 3))
+    # the one inertia_matrix of the package checks what the plant and the law both read
+    with pytest.raises(ScenarioError, match="symmetric"):
+        inertia_matrix(np.arange(9.0))
+    with pytest.raises(ScenarioError, match="positive definite"):
+        inertia_matrix([1.0, -2.0, 3.0])
 
 
 def test_per_episode_inertia_is_each_episodes_own_matrix():

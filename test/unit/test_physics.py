@@ -7,7 +7,8 @@ from scipy.integrate import solve_ivp
 from attitude_sil.core.plant.quaternion import euler_from_quat
 from attitude_sil.core.plant.rigid_body import BodyState, inertial_momentum, rk4_step
 from attitude_sil.core.plant.wheels import MotorParams, WheelAssembly, hst_pyramid
-from attitude_sil.core.sim.engine import build_plant, build_wheels, simulate
+from attitude_sil.core.sim.build import build_plant, build_wheels
+from attitude_sil.core.sim.engine import simulate
 from attitude_sil.core.sim.scenario import load_scenario, scenario_from_dict
 from conftest import CONFIG
 

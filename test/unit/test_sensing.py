@@ -28,7 +28,8 @@ from attitude_sil.core.sensing.models import (
     Tachometer,
     allan_variance_model,
 )
-from attitude_sil.core.sim.engine import build_sensing, simulate
+from attitude_sil.core.sim.build import build_sensing
+from attitude_sil.core.sim.engine import simulate
 from attitude_sil.core.sim.scenario import load_scenario
 from attitude_sil.errors import ScenarioError
 from conftest import CONFIG
@@ -251,7 +252,7 @@ def test_truth_feedback_leaves_the_controller_as_it_was_and_estimate_feedback_cl
     closed = simulate(scn.with_values("scenario", feedback="estimate"), 1, duration=5.0)
     assert not np.array_equal(plain.u_cmd, closed.u_cmd)
     # the loop reads the estimate: the PID's command at step 0 is what it gives on the filter's output
-    from attitude_sil.core.sim.engine import build_controller
+    from attitude_sil.core.sim.build import build_controller
     ctrl = build_controller(scn, 1)
     u0 = ctrl.compute(closed.q_BN_est[:, 0], closed.omega_BN_B_est[:, 0], closed.q_RN[:, 0], closed.omega_RN_R[:, 0],
                       0)

@@ -13,11 +13,35 @@ episodes stays packed).
 from __future__ import annotations
 
 import math
+from enum import IntEnum
 
 import numpy as np
 from numba import njit
 
-__all__ = ["arctan2", "euler_axis", "first_crossing"]
+__all__ = ["Sums", "arctan2", "euler_axis", "first_crossing"]
+
+
+class Sums(IntEnum):
+    """The columns of the batch engine's running sums per episode, by name (the member's value is its column).
+
+    The compiled loop (:mod:`attitude_sil.core.sim.batch_loop`) writes them,
+    :func:`attitude_sil.core.analysis.metrics.step_summary` reads them; both
+    index by these names, so a column means one thing everywhere.
+    """
+
+    time_constant_s = 0  #: first time the response reaches 63.2 % of the step, s after it
+    t10_s = 1  #: first time at 10 %, s
+    t90_s = 2  #: first time at 90 %, s
+    max_fraction = 3  #: the largest fraction of the step reached (overshoot = max(0, this - 1))
+    settling_time_s = 4  #: the sample after the last one outside the band, s; 0 never left, NaN never settled
+    steady_state_error_rad = 5  #: |error| at the last sample, rad
+    iae = 6  #: integral of |error| after the step, rad s (trapezoid)
+    ise = 7  #: integral of error^2, rad^2 s
+    itae = 8  #: integral of t |error|, rad s^2
+    control_effort_Nms = 9  #: integral of |tau_c|, N m s
+    finite = 10  #: 1.0 while every rate and command has been finite, else 0.0
+    peak_command = 11  #: largest |command| (V or N m); inf after a NaN
+    peak_wheel_speed = 12  #: largest |wheel speed|, rad/s; inf after a NaN
 
 
 #: Cephes' arctangent (``atan.c``, S. L. Moshier): tan(3 pi / 8), the rational approximation's numerator and

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from attitude_sil.core.analysis.metric_rows import Sums
 from attitude_sil.core.analysis.pointing import pointing_columns, pointing_errors, pointing_metrics, pointing_start
 from attitude_sil.core.plant.quaternion import euler_from_quat, quat_error, quat_multiply
 from attitude_sil.core.trajectory import EpisodeSummary, Trajectory
@@ -278,7 +279,7 @@ def step_summary(sums: np.ndarray, scenario_values: dict, span: np.ndarray) -> E
 
     Parameters
     ----------
-    sums : (P, len(batch.SUMMARY_COLUMNS))
+    sums : (P, len(Sums))
         Running sums (:func:`attitude_sil.core.sim.batch.run_compiled` with ``sums``).
     scenario_values : dict
         The ``scenario`` node's values (``metrics.tau_d``, ``metrics.w_os``).
@@ -287,17 +288,18 @@ def step_summary(sums: np.ndarray, scenario_values: dict, span: np.ndarray) -> E
         has no time constant, rise, settling or overshoot (NaN), as in
         :func:`step_metrics`.
     """
-    tc, t10, t90, f_max, settle = (sums[:, i].copy() for i in range(5))
+    tc, t10, t90, f_max, settle = (sums[:, c].copy() for c in (Sums.time_constant_s, Sums.t10_s, Sums.t90_s,
+                                                                Sums.max_fraction, Sums.settling_time_s))
     overshoot = np.maximum(0.0, f_max - 1.0) * 100.0
     zero_step = np.asarray(span) == 0.0
     for arr in (tc, t10, t90, overshoot, settle):
         arr[zero_step] = np.nan
-    m = {"time_constant_s": tc, "rise_time_s": t90 - t10, "settling_time_s": settle, "overshoot_pct": overshoot,
-         "steady_state_error_rad": sums[:, 5].copy(), "iae": sums[:, 6].copy(), "ise": sums[:, 7].copy(),
-         "itae": sums[:, 8].copy(), "control_effort_Nms": sums[:, 9].copy()}
+    m = {"time_constant_s": tc, "rise_time_s": t90 - t10, "settling_time_s": settle, "overshoot_pct": overshoot}
+    for c in (Sums.steady_state_error_rad, Sums.iae, Sums.ise, Sums.itae, Sums.control_effort_Nms):
+        m[c.name] = sums[:, c].copy()
     m["cost_J"] = np.abs(tc - scenario_values["metrics.tau_d"]) + scenario_values["metrics.w_os"] * overshoot
-    return EpisodeSummary(metrics=m, finite=sums[:, 10] > 0.5, peak_command=sums[:, 11].copy(),
-                          peak_wheel_speed=sums[:, 12].copy())
+    return EpisodeSummary(metrics=m, finite=sums[:, Sums.finite] > 0.5, peak_command=sums[:, Sums.peak_command].copy(),
+                          peak_wheel_speed=sums[:, Sums.peak_wheel_speed].copy())
 
 
 def segment_metrics(

@@ -103,8 +103,8 @@ def every_row(step, q, w, q_r, w_r, par, st, dt, u):
     A branch on a mode switch of the record (``par.angle_mode``) is the same
     for every episode, but inside one loop LLVM turns it into a select and
     evaluates both sides for every lane: the angle mode's three ``asin``
-    calls, scalar, on every PID step (30-45 ns per episode instead of 12-14
-    in one run). With a loop per value, the condition is known inside each
+    calls, scalar, on every PID step, more than doubling its cost. With a
+    loop per value, the condition is known inside each
     and the branch disappears. Up to :data:`MAX_VERSIONED_FLAGS` fields, in
     the record's order.
     """

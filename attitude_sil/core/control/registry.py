@@ -47,8 +47,7 @@ def _law_of(obj, where: str) -> Law:
 @lru_cache(maxsize=1)
 def _plugin_entry_points() -> tuple:
     """The group's entry points by name, read once per process: the read opens every installed distribution's
-    metadata (16-24 ms here, on each ``attitude-sil`` command's start, where the help and the registry both
-    asked)."""
+    metadata, a noticeable share of each ``attitude-sil`` command's start."""
     return tuple(sorted(entry_points(group=ENTRY_POINT_GROUP), key=lambda e: e.name))
 
 

@@ -1,6 +1,6 @@
 """Actuators other than the PMDC reaction wheels, batch over episodes.
 
-Same interface as :class:`attitude_sil.core.sim.engine.Wheels`: ``advance(cmd,
+Same interface as :class:`attitude_sil.core.sim.models.Wheels`: ``advance(cmd,
 torque_mode)`` holds a body-axis command over one step and returns a
 :class:`~attitude_sil.core.trajectory.WheelStep` (momentum at t_k, mean torque on
 the body over the step, per-actuator position, velocity, effort).

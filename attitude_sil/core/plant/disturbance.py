@@ -260,7 +260,7 @@ class DisturbanceModel:
             tau[:, v["impulse.axis"]] += self._impulse(k) * v["impulse.magnitude"] / self.dt
         if "noise" in self.models:
             # the mean of the step's samples, summed in order (as ndarray.mean over the sample axis): step_means's
-            # numbers, here in numpy (a Generator passed into compiled code costs 20 us a call, once per episode)
+            # numbers, here in numpy (a Generator passed into compiled code is boxed anew on every call)
             draws = np.add.reduce(self._noise(), axis=1) / self.samples_per_step
             tau += draws * self.noise_std
         if "gravity_gradient_linear" in self.models:

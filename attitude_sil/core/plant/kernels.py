@@ -1,7 +1,7 @@
 """Compiled steps of the plant over P episodes in row-major arrays, for the nodes and the stepwise driver.
 
-Profiling the batch engine at P = 50 showed ~300 small numpy calls per step,
-each ~1 us: call overhead, not arithmetic, set the speed. These kernels do the
+A step written as numpy calls is hundreds of small calls whose overhead, not
+their arithmetic, sets the speed. These kernels do the
 same arithmetic as the documented equations in one compiled call. The body
 and the wheels copy their rows into lanes and run the stages of
 :mod:`attitude_sil.core.plant.lanes`, which the batch engine runs on its

@@ -5,7 +5,7 @@ array whose columns are the episodes (structure of arrays): row ``Q`` of the
 body block is the x part of every episode's attitude, ``Q + 3`` the scalar
 part. Each stage of the step is a short loop over the columns with
 straight-line arithmetic inside: the shape the compiler turns into packed
-instructions (4 doubles per AVX2 instruction). What bench/README.md measured
+instructions (as many doubles per instruction as the CPU's vector width holds). What bench/README.md measured
 on the way, and what these functions therefore keep to:
 
 * one 2-D array per block, not a 1-D array per quantity: every array an
@@ -39,7 +39,8 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-__all__ = ["BODY_ROWS", "MOTOR_ROWS", "Q", "W", "H", "TC", "TE", "II", "IV", "U", "rk4_body_lanes", "wheel_lanes",
+__all__ = ["BODY_ROWS", "MOTOR_ROWS", "ANGLE", "CURRENT", "SPEED",
+           "Q", "W", "H", "TC", "TE", "II", "IV", "U", "rk4_body_lanes", "wheel_lanes",
            "motor_lanes", "body_block", "rows_to_lanes", "lanes_to_rows", "mat_to_lanes", "wheels_to_lanes",
            "lanes_to_wheels", "copy_wheels", "column_major"]
 
@@ -52,6 +53,10 @@ II, IV, U = 16, 25, 34
 K1Q, K1W, K2Q, K2W, K3Q, K3W, K4Q, K4W = 37, 41, 44, 48, 51, 55, 58, 62
 TQ, TW, TH, BIG_H = 65, 69, 72, 75
 BODY_ROWS = 78
+
+# ---------------------------------------------------------------- a wheel's state (n, 3, m), (P, n, 3)
+#: the motor state's components: rotor angle rad, armature current A, rotor speed rad/s
+ANGLE, CURRENT, SPEED = 0, 1, 2
 
 # ---------------------------------------------------------------- the motor block's rows
 #: each episode's motor: phi_T (row-major), gamma, K_b, K_i, R_a i_max, R_a; scratch: the drive voltage,
@@ -247,7 +252,7 @@ def _drive(m, j, xw, b, mot, torque, wp):
     a0, a1, a2 = wp.allocation[j, 0], wp.allocation[j, 1], wp.allocation[j, 2]
     b_m, speed_max, v_max = wp.b_m, wp.speed_max, wp.v_max
     for p in range(m):
-        speed = xw[j, 2, p]
+        speed = xw[j, SPEED, p]
         v = -(a0 * b[U, p] + a1 * b[U + 1, p] + a2 * b[U + 2, p])
         emf = mot[KB, p] * speed
         if torque[p]:  # wheel torque -> steady current -> volts
@@ -309,18 +314,19 @@ def wheel_lanes(m, lo, k, xw, xn, b, mot, torque, wp, fail):
             _fail(m, j, lo, k, fail, mot)
         for r in range(3):  # the exact motor step, one state at a time (few rows written per loop)
             for p in range(m):
-                xn[j, r, p] = (xw[j, 0, p] * mot[PHI + r, p] + xw[j, 1, p] * mot[PHI + 3 + r, p]
-                               + xw[j, 2, p] * mot[PHI + 6 + r, p] + mot[E, p] * mot[GAMMA + r, p])
+                xn[j, r, p] = (xw[j, ANGLE, p] * mot[PHI + r, p] + xw[j, CURRENT, p] * mot[PHI + 3 + r, p]
+                               + xw[j, SPEED, p] * mot[PHI + 6 + r, p] + mot[E, p] * mot[GAMMA + r, p])
         if failing:  # open circuit: no current, the wheel coasts down on its viscous friction
             for p in range(m):
                 if mot[LOST, p] != 0.0:
-                    speed = xw[j, 2, p]
-                    xn[j, 0, p], xn[j, 1, p], xn[j, 2, p] = xw[j, 0, p] + coast1 * speed, 0.0, coast0 * speed
+                    speed = xw[j, SPEED, p]
+                    xn[j, ANGLE, p] = xw[j, ANGLE, p] + coast1 * speed
+                    xn[j, CURRENT, p], xn[j, SPEED, p] = 0.0, coast0 * speed
         for i in range(3):
             x_i = axes[i, j]
             for p in range(m):
-                b[H + i, p] += x_i * (xw[j, 2, p] * j_m)
-                b[TC + i, p] += x_i * (xn[j, 2, p] * j_m)
+                b[H + i, p] += x_i * (xw[j, SPEED, p] * j_m)
+                b[TC + i, p] += x_i * (xn[j, SPEED, p] * j_m)
     dt = wp.dt
     for i in range(3):
         for p in range(m):

@@ -3,7 +3,7 @@
 Both are linear with inputs held over each control step, so each step is
 integrated exactly with the matrix exponential of the augmented system
 ``[[A, B], [0, 0]]``. They present the same interface as
-:class:`attitude_sil.core.sim.engine.Plant` (``state.q_BN``, ``state.omega_BN_B``,
+:class:`attitude_sil.core.sim.models.Plant` (``state.q_BN``, ``state.omega_BN_B``,
 ``advance``, ``reset``): the attitude is a rotation about the model's axis, so
 the rest of the graph (controller, recorder, metrics) is unchanged.
 

@@ -22,8 +22,9 @@ import numpy as np
 
 from attitude_sil.core.plant.kernels import rk4_body
 from attitude_sil.core.plant.quaternion import cross, quat_derivative, quat_to_dcm
+from attitude_sil.errors import ScenarioError
 
-__all__ = ["BodyState", "body_derivatives", "rk4_step", "inertial_momentum"]
+__all__ = ["BodyState", "body_derivatives", "rk4_step", "inertial_momentum", "inertia_matrix"]
 
 
 @dataclass
@@ -130,3 +131,18 @@ def inertial_momentum(
     ``H_N = R_NB (I ω + h_w)``; constant when no external torque acts.
     """
     return _matvec(quat_to_dcm(q_BN), _matvec(inertia, omega_BN_B) + h_wheels_B)
+
+
+def inertia_matrix(values) -> np.ndarray:
+    """3 principal values or 9 row-major entries (or (P, 3) / (P, 9)) -> (..., 3, 3) kg m^2.
+
+    Raises ``ValueError`` unless symmetric and positive definite.
+    """
+    v = np.asarray(values, dtype=float)
+    m = v[..., :, None] * np.eye(3) if v.shape[-1] == 3 else v.reshape(v.shape[:-1] + (3, 3))
+    mt = np.swapaxes(m, -1, -2)
+    if not np.all(np.abs(m - mt) <= 1e-8 + 1e-5 * np.abs(mt)):  # np.allclose's test, without its overhead
+        raise ScenarioError("inertia must be symmetric")
+    if np.any(np.linalg.eigvalsh(m) <= 0.0):
+        raise ScenarioError("inertia must be positive definite")
+    return m

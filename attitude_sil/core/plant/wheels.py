@@ -33,6 +33,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from attitude_sil.core.plant.kernels import WheelFailure, WheelParams, expm_small, wheel_step
+from attitude_sil.core.plant.lanes import CURRENT, SPEED
 from attitude_sil.errors import ScenarioError
 
 __all__ = [
@@ -204,16 +205,16 @@ class WheelAssembly:
         """Wheel state array (P, n, 3): angle rad, current A, speed rad/s."""
         x = np.zeros((n_episodes, self.n_wheels, 3))
         if speed0 is not None:
-            x[:, :, 2] = speed0
+            x[:, :, SPEED] = speed0
         return x
 
     def momentum_B(self, x: np.ndarray) -> np.ndarray:
         """Wheel angular momentum in B (eq. 17), (P, 3) N m s."""
-        return (x[:, :, 2] * self.motor.rotor_inertia) @ self.axes_B.T
+        return (x[:, :, SPEED] * self.motor.rotor_inertia) @ self.axes_B.T
 
     def motor_torque(self, x: np.ndarray) -> np.ndarray:
         """Electromagnetic torque K_i i_a on each wheel (each episode's K_i), (P, n) N m."""
-        return self.k_i_e[:, None] * x[:, :, 1]
+        return self.k_i_e[:, None] * x[:, :, CURRENT]
 
     def wheel_voltages(self, v_cmd_B: np.ndarray, x: np.ndarray) -> np.ndarray:
         """Body-axis voltage command to limited per-wheel voltages, (P, n) V.
@@ -224,7 +225,7 @@ class WheelAssembly:
         """
         m = self.motor
         e = -(v_cmd_B @ self.allocation.T)
-        speed = x[:, :, 2]
+        speed = x[:, :, SPEED]
         emf = m.back_emf_constant * speed
         headroom = m.resistance * m.current_max
         e = np.clip(e, emf - headroom, emf + headroom)

@@ -1,7 +1,7 @@
 """Whole episodes in compiled code: the batch engine's second driver of the step kernels.
 
 The nodes call the compiled step kernels of :mod:`attitude_sil.core.plant.kernels`
-once per message, through the objects of :mod:`attitude_sil.core.sim.engine`; the
+once per message, through the objects of :mod:`attitude_sil.core.sim.models`; the
 stepwise :func:`~attitude_sil.core.sim.engine.simulate` loop calls the same objects
 once per step from Python. This module is the third caller: one compiled loop
 over every step of a chunk of episodes, calling the *same* kernels with the
@@ -14,8 +14,8 @@ result is identical for any number of threads.
 What the compiled driver covers (the tuning and Monte Carlo workhorse: the HST
 and CubeSat presets and their kind): the ``rigid_body`` plant, the
 ``reaction_wheels`` actuator, ``step`` guidance, the ``constant``, ``step``
-and ``noise`` disturbance models (or none), and every law (``pid``,
-``fuzzy_pid``, ``ga_flc``, ``geometric``): one per episode if asked, with
+and ``noise`` disturbance models (or none), and every law of the registry,
+built in or plugin: one per episode if asked, with
 scheduled swaps and the controller bank's bumpless transfer, per-episode gains,
 motor constants, wheel failures and sensor noise (the Monte Carlo's
 dispersions; the same kernels as the nodes'). Noise torques are drawn from the
@@ -35,6 +35,7 @@ from typing import NamedTuple
 import numba
 import numpy as np
 
+from attitude_sil.core.analysis.metric_rows import Sums
 from attitude_sil.core.control import registry
 from attitude_sil.core.control.compiled import dispatch_module, law_addresses
 from attitude_sil.core.plant.kernels import WheelFailure, WheelParams
@@ -48,10 +49,8 @@ __all__ = ["COMPILED_DISTURBANCES", "SUMMARY_COLUMNS", "TRAJECTORY_FIELDS", "run
 COMPILED_DISTURBANCES = frozenset({"constant", "step", "noise"})
 
 
-#: columns of the running sums the compiled driver keeps per episode (``summary=True``)
-SUMMARY_COLUMNS = ("time_constant_s", "t10_s", "t90_s", "max_fraction", "settling_time_s", "steady_state_error_rad",
-                   "iae", "ise", "itae", "control_effort_Nms", "finite", "peak_command", "peak_wheel_speed")
-assert len(SUMMARY_COLUMNS) == batch_loop.N_SUMS
+#: columns of the running sums the compiled driver keeps per episode (``sums``), in column order
+SUMMARY_COLUMNS = tuple(c.name for c in Sums)
 
 
 class SimArrays(NamedTuple):
@@ -114,9 +113,8 @@ class SumsSpec(NamedTuple):
 
 
 #: episodes per chunk, the block the plant's lanes span (at most; fewer where the threads would idle). Each
-#: step of a chunk costs about 0.2 us whatever its size (the stages' loop set-up, the law's call at its
-#: address), so a larger block spreads it thinner while the block stays in L2: on the HST roll step, two
-#: threads, 128 ran 1-5 % faster than 64 in six alternated pairs (bench/README.md), 256 slower
+#: step of a chunk has a cost whatever its size (the stages' loop set-up, the law's call at its address), so a
+#: larger block spreads it thinner while the block stays in L2; bench/README.md has the measured choice
 CHUNK = 128
 
 
@@ -171,7 +169,7 @@ def run_compiled(models: tuple, n_steps: int, dt: float, stride: int = 1, thread
     ----------
     models : tuple
         ``(plant, wheels, dist, guide, ctrl)``: fresh models from the
-        ``build_*`` functions of :mod:`attitude_sil.core.sim.engine` (``Plant``,
+        ``build_*`` functions of :mod:`attitude_sil.core.sim.build` (``Plant``,
         ``Wheels``, ``DisturbanceModel``, ``Guidance``, ``ControllerBank``)
         that :func:`attitude_sil.core.sim.engine.compiled_plan` accepted.
     n_steps : int
@@ -211,7 +209,7 @@ def run_compiled(models: tuple, n_steps: int, dt: float, stride: int = 1, thread
     plant, wheels, dist, _, ctrl = models
     P = plant.n_episodes
     swaps = dict(swaps or {})
-    if laws is None:  # every episode on the bank's law (no per-episode lookup: 2 ms at P = 16,384)
+    if laws is None:  # every episode on the bank's law: np.full, no lookup per episode
         laws = np.full(P, ctrl.active, dtype=object)
         law0, used = np.full(P, ctrl.codes[ctrl.active], dtype=np.int64), {ctrl.active}
     else:
@@ -271,7 +269,7 @@ def _sums_spec(sums: tuple | None, P: int) -> SumsSpec:
 _NO_NOISE = np.zeros((0, 0, 3))
 
 #: the laws' compiled loops' addresses by law set, laws run and the records' field kinds (what fixes their numba
-#: types once _rows has laid them out): typing the records took about 1 ms of a one-episode call
+#: types once _rows has laid them out): typing the records is a large share of a one-episode call
 _ADDRESSES: dict[tuple, np.ndarray] = {}
 
 

@@ -18,13 +18,18 @@ copies (m, width) made once per step.
 
 from __future__ import annotations
 
+from enum import IntEnum
+
 import numpy as np
 from numba import njit
 
-from attitude_sil.core.analysis.metric_rows import euler_axis, first_crossing
+from attitude_sil.core.analysis.metric_rows import Sums, euler_axis, first_crossing
 from attitude_sil.core.control.dispatch import command_stage, enter_at, reset_row
 from attitude_sil.core.plant.kernels import WheelFailure, measure_row, wheel_params_copy
 from attitude_sil.core.plant.lanes import (
+    ANGLE,
+    CURRENT,
+    SPEED,
     TC,
     TE,
     H,
@@ -42,8 +47,16 @@ from attitude_sil.core.plant.lanes import (
     wheels_to_lanes,
 )
 
-#: number of running-sum columns (batch.SUMMARY_COLUMNS)
-N_SUMS = 13
+#: number of running-sum columns
+N_SUMS = len(Sums)
+
+
+class Previous(IntEnum):
+    """The rows of the running sums' previous sample (3, m)."""
+
+    fraction = 0  #: the response as a fraction of the step
+    time = 1  #: time after the step, s
+    error = 2  #: error, rad
 
 
 @njit(cache=True, inline="always")
@@ -100,11 +113,11 @@ def _keep_wheels(o_ws, o_wa, o_we, r, lo, xw, k_i):
         e = lo + p
         for j in range(xw.shape[0]):
             if o_wa.shape[0] > 0:
-                o_wa[e, r, j] = xw[j, 0, p]
+                o_wa[e, r, j] = xw[j, ANGLE, p]
             if o_ws.shape[0] > 0:
-                o_ws[e, r, j] = xw[j, 2, p]
+                o_ws[e, r, j] = xw[j, SPEED, p]
             if o_we.shape[0] > 0:
-                o_we[e, r, j] = k_i[e if k_i.shape[0] > 1 else 0] * xw[j, 1, p]
+                o_we[e, r, j] = k_i[e if k_i.shape[0] > 1 else 0] * xw[j, CURRENT, p]
 
 
 @njit(cache=True, inline="always")
@@ -136,7 +149,7 @@ def chunk(lo, hi, sim, recs, noise, noise_lo, out, sums, at):
 @njit(cache=True, nogil=True, error_model="numpy")
 def chunk_one(lo, hi, sim, recs, noise, noise_lo, out, sums, at):
     """:func:`chunk` for one episode (``hi == lo + 1``): the block's width is a constant there, so LLVM
-    drops every stage's loop over the episodes (a loop of one pays its vector preamble: 0.37 us a step)."""
+    drops every stage's loop over the episodes (a loop of one would pay its vector preamble every step)."""
     _chunk(lo, lo + 1, 1, sim, recs, noise, noise_lo, out, sums, at)
 
 
@@ -242,9 +255,9 @@ def _sums_start(m):
     # previous sample (fraction of the step, time after it, error) (3, m); the sample's angle (m,)
     acc = np.zeros((N_SUMS, m))
     for p in range(m):
-        acc[0, p] = acc[1, p] = acc[2, p] = np.nan
-        acc[3, p] = -np.inf
-        acc[10, p] = 1.0
+        acc[Sums.time_constant_s, p] = acc[Sums.t10_s, p] = acc[Sums.t90_s, p] = np.nan
+        acc[Sums.max_fraction, p] = -np.inf
+        acc[Sums.finite, p] = 1.0
     return acc, np.full(m, -1), np.zeros((3, m)), np.empty(m)
 
 
@@ -254,10 +267,10 @@ def _sums_end(state, n_after, sums_out, lo):
     acc, last_out, prev, _ = state
     for p in range(acc.shape[1]):
         if last_out[p] < 0:
-            acc[4, p] = 0.0
+            acc[Sums.settling_time_s, p] = 0.0
         elif last_out[p] == n_after - 1:
-            acc[4, p] = np.nan
-        acc[5, p] = abs(prev[2, p])
+            acc[Sums.settling_time_s, p] = np.nan
+        acc[Sums.steady_state_error_rad, p] = abs(prev[Previous.error, p])
         for c in range(N_SUMS):
             sums_out[lo + p, c] = acc[c, p]
 
@@ -270,15 +283,17 @@ def _accumulate_checks(acc, m, k, t, n_steps, dt, b, xw):
         for i in range(3):
             w_i, u_i = b[W + i, p], b[U + i, p]
             if not (np.isfinite(w_i) and np.isfinite(u_i)):
-                acc[10, p] = 0.0
-            acc[11, p] = max(acc[11, p], abs(u_i)) if not np.isnan(u_i) else np.inf
+                acc[Sums.finite, p] = 0.0
+            acc[Sums.peak_command, p] = max(acc[Sums.peak_command, p], abs(u_i)) if not np.isnan(u_i) else np.inf
     for j in range(xw.shape[0]):
         for p in range(m):
-            acc[12, p] = max(acc[12, p], abs(xw[j, 2, p])) if not np.isnan(xw[j, 2, p]) else np.inf
+            speed = xw[j, SPEED, p]
+            peak = acc[Sums.peak_wheel_speed, p]
+            acc[Sums.peak_wheel_speed, p] = max(peak, abs(speed)) if not np.isnan(speed) else np.inf
     if k < n_steps:
         for p in range(m):
             tc0, tc1, tc2 = b[TC, p], b[TC + 1, p], b[TC + 2, p]
-            acc[9, p] += np.sqrt(tc0 ** 2 + tc1 ** 2 + tc2 ** 2) * ((k + 1) * dt - t)
+            acc[Sums.control_effort_Nms, p] += np.sqrt(tc0 ** 2 + tc1 ** 2 + tc2 ** 2) * ((k + 1) * dt - t)
 
 
 @njit(cache=True, inline="always")
@@ -297,19 +312,21 @@ def _accumulate_response(state, m, ta, n_after, b, response, lo):
     for p in range(m):
         span = r_fin[lo + p] - y0[lo + p]
         f = (y[p] - y0[lo + p]) / (1.0 if span == 0.0 else span)
-        f_prev, ta_prev, err_prev = prev[0, p], prev[1, p], prev[2, p]
-        acc[0, p] = first_crossing(acc[0, p], 0.632, f, f_prev, ta, ta_prev, first)
-        acc[1, p] = first_crossing(acc[1, p], 0.1, f, f_prev, ta, ta_prev, first)
-        acc[2, p] = first_crossing(acc[2, p], 0.9, f, f_prev, ta, ta_prev, first)
-        acc[3, p] = max(acc[3, p], f)
+        f_prev, ta_prev, err_prev = prev[Previous.fraction, p], prev[Previous.time, p], prev[Previous.error, p]
+        tc = first_crossing(acc[Sums.time_constant_s, p], 0.632, f, f_prev, ta, ta_prev, first)
+        acc[Sums.time_constant_s, p] = tc
+        acc[Sums.t10_s, p] = first_crossing(acc[Sums.t10_s, p], 0.1, f, f_prev, ta, ta_prev, first)
+        acc[Sums.t90_s, p] = first_crossing(acc[Sums.t90_s, p], 0.9, f, f_prev, ta, ta_prev, first)
+        acc[Sums.max_fraction, p] = max(acc[Sums.max_fraction, p], f)
         if abs(y[p] - r_fin[lo + p]) > band * abs(span):
             last_out[p] = n_after
         elif last_out[p] == n_after - 1 and last_out[p] >= 0:
-            acc[4, p] = ta  # settled: the first sample after the last one outside the band, unless it leaves again
+            # settled: the first sample after the last one outside the band, unless it leaves again
+            acc[Sums.settling_time_s, p] = ta
         err = r_fin[lo + p] - y[p]
         if not first:
             d = ta - ta_prev
-            acc[6, p] += 0.5 * (abs(err) + abs(err_prev)) * d
-            acc[7, p] += 0.5 * (err ** 2 + err_prev ** 2) * d
-            acc[8, p] += 0.5 * (ta * abs(err) + ta_prev * abs(err_prev)) * d
-        prev[0, p], prev[1, p], prev[2, p] = f, ta, err
+            acc[Sums.iae, p] += 0.5 * (abs(err) + abs(err_prev)) * d
+            acc[Sums.ise, p] += 0.5 * (err ** 2 + err_prev ** 2) * d
+            acc[Sums.itae, p] += 0.5 * (ta * abs(err) + ta_prev * abs(err_prev)) * d
+        prev[Previous.fraction, p], prev[Previous.time, p], prev[Previous.error, p] = f, ta, err

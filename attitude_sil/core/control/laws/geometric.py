@@ -35,8 +35,9 @@ from attitude_sil.core.control.law import Law, lanes
 from attitude_sil.core.paramspec import ParamSpec, distinct, double, double_array, inertia_rule
 from attitude_sil.core.plant.disturbance import aerodynamic_torque, gravity_gradient_torque, orbit_rate
 from attitude_sil.core.plant.quaternion import cross, quat_to_dcm
+from attitude_sil.core.plant.rigid_body import inertia_matrix
 
-__all__ = ["LAW", "Params", "geometric_row", "torque_reference", "skew_vee", "inertia_matrix"]
+__all__ = ["LAW", "Params", "geometric_row", "torque_reference", "skew_vee"]
 
 _HST_INERTIA = [31.046, 77.217, 78.754]
 
@@ -114,13 +115,6 @@ def step(q_BN, omega_BN_B, q_RN, omega_RN_R, p, par, st, dt, u):
     for i in range(3):
         st.w_d_prev[p, i] = omega_RN_R[p, i]
     st.has_prev[p, 0] = True
-
-
-def inertia_matrix(values) -> np.ndarray:
-    """``geometric.inertia`` (3 diagonal or 9 values, or per-episode rows of them) as (..., 3, 3)."""
-    v = np.asarray(values, dtype=float)
-    return np.diag(v) if v.shape == (3,) else (v[..., :, None] * np.eye(3) if v.shape[-1] == 3
-                                                else v.reshape(v.shape[:-1] + (3, 3)))
 
 
 def _record(values, n: int, dt: float) -> Params:

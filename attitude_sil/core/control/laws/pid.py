@@ -73,7 +73,7 @@ def pid_axis(e, i, p, par, st, dt):
     raw = par.kp[p, i] * e + par.ki[p, i] * (st.integral[p, i] + 0.5 * e * dt) + par.kd[p, i] * deriv
     out = min(max(raw, -par.u_max), par.u_max)
     # conditional integration as a select, stored either way: on the episode axis a conditional store is a
-    # masked store, which this machine class (AMD EPYC) runs many times slower than a plain one
+    # masked store, which some CPUs run many times slower than a plain one
     held = out != raw and e * raw > 0.0
     st.integral[p, i] = st.integral[p, i] if held else st.integral[p, i] + e * dt
     st.filt[p, i] = a * st.filt[p, i] + (1.0 - a) * e

@@ -1,0 +1,187 @@
+"""The lockstep step objects: the models every driver steps, the graph's nodes one message at a time.
+
+The five graph nodes each hold one of these objects (or a controller bank,
+:class:`~attitude_sil.core.control.bank.ControllerBank`) and call exactly the
+methods the drivers of :mod:`attitude_sil.core.sim.engine` call, in the same
+order, so a run through the ROS graph and the batch engine with P = 1
+produce the same numbers (docs/architecture.md, "Lockstep"). One control
+step k of the lockstep protocol:
+
+1. ``Plant.state`` at t_k (published as ``attitude``, ``body_rate``);
+2. ``Guidance.setpoint(t_k)`` and ``DisturbanceModel.torque(q_BN)``;
+3. ``ControllerBank.compute(...)`` -> command held over ``[t_k, t_k+1]``;
+4. ``Wheels.advance(command)`` -> momentum at t_k and mean torque;
+5. ``Plant.advance(tau_c, h_w, tau_ext)`` -> state at t_k+1.
+
+Every object carries a leading episode axis P. :mod:`attitude_sil.core.sim.build`
+builds them from a scenario.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from attitude_sil.core.plant.disturbance import lvlh_attitude
+from attitude_sil.core.plant.kernels import WheelFailure
+from attitude_sil.core.plant.lanes import ANGLE, SPEED
+from attitude_sil.core.plant.quaternion import quat_from_euler
+from attitude_sil.core.plant.rigid_body import BodyState, rk4_step
+from attitude_sil.core.plant.wheels import WheelAssembly
+from attitude_sil.core.sensing.mekf import Mekf
+from attitude_sil.core.sensing.models import SensorSuite
+from attitude_sil.core.trajectory import WheelStep
+
+__all__ = ["Plant", "Wheels", "Guidance", "Sensing", "SENSING_FIELDS", "per_episode"]
+
+
+def per_episode(value, n: int, width: int) -> np.ndarray:
+    """Broadcast a (width,) or (P, width) value to (P, width)."""
+    a = np.asarray(value, dtype=float)
+    return np.array(np.broadcast_to(a, (n, width)))
+
+
+def _inverse(m: np.ndarray) -> np.ndarray:
+    """``np.linalg.inv(m)`` for a stack (..., 3, 3), the same bits, inverted once where every matrix is the
+    first (the common case: one inertia for all episodes, where a LAPACK call per 3 x 3 dominates a large
+    batch's set-up)."""
+    if m.ndim == 3 and m.shape[0] > 1 and np.array_equal(m, np.broadcast_to(m[:1], m.shape)):
+        return np.repeat(np.linalg.inv(m[:1]), m.shape[0], axis=0)
+    return np.linalg.inv(m)
+
+
+class Plant:
+    """Spacecraft body: RK4 over each held-input interval (paper 000 eq. 4, 10-11)."""
+
+    def __init__(self, inertia: np.ndarray, dt: float, substeps: int,
+                 q0: np.ndarray, omega0: np.ndarray) -> None:
+        self.inertia = np.asarray(inertia, dtype=float)
+        self.inertia_inv = _inverse(self.inertia)
+        self.dt = float(dt)
+        self.substeps = int(substeps)
+        self.q0 = np.asarray(q0, dtype=float)
+        self.omega0 = np.asarray(omega0, dtype=float)
+        self.reset()
+
+    @property
+    def n_episodes(self) -> int:
+        return self.q0.shape[0]
+
+    def reset(self) -> None:
+        """Return to the initial state (wheel momentum comes from the wheels each step)."""
+        self.state = BodyState(self.q0.copy(), self.omega0.copy(), np.zeros_like(self.omega0))
+
+    def advance(self, tau_c_B: np.ndarray, h_wheels_B: np.ndarray, tau_ext_B: np.ndarray) -> BodyState:
+        """Integrate from t_k to t_k+1 with the step's inputs.
+
+        Parameters
+        ----------
+        tau_c_B : (P, 3) N m, mean wheel torque on the body over the step
+        h_wheels_B : (P, 3) N m s, wheel momentum at t_k
+        tau_ext_B : (P, 3) N m, disturbance torque held over the step
+        """
+        self.state.h_wheels_B = np.asarray(h_wheels_B, dtype=float)
+        self.state = rk4_step(self.state, self.inertia, self.inertia_inv, tau_c_B, tau_ext_B,
+                              self.dt, self.substeps)
+        return self.state
+
+
+class Wheels:
+    """Reaction-wheel assembly driven by a body-axis voltage command.
+
+    ``failure`` is ``(wheel (P,) int, -1 none; step (P,) int; stuck (P,) bool)``:
+    from that step on the wheel is lost (open circuit) or its drive is stuck at
+    the voltage of the step before (:func:`attitude_sil.core.plant.kernels.wheel_step`).
+    """
+
+    def __init__(self, assembly: WheelAssembly, n_episodes: int, speed0: np.ndarray | None,
+                 failure: tuple | None = None) -> None:
+        self.assembly = assembly
+        self.n_episodes = n_episodes
+        self.speed0 = speed0
+        if failure is None or not np.any(np.asarray(failure[0]) >= 0):
+            self.failure = None
+        else:
+            wheel, step, stuck = (np.atleast_1d(np.asarray(a)) for a in failure)
+            f = n_episodes  # the held voltage is per episode
+            self.failure = (np.broadcast_to(wheel, (f,)).astype(np.int64), np.broadcast_to(step, (f,)).astype(np.int64),
+                            np.broadcast_to(stuck, (f,)).astype(np.bool_))
+        self.reset()
+
+    def reset(self) -> None:
+        self.x = self.assembly.initial_state(self.n_episodes, self.speed0)
+        self.k = 0
+        self.e_hold = None if self.failure is None else np.zeros(len(self.failure[0]))
+
+    @property
+    def names(self) -> list[str]:
+        return [f"wheel_{i + 1}" for i in range(self.assembly.n_wheels)]
+
+    def failure_arrays(self) -> WheelFailure | None:
+        """The kernel's failure record (with the held voltages, state), or None."""
+        return None if self.failure is None else WheelFailure(*self.failure, self.e_hold)
+
+    def advance(self, cmd_B: np.ndarray, torque_mode: bool = False) -> WheelStep:
+        """Hold a body-axis command (P, 3) over one step; return the step's outputs.
+
+        The command is a voltage (V), or with ``torque_mode`` a body torque (N m)
+        that the inverse motor model turns into voltages.
+        """
+        x = self.x
+        self.x, tau_c, h = self.assembly.advance(x, np.ascontiguousarray(cmd_B, dtype=float), torque_mode,
+                                                 self.k, self.failure_arrays())
+        self.k += 1
+        return WheelStep(h, tau_c, x[:, :, ANGLE], x[:, :, SPEED], self.assembly.motor_torque(x))
+
+
+class Guidance:
+    """Setpoints of the ``guidance`` node.
+
+    * ``step``: ``initial`` attitude until ``step_time``, then ``final``; zero rate.
+    * ``lvlh``: the orbit frame, ``q_RN(t) = q_LN(0) ⊗ R_y(Omega_0 t)`` with
+      ``omega_RN_R = [0, Omega_0, 0]`` (paper 001: the body tracks LVLH).
+    """
+
+    def __init__(self, initial_rpy_deg, final_rpy_deg, step_time: float, n_episodes: int, mode: str = "step",
+                 lvlh_rpy_deg=(0.0, 0.0, 0.0), orbit_rate_rad_s: float = 0.0) -> None:
+        self.mode = mode
+        self.n = n_episodes
+        self.q_initial = per_episode(quat_from_euler(np.radians(initial_rpy_deg)), n_episodes, 4)
+        self.q_final = per_episode(quat_from_euler(np.radians(final_rpy_deg)), n_episodes, 4)
+        self.step_time = float(step_time)
+        self.q_LN0 = quat_from_euler(np.radians(np.asarray(lvlh_rpy_deg, dtype=float)))
+        self.rate = float(orbit_rate_rad_s)
+        self.omega = np.zeros((n_episodes, 3))
+        if mode == "lvlh":
+            self.omega[:, 1] = self.rate
+
+    def setpoint(self, t: float) -> tuple[np.ndarray, np.ndarray]:
+        """Reference (q_RN (P, 4), omega_RN_R (P, 3) rad/s) at sim time t."""
+        if self.mode == "lvlh":
+            return per_episode(lvlh_attitude(t, self.q_LN0, self.rate), self.n, 4), self.omega
+        # compare in integer-safe form: t is k*dt computed from integer ns
+        q = self.q_final if t >= self.step_time - 1e-12 else self.q_initial
+        return q, self.omega
+
+
+class Sensing:
+    """The sensing loop of P episodes: the sensors and the estimator, stepped together (docs/sensors.md).
+
+    ``step(k, q_BN, omega_BN_B)`` samples the sensors on the truth at t_k and
+    runs the filter on what they report, as the ``sensors`` and ``estimator``
+    nodes do for one episode; it returns the filter's estimate at t_k.
+    """
+
+    def __init__(self, suite: SensorSuite, mekf: Mekf, feedback: str) -> None:
+        self.suite = suite
+        self.mekf = mekf
+        self.feedback = feedback
+
+    def step(self, k: int, q_BN: np.ndarray, omega_BN_B: np.ndarray):
+        """The estimate at step ``k`` (a :class:`~attitude_sil.core.sensing.mekf.Estimate`) and the gyro reading."""
+        sample = self.suite.sample(q_BN, omega_BN_B, k)
+        return self.mekf.step(k, sample.omega_meas_B, sample.star_tracker), sample.omega_meas_B
+
+
+#: the arrays a run with the sensing loop adds to its trajectory (:class:`~attitude_sil.core.trajectory.Trajectory`)
+SENSING_FIELDS = ("q_BN_est", "omega_BN_B_est", "gyro_bias_est", "attitude_sigma", "omega_BN_B_meas",
+                  "gyro_bias_true")
