@@ -60,8 +60,8 @@ def build_parser() -> argparse.ArgumentParser:
 
 @functools.cache
 def _parser() -> argparse.ArgumentParser:
-    # built once per process: parsing leaves a parser as it was, and building it (13 verbs, their help) took
-    # 13 ms, most of an in-process call that stops at bad input (test/cli/test_user_errors.py: 1,757 of them)
+    # built once per process: parsing leaves a parser as it was, and building it (every verb and its help) is
+    # most of an in-process call that stops at bad input (test/cli/test_user_errors.py makes many)
     return build_parser()
 
 

@@ -33,7 +33,8 @@ from attitude_sil.core.analysis.metrics import episode_report
 from attitude_sil.core.analysis.running_metrics import EpisodeAccumulator
 from attitude_sil.core.control import registry
 from attitude_sil.core.plant.scene import body_scene
-from attitude_sil.core.sim.engine import check_episode, schedule_from_scenario, simulate
+from attitude_sil.core.sim.build import check_episode, schedule_from_scenario
+from attitude_sil.core.sim.engine import simulate
 from attitude_sil.core.sim.params import spec_for
 from attitude_sil.core.sim.scenario import Scenario
 from attitude_sil.core.trajectory import Trajectory
@@ -554,7 +555,7 @@ def episode_complete(newest_stamp: dict[str, int], step_topics: list[str], final
     top of the counts (:func:`spin_episode` asks both): counts alone were
     fooled, a foreign node's finite messages stamped steps back (in order on
     their own topic, so taken) filling them before the last real ones came,
-    and the run's metrics missed its last step (1 hostile run in 4); the
+    and the run's metrics missed its last step; the
     latest stamp would not do either, a stray taken after the last step
     being older.
     """

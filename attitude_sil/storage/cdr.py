@@ -11,8 +11,8 @@ The nodes publish each step's stamped vectors, quaternions and clock as the
 bytes of :func:`stamped_vector_cdr`, :func:`clock_cdr` and
 :func:`joint_state_cdr`, which rclpy sends
 as they are (``Publisher.publish(bytes)``): building a Python message and
-having rclpy convert and serialise it cost 34 us a message here, these 8 us
-with the send.
+having rclpy convert and serialise it costs several times as much
+(bench/README.md).
 """
 
 from __future__ import annotations

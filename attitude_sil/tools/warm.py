@@ -14,7 +14,7 @@ driver's kernels (the nodes' own) while the first compiles the compiled
 loop, then takes the laws' compiled-driver work from the other end of the
 list, so the two end together: the first item, each preset's own law
 first, builds the loop in its two forms (for one episode and for a
-block), each other law its own loops (4-20 s each).
+block), each other law its own loops.
 """
 
 from __future__ import annotations
