@@ -3,9 +3,10 @@
 Once it holds ``attitude``, ``body_rate``, ``attitude_setpoint`` and
 ``rate_setpoint`` all stamped t_k, it computes the command of the active law
 (:class:`attitude_sil.core.control.bank.ControllerBank`) and publishes, stamped
-t_k, ``voltage_cmd`` (V, body axes: ``pid``, ``fuzzy_pid``, ``ga_flc``) or
-``torque_cmd`` (N m: ``geometric``), and ``attitude_error`` (roll, pitch, yaw of
-the rotation still to go, setpoint minus attitude, rad).
+t_k, ``voltage_cmd`` (V, body axes) or ``torque_cmd`` (N m), as the law's
+``output`` and the ``command`` parameter say, and ``attitude_error`` (roll,
+pitch, yaw of the rotation still to go, setpoint minus attitude, rad). The
+laws are the registry's (:mod:`attitude_sil.core.control.registry`).
 
 ``controller_type`` and every gain may change while the graph runs (``ros2
 param set`` or ``attitude-sil param set``). A new type takes over at the next
@@ -19,20 +20,20 @@ from __future__ import annotations
 import numpy as np
 
 from attitude_sil.core.plant.quaternion import euler_from_quat, quat_conjugate, quat_error
-from attitude_sil.core.sim.engine import build_controller
-from attitude_sil.core.sim.lockstep import StepInputs, StepSequencer
+from attitude_sil.core.sim.build import build_controller
 from attitude_sil.ros.contract import ATTITUDE, ATTITUDE_ERROR, ATTITUDE_SETPOINT, COMMAND_TOPIC, CONTROLLER_INPUTS
 from attitude_sil.ros.convert import message_to_array, stamp_to_ns
-from attitude_sil.ros.node import SchemaNode, run_node
+from attitude_sil.ros.node import LockstepNode, run_node
 from attitude_sil.storage.cdr import stamped_vector_cdr
 
 INPUTS = CONTROLLER_INPUTS
 
 
-class ControllerNode(SchemaNode):
+class ControllerNode(LockstepNode):
     """Attitude controller in lockstep; see the module docstring."""
 
     schema_name = "controller"
+    step_inputs = INPUTS
 
     def __init__(self, **kwargs) -> None:
         super().__init__(**kwargs)
@@ -40,14 +41,11 @@ class ControllerNode(SchemaNode):
         self.pub_err = self.step_publisher(ATTITUDE_ERROR)
         for name in INPUTS:
             self.step_subscription(name, lambda m, n=name: self._on_input(n, message_to_array(m)[None], m))
-        self.seq = StepSequencer()
-        self.inputs = StepInputs(INPUTS)
-        self._rebuild()
+        self.new_episode()
 
-    def _rebuild(self) -> None:
+    def rebuild(self) -> None:
         scn = self.scenario()
         self.core = build_controller(scn, 1)
-        self.dt_ns = int(round(self.param("control_period") * 1e9))
 
     def on_parameters_set(self, names: list[str]) -> None:
         v = self.values()

@@ -9,30 +9,29 @@ every input whatever the scenario.
 from __future__ import annotations
 
 from attitude_sil.core.plant.quaternion import unit_or_none
-from attitude_sil.core.sim.engine import build_disturbance
+from attitude_sil.core.sim.build import build_disturbance
 from attitude_sil.core.sim.lockstep import StepSequencer
 from attitude_sil.ros.contract import ATTITUDE, DISTURBANCE_TORQUE
 from attitude_sil.ros.convert import quaternion_to_array, stamp_to_ns
-from attitude_sil.ros.node import SchemaNode, run_node
+from attitude_sil.ros.node import LockstepNode, run_node
 from attitude_sil.storage.cdr import stamped_vector_cdr
 
 
-class DisturbanceNode(SchemaNode):
+class DisturbanceNode(LockstepNode):
     """Disturbance torques in lockstep; see the module docstring."""
 
     schema_name = "disturbance"
+    step_inputs = ()
 
     def __init__(self, **kwargs) -> None:
         super().__init__(**kwargs)
         self.pub = self.step_publisher(DISTURBANCE_TORQUE)
         self.step_subscription(ATTITUDE, self._on_attitude)
-        self.seq = StepSequencer()
-        self._rebuild()
+        self.new_episode()
 
-    def _rebuild(self) -> None:
+    def rebuild(self) -> None:
         scn = self.scenario()
         self.core = build_disturbance(scn, 1)
-        self.dt_ns = int(round(self.param("control_period") * 1e9))
 
     def _on_attitude(self, msg) -> None:
         t = stamp_to_ns(msg.header.stamp)
@@ -43,7 +42,7 @@ class DisturbanceNode(SchemaNode):
             return
         kind = self.seq.classify(t, self.dt_ns)
         if kind == StepSequencer.NEW:
-            self._rebuild()
+            self.new_episode()
         elif kind != StepSequencer.NEXT:
             return
         tau = self.core.torque(q, t)[0]

@@ -36,14 +36,15 @@ from attitude_sil.ros.contract import (
     STAR_TRACKER,
 )
 from attitude_sil.ros.convert import imu_orientation, imu_rate, stamp_to_ns
-from attitude_sil.ros.node import SchemaNode, run_node
+from attitude_sil.ros.node import LockstepNode, run_node
 from attitude_sil.storage.cdr import stamped_vector_cdr
 
 
-class EstimatorNode(SchemaNode):
+class EstimatorNode(LockstepNode):
     """The attitude filter in lockstep; see the module docstring."""
 
     schema_name = "estimator"
+    step_inputs = ()
 
     def __init__(self, **kwargs) -> None:
         super().__init__(**kwargs)
@@ -53,21 +54,20 @@ class EstimatorNode(SchemaNode):
         self.pub_s = self.step_publisher(ESTIMATE_ATTITUDE_SIGMA)
         self.step_subscription(IMU, self._on_imu)
         self.step_subscription(STAR_TRACKER, self._on_star_tracker)
-        self.seq = StepSequencer()
         self.imu: dict[int, tuple[np.ndarray, np.ndarray]] = {}  # stamp -> (rate, variance)
         self.star: dict[int, tuple[np.ndarray, np.ndarray] | None] = {}  # exposure stamp -> (q, variance) or None
         self.filter: Mekf | None = None
-        self._schedule()
+        self.new_episode()
 
-    def _schedule(self) -> None:
+    def rebuild(self) -> None:
+        """The star tracker's schedule from the parameters (the filter itself starts with the first gyro sample)."""
         dt = self.param("control_period")
-        self.dt_ns = int(round(dt * 1e9))
         self.schedule = TrackerSchedule(self.param("star_tracker.rate_hz"), self.param("star_tracker.latency_s"), dt)
         self.latency_steps = self.schedule.latency_steps
 
     def _start(self, variance: np.ndarray) -> None:
         """A new episode: the filter from the parameters and the gyro's white-noise variance (rad/s)^2."""
-        self._schedule()
+        self.new_episode()
         dt = self.param("control_period")
         arw = float(np.sqrt(np.max(variance) * dt))
         settings = MekfSettings.from_values(self.values(), arw, np.zeros(3))

@@ -2,14 +2,14 @@
 
 On each ``/clock`` tick t_k it publishes ``attitude_setpoint`` (q_RN, frame
 ``inertial``) and ``rate_setpoint`` (omega_RN in R, rad/s) stamped t_k
-(:class:`attitude_sil.core.sim.engine.Guidance`: a step from
+(:class:`attitude_sil.core.sim.models.Guidance`: a step from
 ``initial_setpoint_rpy_deg`` to ``setpoint_rpy_deg`` at ``step_time``).
 Setpoint parameters changed at runtime apply from the next tick.
 """
 
 from __future__ import annotations
 
-from attitude_sil.core.sim.engine import build_guidance
+from attitude_sil.core.sim.build import build_guidance
 from attitude_sil.ros.contract import ATTITUDE_SETPOINT, CLOCK, RATE_SETPOINT
 from attitude_sil.ros.convert import stamp_to_ns
 from attitude_sil.ros.node import SchemaNode, run_node

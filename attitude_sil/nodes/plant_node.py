@@ -3,7 +3,7 @@
 Publishes ``/clock``, ``attitude`` and ``body_rate`` for step k (stamp t_k)
 (and ``flexible_mode``, alpha and its rate, for paper 002's flexible model),
 waits for ``wheel_torque``, ``wheel_momentum`` and ``disturbance_torque``
-stamped t_k, integrates to t_k+1 with :class:`attitude_sil.core.sim.engine.Plant`
+stamped t_k, integrates to t_k+1 with :class:`attitude_sil.core.sim.models.Plant`
 and publishes the next step (docs/architecture.md, "Lockstep"). An input that
 does not arrive within ``input_timeout`` (wall time) stops the episode with an
 error; one stamped for another step, non-finite, or a second one for a step is
@@ -31,7 +31,7 @@ import time
 import numpy as np
 from std_srvs.srv import Trigger
 
-from attitude_sil.core.sim.engine import build_plant
+from attitude_sil.core.sim.build import build_plant
 from attitude_sil.core.sim.lockstep import Action, PlantLockstep
 from attitude_sil.errors import AttitudeSilError
 from attitude_sil.ros.contract import ATTITUDE, BODY_RATE, CLOCK, FLEXIBLE_MODE, PLANT_INPUTS

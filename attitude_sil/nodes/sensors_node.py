@@ -18,18 +18,19 @@ from __future__ import annotations
 import numpy as np
 
 from attitude_sil.core.sensing.models import SensorSuite
-from attitude_sil.core.sim.lockstep import StepInputs, StepSequencer
+from attitude_sil.core.sim.lockstep import StepSequencer
 from attitude_sil.ros.contract import ATTITUDE, BODY_RATE, IMU, STAR_TRACKER, WHEEL_SPEED, WHEEL_STATE
 from attitude_sil.ros.convert import imu_msg, joint_state_msg, message_to_array, stamp_to_ns, star_tracker_msg
-from attitude_sil.ros.node import SchemaNode, run_node
+from attitude_sil.ros.node import LockstepNode, run_node
 
 INPUTS = (ATTITUDE, BODY_RATE)
 
 
-class SensorsNode(SchemaNode):
+class SensorsNode(LockstepNode):
     """The gyro, the star tracker and the wheel tachometers in lockstep; see the module docstring."""
 
     schema_name = "sensors"
+    step_inputs = INPUTS
 
     def __init__(self, **kwargs) -> None:
         super().__init__(**kwargs)
@@ -39,13 +40,10 @@ class SensorsNode(SchemaNode):
         for name in INPUTS:
             self.step_subscription(name, lambda m, n=name: self._on_input(n, m))
         self.step_subscription(WHEEL_STATE, self._on_wheel_state)
-        self.inputs = StepInputs(INPUTS)
-        self.seq = StepSequencer()
         self.wheel_seq = StepSequencer()
-        self._rebuild()
+        self.new_episode()
 
-    def _rebuild(self) -> None:
-        self.dt_ns = int(round(self.param("control_period") * 1e9))
+    def rebuild(self) -> None:
         self.core = SensorSuite(self.values(), self.param("control_period"))
         self.gyro_variance = np.full(3, self.core.gyro.errors.white_std(self.core.gyro.dt) ** 2)
         self.star_variance = self.core.star_tracker.errors.sigma_B ** 2

@@ -2,7 +2,7 @@
 
 On ``voltage_cmd`` (or ``torque_cmd``, turned into voltages by the inverse
 motor model) stamped t_k it integrates the motors exactly over
-``[t_k, t_k+1]`` with the voltage held (:class:`attitude_sil.core.sim.engine.Wheels`)
+``[t_k, t_k+1]`` with the voltage held (:class:`attitude_sil.core.sim.models.Wheels`)
 and publishes, stamped t_k: ``wheel_torque`` (mean torque on the body over the
 step, so momentum is exchanged exactly), ``wheel_momentum`` (h_w at t_k, in B)
 and ``wheel_state`` (per wheel angle, speed and motor torque at t_k).
@@ -10,18 +10,19 @@ and ``wheel_state`` (per wheel angle, speed and motor torque at t_k).
 
 from __future__ import annotations
 
-from attitude_sil.core.sim.engine import build_wheels
+from attitude_sil.core.sim.build import build_wheels
 from attitude_sil.core.sim.lockstep import StepSequencer
 from attitude_sil.ros.contract import TORQUE_CMD, VOLTAGE_CMD, WHEEL_MOMENTUM, WHEEL_STATE, WHEEL_TORQUE
 from attitude_sil.ros.convert import stamp_to_ns, vector_to_array
-from attitude_sil.ros.node import SchemaNode, run_node
+from attitude_sil.ros.node import LockstepNode, run_node
 from attitude_sil.storage.cdr import joint_state_cdr, stamped_vector_cdr
 
 
-class WheelsNode(SchemaNode):
+class WheelsNode(LockstepNode):
     """Reaction-wheel assembly in lockstep; see the module docstring."""
 
     schema_name = "wheels"
+    step_inputs = ()
 
     def __init__(self, **kwargs) -> None:
         super().__init__(**kwargs)
@@ -30,13 +31,11 @@ class WheelsNode(SchemaNode):
         self.pub_state = self.step_publisher(WHEEL_STATE)
         self.step_subscription(VOLTAGE_CMD, lambda m: self._on_command(m, False))
         self.step_subscription(TORQUE_CMD, lambda m: self._on_command(m, True))
-        self.seq = StepSequencer()
-        self._rebuild()
+        self.new_episode()
 
-    def _rebuild(self) -> None:
+    def rebuild(self) -> None:
         scn = self.scenario()
         self.core = build_wheels(scn, 1)
-        self.dt_ns = int(round(self.param("control_period") * 1e9))
 
     def _on_command(self, msg, torque_mode: bool) -> None:
         t = stamp_to_ns(msg.header.stamp)
@@ -47,7 +46,7 @@ class WheelsNode(SchemaNode):
             return
         kind = self.seq.classify(t, self.dt_ns)
         if kind == StepSequencer.NEW:
-            self._rebuild()
+            self.new_episode()
         elif kind in (StepSequencer.DUPLICATE, StepSequencer.STALE):
             return
         elif kind == StepSequencer.MISMATCH:

@@ -27,7 +27,7 @@ from rclpy.signals import SignalHandlerOptions
 
 from attitude_sil.core import yaml12
 from attitude_sil.core.plant.quaternion import unit_or_none
-from attitude_sil.core.sim.lockstep import StepSequencer
+from attitude_sil.core.sim.lockstep import StepInputs, StepSequencer
 from attitude_sil.core.sim.paramfile import node_key, sections_for
 from attitude_sil.core.sim.params import NODE_PARAMS
 from attitude_sil.core.sim.scenario import Scenario, scenario_from_dict
@@ -39,7 +39,7 @@ from attitude_sil.ros.parameters import PARAMETER_TYPES, descriptor
 from attitude_sil.ros.qos import INPUT_QOS, LOCKSTEP_QOS, qos_event_callbacks
 from attitude_sil.ros.signals import StopSignals
 
-__all__ = ["SchemaNode", "params_file_warning", "run_node", "sim_time_given", "steady_clock"]
+__all__ = ["SchemaNode", "LockstepNode", "params_file_warning", "run_node", "sim_time_given", "steady_clock"]
 
 
 def steady_clock() -> Clock:
@@ -145,13 +145,59 @@ class SchemaNode(Node):
     def finite(array: np.ndarray) -> bool:
         return bool(np.all(np.isfinite(array)))
 
+
+class LockstepNode(SchemaNode):
+    """A node that steps in the lockstep protocol, once per control step stamped t_k (docs/architecture.md).
+
+    What a subclass provides, checked when the class is defined (so a
+    missing piece is an error at import, not at step 0):
+
+    * ``schema_name``: its parameters' table in ``NODE_PARAMS`` (with a
+      ``control_period``);
+    * ``step_inputs``: the contract topics it holds per stamp before it steps
+      (:meth:`gather`), ``()`` for a node that steps on one input;
+    * ``rebuild()``: (re)build its models from its current parameters; called
+      by :meth:`new_episode` at construction and at every new episode (an
+      input stamped 0).
+
+    What it gets: ``seq`` (a :class:`~attitude_sil.core.sim.lockstep.StepSequencer`
+    of its steps), ``inputs`` (a :class:`~attitude_sil.core.sim.lockstep.StepInputs`
+    of ``step_inputs``), ``dt_ns`` (the control period, ns, as of the last
+    new episode) and :meth:`gather`.
+    """
+
+    step_inputs: tuple[str, ...] | None = None
+
+    def __init_subclass__(cls, **kwargs: Any) -> None:
+        super().__init_subclass__(**kwargs)
+        missing = []
+        if not cls.schema_name or cls.schema_name not in NODE_PARAMS:
+            missing.append("schema_name (a node of NODE_PARAMS)")
+        if cls.step_inputs is None:
+            missing.append("step_inputs (the topics it gathers per stamp, () for none)")
+        if not callable(getattr(cls, "rebuild", None)):
+            missing.append("rebuild() (its models from its parameters, at every new episode)")
+        if missing:
+            raise TypeError(f"lockstep node {cls.__name__} must declare {'; '.join(missing)}")
+
+    def __init__(self, **kwargs: Any) -> None:
+        super().__init__(**kwargs)
+        self.seq = StepSequencer()
+        self.inputs = StepInputs(self.step_inputs)
+        self.dt_ns = 0
+
+    def new_episode(self) -> None:
+        """The control period and the subclass's models (``rebuild()``) from the current parameters."""
+        self.dt_ns = int(round(self.param("control_period") * 1e9))
+        self.rebuild()
+
     def gather(self, name: str, value: np.ndarray, t: int) -> dict | None:
         """One input of a node that steps once it holds all of them for a stamp (the controller, the sensors).
 
         ``value`` (1, 3) or (1, 4) is checked (finite; a quaternion near unit norm, renormalised) and held
-        in ``self.inputs`` (a :class:`~attitude_sil.core.sim.lockstep.StepInputs`); once the stamp ``t``
-        (ns) has every input and comes in sequence (``self.seq``), the step's inputs are returned; a new
-        episode (stamp 0) calls ``self._rebuild()`` first. A refused message is logged and returns None.
+        in ``self.inputs``; once the stamp ``t`` (ns) has every input and comes in sequence (``self.seq``),
+        the step's inputs are returned; a new
+        episode (stamp 0) calls :meth:`new_episode` first. A refused message is logged and returns None.
         """
         if not self.finite(value):
             self.get_logger().error(f"{name} at t={t * 1e-9:.6f} s is not finite: {value[0].tolist()}; ignored",
@@ -169,7 +215,7 @@ class SchemaNode(Node):
             return None
         kind = self.seq.classify(t, self.dt_ns)
         if kind == StepSequencer.NEW:
-            self._rebuild()
+            self.new_episode()
         elif kind != StepSequencer.NEXT:
             self.get_logger().error(f"inputs stamped {t * 1e-9:.6f} s out of sequence ({kind}); ignored",
                                     throttle_duration_sec=1.0)
@@ -283,8 +329,8 @@ def run_node(factory: Callable[[], Node], args: list[str] | None = None) -> int:
             node.set_parameters([Parameter("use_sim_time", Parameter.Type.BOOL, True)])
         executor = EventsExecutor()
         executor.add_node(node)
-        # spin_once in a loop: EventsExecutor.spin() of rclpy 7.1 left service
-        # requests unanswered in a separate process (measured here)
+        # spin_once in a loop: EventsExecutor.spin() of rclpy 7.1 leaves service
+        # requests unanswered in a separate process
         while rclpy.ok() and not stop.requested:
             executor.spin_once(timeout_sec=0.1)
     except (KeyboardInterrupt, ExternalShutdownException):
