@@ -87,7 +87,11 @@ def _same(a: dict, b: dict) -> None:
 
 def test_hand_started_graph_record_episode_metrics(tmp_path, capfd):
     short = tmp_path / "short.yaml"
-    short.write_text(yaml.safe_dump({"/**/plant": {"ros__parameters": {"duration": DURATION}}}))
+    # the plant waits for a step's inputs up to the hang guard, not its default 10 s: a node process's first step
+    # loads (or, after an edit of the package's core, compiles) its kernels, which on a loaded machine can take
+    # longer; the numbers do not depend on it
+    short.write_text(yaml.safe_dump({"/**/plant": {"ros__parameters": {"duration": DURATION,
+                                                                        "input_timeout": HANG_GUARD}}}))
     # the reference: attitude-sil run on the same scenario, on a domain of its own, meanwhile
     own = {k: v for k, v in os.environ.items() if k != "ROS_DOMAIN_ID"}
     ref = subprocess.Popen([sys.executable, "-m", "attitude_sil.cli", "run", str(SCENARIO), "--duration",
