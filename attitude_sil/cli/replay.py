@@ -35,7 +35,8 @@ def execute(args: argparse.Namespace) -> int:
     from attitude_sil.tools.verify import verify_controller
 
     if args.verify_controller:
-        result = verify_controller(args.bag, params_file=args.params, tolerance=args.tolerance)
+        result = verify_controller(args.bag, params_file=args.params, tolerance=args.tolerance,
+                                   say=lambda line: print(line, file=sys.stderr, flush=True))
         verdict = "PASS" if result.passed else "FAIL"
         print(f"{verdict}: {result.steps} steps, largest command deviation {result.max_deviation:.3g} "
               f"at t={result.worst_time_s:.3f} s (axis {result.worst_axis}), tolerance {result.tolerance:g}, "

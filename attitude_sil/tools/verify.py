@@ -9,12 +9,20 @@ from the parameter snapshot the runner stores in the bag's ``metadata.yaml``
 controller (gain changes, swaps) are applied before the step they precede,
 so a run with a live swap verifies too. This is how a user checks that a
 controller change did not alter behaviour on a library of recorded episodes.
+
+A bag outlives the environment it was recorded in: its snapshot holds the
+parameters of every law that was installed then. Parameters of a law that
+is not installed now are left out, with one notice naming the law(s)
+(:func:`recorded_parameters`); only a law that flew (the snapshot's
+``controller_type``, or a recorded swap) has to be installed, and a bag
+that flew one that is not is refused in one line naming it.
 """
 
 from __future__ import annotations
 
 import math
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -38,8 +46,9 @@ from attitude_sil.ros.parameters import typed_parameter
 from attitude_sil.ros.qos import LOCKSTEP_QOS
 from attitude_sil.storage.reader import BagReader, open_bag
 from attitude_sil.storage.writer import PARAMETERS_KEY, SCENARIO_KEY
+from attitude_sil.tools.snapshot import check_installed, drop_uninstalled, flatten, notice
 
-__all__ = ["VerifyResult", "verify_controller", "controller_parameters"]
+__all__ = ["VerifyResult", "verify_controller", "controller_parameters", "recorded_parameters"]
 
 INPUTS = CONTROLLER_INPUTS
 COMMANDS = COMMAND_TOPICS
@@ -76,14 +85,29 @@ class VerifyResult:
 
 
 def controller_parameters(bag_path: str | Path, params_file: str | Path | None = None) -> dict:
-    """The controller's parameters at the start of the recorded run.
+    """The controller's parameters at the start of the recorded run (:func:`recorded_parameters`'s values)."""
+    return recorded_parameters(bag_path, params_file)[0]
+
+
+def recorded_parameters(bag_path: str | Path, params_file: str | Path | None = None) -> tuple[dict, list[str]]:
+    """The controller's parameters at the start of the recorded run, and the laws whose parameters were left out.
 
     From ``params_file`` (a scenario or parameter YAML) if given, else from the
-    snapshot in the bag's metadata.yaml.
+    snapshot in the bag's metadata.yaml. The snapshot holds the parameters of
+    every law installed when the bag was recorded; those of a law not
+    installed now are left out and the law named in the second item (the
+    caller says so in one line). The law the snapshot flew must be installed.
+
+    Raises
+    ------
+    BagError
+        No snapshot or no controller section in it, a snapshot that is not
+        valid YAML or breaks the schema, a flown law that is not installed,
+        or a bad ``params_file``.
     """
     if params_file is not None:
         try:
-            return load_scenario(params_file).values["controller"]
+            return load_scenario(params_file).values["controller"], []
         except ScenarioError as exc:
             raise BagError(str(exc)) from None
     path = Path(bag_path)
@@ -111,25 +135,42 @@ def controller_parameters(bag_path: str | Path, params_file: str | Path | None =
         raise BagError(f"{meta}: the parameter snapshot has no controller section (a controller outside "
                        "attitude_sil flew this bag, run --external controller, or another tool recorded it); "
                        "give --params FILE to check one of the package's laws against it")
+    dropped: set[str] = set()
+    for key, section in sections.items():
+        params = section.get("ros__parameters") if isinstance(section, dict) else None
+        if isinstance(params, dict):  # anything else is the schema's to refuse, below
+            params = flatten(params)
+            check_installed(params.get("controller_type"), str(path))
+            kept, laws = drop_uninstalled(params)
+            sections[key] = {**section, "ros__parameters": kept}
+            dropped.update(laws)
     try:
-        return scenario_from_dict(sections, source=f"{meta}", check=False).values["controller"]
+        values = scenario_from_dict(sections, source=f"{meta}", check=False).values["controller"]
     except ScenarioError as exc:
         raise BagError(f"the parameter snapshot: {exc}") from None
+    return values, sorted(dropped)
 
 
-def _param_changes(reader) -> list[tuple[int, dict]]:
-    """Recorded changes of the controller's parameters as (stamp ns, {name: value})."""
+def _param_changes(reader: BagReader, where: str) -> tuple[list[tuple[int, dict]], list[str]]:
+    """Recorded changes of the controller's parameters as (stamp ns, {name: value}), and the laws whose
+    parameters were left out (not installed); a swap to a law that is not installed is a BagError naming
+    ``where`` (the bag)."""
     out = []
+    dropped: set[str] = set()
     topic = reader.find_topic("parameter_events")
     if topic is None:
-        return out
+        return out, []
     for raw, msg in reader.iter_decoded(topics=[topic]):
         if not msg.node.rstrip("/").endswith("controller"):
             continue
         changes = {p.name: parameter_value_to_python(p.value) for p in msg.changed_parameters}
+        check_installed(changes.get("controller_type"), where,
+                        f" (a swap recorded at t={raw.log_time_ns * 1e-9:.3f} s)")
+        changes, laws = drop_uninstalled(changes)
+        dropped.update(laws)
         if changes:
             out.append((raw.log_time_ns, changes))
-    return out
+    return out, sorted(dropped)
 
 
 def _feedback(reader: BagReader) -> str:
@@ -197,8 +238,11 @@ def _deviation(got: tuple[str, np.ndarray], recorded: tuple[str, np.ndarray]) ->
 
 
 def verify_controller(bag_path: str | Path, params_file: str | Path | None = None, tolerance: float = 1e-9,
-                      timeout: float = 10.0) -> VerifyResult:
+                      timeout: float = 10.0, say: Callable[[str], None] | None = None) -> VerifyResult:
     """Feed the recorded plant topics to a fresh controller node and compare its commands.
+
+    ``say`` gets the one notice line when the bag holds parameters of laws
+    that are not installed (left out: the bag did not fly them).
 
     Raises
     ------
@@ -213,8 +257,11 @@ def verify_controller(bag_path: str | Path, params_file: str | Path | None = Non
         controller_parameters(bag_path, params_file)  # a bad --params is refused before the bag is read
     reader = open_bag(bag_path)
     names, cmd_topics = _bag_topics(reader, _feedback(reader))
-    values = controller_parameters(bag_path, params_file)
-    changes = _param_changes(reader)
+    values, dropped = recorded_parameters(bag_path, params_file)
+    changes, dropped_later = _param_changes(reader, str(bag_path))
+    dropped = sorted(set(dropped) | set(dropped_later))
+    if dropped and say is not None:
+        say(notice(str(bag_path), dropped))
     inputs, recorded, stamps = _recorded_steps(reader, names, cmd_topics)
 
     localhost_environment()
