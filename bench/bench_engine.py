@@ -274,7 +274,7 @@ def law_lanes(scn, n_episodes: int = 64, steps: int = 2000) -> dict[str, tuple[f
     Returns each law's (row loop ns, vector loop ns, packed share), as printed."""
     import re
 
-    from attitude_sil.core.control.compiled import dispatch_module
+    from attitude_sil.core.control.registry import dispatch_module
     rng = np.random.default_rng(0)
     q = quat_from_euler(np.radians(rng.uniform(-20, 20, (n_episodes, 3))))
     w = rng.normal(0, 0.01, (n_episodes, 3))

@@ -33,7 +33,7 @@ def execute(args: argparse.Namespace) -> int:
     if args.source:
         print(compiled.dispatch_source(laws), end="")
         return 0
-    table = compiled.dispatch_module()
+    table = registry.dispatch_module()
     print(f"batch loop:     {inspect.getsourcefile(batch_loop)}")
     print(f"laws' loops:    {inspect.getsourcefile(dispatch)}")
     print(f"dispatch table: {table.__file__} (generated; attitude-sil engine --source)")

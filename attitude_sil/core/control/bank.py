@@ -27,7 +27,6 @@ from typing import Any
 import numpy as np
 
 from attitude_sil.core.control import registry
-from attitude_sil.core.control.compiled import dispatch_module
 from attitude_sil.core.control.law import Law, state_layout
 from attitude_sil.core.plant.kernels import measure
 from attitude_sil.errors import ScenarioError
@@ -77,7 +76,7 @@ class ControllerBank:
     def __init__(self, values: dict, dt: float, n_episodes: int, per_episode: dict | None = None) -> None:
         self.dt = float(dt)
         self.n = int(n_episodes)
-        self.dispatch = dispatch_module()
+        self.dispatch = registry.dispatch_module()
         self.names: tuple[str, ...] = self.dispatch.LAWS
         self.codes = {name: i for i, name in enumerate(self.names)}
         self.states = self.new_states(self.n)

@@ -8,7 +8,7 @@ the dispatch table (:func:`dispatch_source`; ``attitude-sil engine
 cache folder (:func:`attitude_sil.core.cache.cache_dir`) and imports it:
 numba then caches its functions like any other module's, and an edited law
 gets a new hash. For each law (its code is its place in
-``registry.names()``) the table binds the law's step to the loops of
+the registry's order) the table binds the law's step to the loops of
 :mod:`attitude_sil.core.control.dispatch`, one line each:
 
 * ``vector_<code>``: the step on every row, the arrays column-major so that
@@ -48,10 +48,9 @@ from numba.core.compiler_machinery import FunctionPass, register_pass
 from numba.extending import intrinsic, overload
 
 from attitude_sil.core.cache import cache_dir
-from attitude_sil.core.control import registry
 from attitude_sil.core.control.law import Law, state_layout
 
-__all__ = ["dispatch_module", "dispatch_source", "LanesCompiler", "VECTOR_STEP", "every_row", "law_addresses",
+__all__ = ["table_for", "dispatch_source", "LanesCompiler", "VECTOR_STEP", "every_row", "law_addresses",
            "call_at"]
 
 #: how a law's step is compiled again for :func:`vector_<code>`: inlined by LLVM (``alwaysinline``), not by
@@ -145,7 +144,7 @@ def law_addresses(dispatch: ModuleType, codes, pars: tuple, sts: tuple) -> np.nd
     Parameters
     ----------
     dispatch : module
-        A generated dispatch module (:func:`dispatch_module`).
+        A dispatch table (:func:`table_for`).
     codes : iterable of int
         The laws the engine may run (the others get 0: not callable).
     pars, sts : tuple
@@ -211,7 +210,7 @@ def call_at(typingctx, address, args):
 
 _LOCK = threading.Lock()
 _MODULES: dict[str, ModuleType] = {}
-_BY_NAMES: dict[tuple[str, ...], ModuleType] = {}
+_BY_NAMES: dict[tuple, ModuleType] = {}
 
 
 def _source_digest(law: Law) -> str:
@@ -283,18 +282,14 @@ def _load(name: str, source: str) -> ModuleType:
         return module
 
 
-def dispatch_module(law_names: tuple[str, ...] | None = None) -> ModuleType:
-    """The generated dispatch module of these laws (default: every registered law), in that order."""
-    key = tuple(law_names or registry.names())
+def table_for(laws: tuple[Law, ...]) -> ModuleType:
+    """The dispatch table of ``laws``, in that order (a law's code is its place), generated and imported once per
+    process and law set (:func:`attitude_sil.core.control.registry.dispatch_module`: the registered laws')."""
+    key = tuple((law.name, id(law)) for law in laws)
     if key not in _BY_NAMES:  # the laws' sources are read and hashed once per process
-        _BY_NAMES[key] = _dispatch_module(key)
+        source = dispatch_source(list(laws))
+        digest = hashlib.sha256(source.encode())
+        for law in laws:
+            digest.update(_source_digest(law).encode())
+        _BY_NAMES[key] = _load(f"attitude_sil_laws_{digest.hexdigest()[:16]}", source)
     return _BY_NAMES[key]
-
-
-def _dispatch_module(law_names: tuple[str, ...]) -> ModuleType:
-    laws = [registry.get(n) for n in law_names]
-    source = dispatch_source(laws)
-    digest = hashlib.sha256(source.encode())
-    for law in laws:
-        digest.update(_source_digest(law).encode())
-    return _load(f"attitude_sil_laws_{digest.hexdigest()[:16]}", source)

@@ -28,6 +28,7 @@ torque on the body about that axis; the wheels are driven the other way
 from __future__ import annotations
 
 import functools
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -43,7 +44,33 @@ __all__ = [
     "GEOMETRIES",
     "WheelAssembly",
     "no_failure",
+    "HST_MOTOR",
 ]
+
+#: HST wheel motor (the wheels' schema defaults). Paper 000 gives J_m = 0.84 kg m^2, 0.8 N m and 3000 rpm and
+# names a commercial PMDC motor without its constants; the rest is assumed.
+_RATED_SPEED = 3000.0 * 2.0 * math.pi / 60.0  # rad/s, paper 000
+_K_MOTOR = 1.5  # assumed, see below
+
+HST_MOTOR = {
+    # Schema defaults (a generic wheel, assumed): K_i = K_b = 1.5 (SI units, ideal
+    # PMDC), R_a = 1.5 ohm, 0.8 N m current limit, 3000 rpm no-load drive. The HST
+    # presets (config/hst_*.yaml) override K and R with the constants identified from
+    # paper 000's published results (K 1.002, R 1.1889 ohm; docs/fidelity.md) and keep
+    # the 0.8 N m / 3000 rpm rating; hst_roll_step_unlimited.yaml lifts it, as the paper's model.
+    "motor.back_emf_constant": _K_MOTOR,
+    "motor.torque_constant": _K_MOTOR,
+    "motor.resistance": 1.5,
+    # assumed: drive voltage that gives the paper's 3000 rpm no-load speed.
+    "motor.v_max": _K_MOTOR * _RATED_SPEED,
+    # assumed: electrical time constant L/R = 1 ms.
+    "motor.inductance": 1.5e-3,
+    "motor.rotor_inertia": 0.84,
+    # assumed: small bearing friction, 1e-4 N m per rad/s.
+    "motor.viscous_friction": 1.0e-4,
+    "motor.torque_max": 0.8,
+    "motor.speed_max_rpm": 3000.0,
+}
 
 
 def hst_pyramid() -> np.ndarray:

@@ -37,7 +37,7 @@ import numpy as np
 
 from attitude_sil.core.analysis.metric_rows import Sums
 from attitude_sil.core.control import registry
-from attitude_sil.core.control.compiled import dispatch_module, law_addresses
+from attitude_sil.core.control.compiled import law_addresses
 from attitude_sil.core.plant.kernels import WheelFailure, WheelParams
 from attitude_sil.core.plant.wheels import no_failure
 from attitude_sil.core.sim import batch_loop
@@ -293,7 +293,7 @@ def _chunk_runner(ctrl, used: set[str], sim: SimArrays, outputs: Outputs, spec: 
     key = (ctrl.names, codes, tuple((type(r), tuple((f.dtype.str, f.ndim) if isinstance(f, np.ndarray) else type(f)
                                                     for f in r)) for r in records))
     if key not in _ADDRESSES:
-        _ADDRESSES[key] = law_addresses(dispatch_module(ctrl.names), codes, *blocks(0, 1))
+        _ADDRESSES[key] = law_addresses(ctrl.dispatch, codes, *blocks(0, 1))
     at = _ADDRESSES[key]
 
     def run(lo, hi):

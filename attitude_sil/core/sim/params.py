@@ -11,66 +11,25 @@ description, with the reason.
 
 from __future__ import annotations
 
-import math
 from dataclasses import replace
 from typing import Any
 
 from attitude_sil.core.control import registry
+from attitude_sil.core.control.shared import AERO, CONTROLLER_SHARED, ORBIT
 from attitude_sil.core.paramspec import ParamSpec
 from attitude_sil.core.paramspec import double as _d
 from attitude_sil.core.paramspec import double_array as _da
 from attitude_sil.core.paramspec import inertia_rule as _inertia_rule
 from attitude_sil.core.paramspec import nonzero as _nonzero
+from attitude_sil.core.plant.wheels import HST_MOTOR
 
 __all__ = ["ParamSpec", "NODE_PARAMS", "GLOBAL_NODE", "SCENARIO_NODE", "spec_for", "HST_MOTOR", "parameters_markdown"]
 
 GLOBAL_NODE = "/**"
 SCENARIO_NODE = "scenario"
 
-# HST wheel motor. Paper 000 gives J_m = 0.84 kg m^2, 0.8 N m and 3000 rpm and
-# names a commercial PMDC motor without its constants; the rest is assumed.
-_RATED_SPEED = 3000.0 * 2.0 * math.pi / 60.0  # rad/s, paper 000
-_K_MOTOR = 1.5  # assumed, see below
-
-HST_MOTOR = {
-    # Schema defaults (a generic wheel, assumed): K_i = K_b = 1.5 (SI units, ideal
-    # PMDC), R_a = 1.5 ohm, 0.8 N m current limit, 3000 rpm no-load drive. The HST
-    # presets (config/hst_*.yaml) override K and R with the constants identified from
-    # paper 000's published results (K 1.002, R 1.1889 ohm; docs/fidelity.md) and keep
-    # the 0.8 N m / 3000 rpm rating; hst_roll_step_unlimited.yaml lifts it, as the paper's model.
-    "motor.back_emf_constant": _K_MOTOR,
-    "motor.torque_constant": _K_MOTOR,
-    "motor.resistance": 1.5,
-    # assumed: drive voltage that gives the paper's 3000 rpm no-load speed.
-    "motor.v_max": _K_MOTOR * _RATED_SPEED,
-    # assumed: electrical time constant L/R = 1 ms.
-    "motor.inductance": 1.5e-3,
-    "motor.rotor_inertia": 0.84,
-    # assumed: small bearing friction, 1e-4 N m per rad/s.
-    "motor.viscous_friction": 1.0e-4,
-    "motor.torque_max": 0.8,
-    "motor.speed_max_rpm": 3000.0,
-}
-
 _HST_INERTIA = [31.046, 77.217, 78.754]
 
-
-_ORBIT = [
-    _d("orbit.mu", 3.986004418e14, "Earth gravitational parameter, m^3/s^2", min=0.0, min_exclusive=True),
-    _d("orbit.radius", 6.913e6, "circular orbit radius, m (default: HST, about 535 km altitude, assumed)",
-       min=6.378e6),
-    _da("orbit.lvlh_initial_rpy_deg", [0, 0, 0], "LVLH frame at t = 0 relative to N, roll/pitch/yaw deg",
-        lengths=(3,), min=-360.0, max=360.0),
-]
-_AERO = [
-    _d("aero.density", 1.0e-13, "atmospheric density, kg/m^3 (assumed: 600 km, moderate solar activity)",
-       min=0.0),
-    _d("aero.drag_coefficient", 2.2, "drag coefficient C_d (assumed: 2.2, free-molecular flow)", min=0.0),
-    _d("aero.area", 0.508, "area normal to the velocity, m^2 (assumed: Hawai'iSat side, 0.66 m x 0.77 m)",
-       min=0.0),
-    _da("aero.cp_offset", [0.0, 0.0, 0.05], "centre of pressure from the centre of mass in B, m (assumed)",
-        lengths=(3,)),
-]
 
 NODE_PARAMS: dict[str, list[ParamSpec]] = {
     GLOBAL_NODE: [],  # filled below: names any node declares may be set for all
@@ -183,8 +142,8 @@ NODE_PARAMS: dict[str, list[ParamSpec]] = {
             lengths=(3,), min=0.0),
         _d("noise.sample_time", 0.001, "noise sample time T_s, s", min=0.0, min_exclusive=True),
         ParamSpec("noise.seed", "integer", 0, "noise seed (episode p of a batch uses seed + p)", min=0),
-        *_ORBIT,
-        *_AERO,
+        *ORBIT,
+        *AERO,
     ],
     "guidance": [
         _d("control_period", 0.01, "control step dt, s (shared by every node)", min=0.0, min_exclusive=True, max=1.0),
@@ -195,33 +154,17 @@ NODE_PARAMS: dict[str, list[ParamSpec]] = {
         _d("step_time", 0.0, "sim time of the setpoint step, s", min=0.0, runtime=True),
         ParamSpec("mode", "string", "step", "step (setpoints above) or lvlh (track the orbit frame, paper 001)",
                   choices=("step", "lvlh")),
-        *_ORBIT,
+        *ORBIT,
     ],
     "controller": [
         _d("control_period", 0.01, "control step dt, s (shared by every node)", min=0.0, min_exclusive=True, max=1.0),
         ParamSpec("controller_type", "string", "pid", "active control law (switches at the next step, bumpless)",
                   choices=registry.names(), runtime=True),
-        ParamSpec("error_mode", "string", "quaternion",
-                  "what the PID-family laws act on: quaternion (vector part, paper 000) or angle (2 asin of it, "
-                  "the rotation angle per axis, for single-axis papers 002 and 004)", choices=("quaternion", "angle")),
-        ParamSpec("command", "string", "voltage",
-                  "topic of the PID-family laws: voltage (voltage_cmd, wheel presets) or torque (torque_cmd, "
-                  "torque presets); geometric always commands torque", choices=("voltage", "torque")),
-        _d("bumpless_time_constant", 1.0,
-           "decay time of the transfer offset when switching to a law without a bumpless entry (ga_flc, geometric), s",
-           min=0.0, runtime=True),
-        _d("output_limit", HST_MOTOR["motor.v_max"], "command saturation of the voltage laws, V",
-           min=0.0, min_exclusive=True, runtime=True),
-        _d("sensor_noise.attitude_std_deg", 0.0, "attitude sensor noise: standard deviation of a small "
-           "rotation per body axis on the attitude the law sees, deg (0: none)", min=0.0),
-        _d("sensor_noise.rate_std_deg_s", 0.0, "rate sensor noise: standard deviation per body axis on the "
-           "body rate the law sees, deg/s (0: none)", min=0.0),
-        ParamSpec("sensor_noise.seed", "integer", 0, "sensor noise seed (a draw depends only on the seed, the "
-                  "step and the channel)", min=0),
+        *CONTROLLER_SHARED,
         # each registered law's own table, as <law>.<name> (attitude_sil.core.control.laws, plugins)
         *registry.parameter_table(),
-        *_ORBIT,
-        *_AERO,
+        *ORBIT,
+        *AERO,
     ],
     "sensors": [
         # The defaults are a generic navigation-grade gyro and a mid-class star tracker (assumed); the presets
