@@ -38,7 +38,7 @@ from attitude_sil.errors import AttitudeSilError, SpecError
 from attitude_sil.graph.engine_bag import record_episode
 from attitude_sil.graph.evaluator import GraphEpisodes, GraphEvaluator, best_parameters
 from attitude_sil.ros.environment import localhost_environment
-from attitude_sil.tuning.evaluate import Evaluator, scenario_for
+from attitude_sil.tuning.evaluate import Evaluator, scalar_groups, scenario_for, scenario_with
 from attitude_sil.tuning.executor import DaskCluster
 from attitude_sil.tuning.optimize import check_output, run_tuning
 from attitude_sil.tuning.results import TuningResult
@@ -86,6 +86,9 @@ def _record_from_engine(spec: TuningSpec, x: np.ndarray, path: Path) -> bool:
         return False  # the flexible mode is not in the trajectory: the graph records it
     params, _ = decode(spec, x[None])
     params.pop("final_time", None)
+    ((fixed, _),) = scalar_groups(params, 1)  # a scalar gene is the scenario's value, as in evaluation
+    scn = scenario_with(scn, fixed)
+    params = {k: v for k, v in params.items() if k not in fixed}
     tr = simulate(scn, 1, controller_params=params, controller=spec.controller, schedule=[])
     record_episode(scn, tr, path, controller_params=best_parameters(spec, x), controller=spec.controller)
     return True

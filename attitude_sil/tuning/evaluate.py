@@ -3,7 +3,11 @@
 Every candidate of a population runs as one episode of one vectorised
 :func:`attitude_sil.core.sim.engine.simulate` call per scenario and condition
 (costs are summed over them); with ``workers > 1`` the population is split
-over processes. A candidate that diverges (non-finite state), runs a wheel
+over processes. A gene on a scalar parameter (``geometric.torque_limit``,
+``output_limit``) is the exception: a law's parameter record holds a scalar
+once for all its episodes (a list parameter has a row per episode), so the
+candidates run in one call per distinct value, the value set in the
+scenario (:func:`scalar_groups`). A candidate that diverges (non-finite state), runs a wheel
 into its speed limit, or breaks a cost's rule gets :data:`PENALTY` and a
 recorded reason; nothing raises.
 
@@ -39,13 +43,14 @@ import numpy as np
 from attitude_sil.core.analysis.metrics import summarize
 from attitude_sil.core.plant.quaternion import euler_from_quat
 from attitude_sil.core.sim.engine import simulate, simulate_summary
+from attitude_sil.core.sim.params import spec_for
 from attitude_sil.core.trajectory import EpisodeSummary, Trajectory
 
 from .dispersions import episode_values
 from .executor import Executor, InProcess, LocalProcesses
-from .spec import TuningSpec, decode
+from .spec import TuningSpec, decode, is_scalar
 
-__all__ = ["PENALTY", "Evaluation", "evaluate", "Evaluator"]
+__all__ = ["PENALTY", "Evaluation", "evaluate", "Evaluator", "scalar_groups", "scenario_with"]
 
 #: cost of a failed candidate (finite, so rankings and medians stay defined)
 PENALTY = 1.0e6
@@ -122,6 +127,8 @@ def evaluate(spec: TuningSpec, x: np.ndarray, first: int = 0, threads: int | Non
         params = {k: np.repeat(v, reps, axis=0) for k, v in params.items()}
         final_time = None if final_time is None else np.repeat(final_time, reps, axis=0)
     n = n_cand * reps
+    groups = scalar_groups(params, n)
+    params = {k: v for k, v in params.items() if not is_scalar(k)}
     cost = spec.cost
     name = cost["name"]
     n_obj = 2 if name == "ts_ce" else 1
@@ -149,9 +156,14 @@ def evaluate(spec: TuningSpec, x: np.ndarray, first: int = 0, threads: int | Non
                              for k, v in episode_values(scn, robust["dispersions"], robust["seed"],
                                                         np.arange(reps)).items()}
             run = simulate if name == "paper004_objective" else simulate_summary  # eq. 7 needs the series
-            result = run(scn, n, controller_params=params, controller=spec.controller, schedule=[], threads=threads,
-                         episode_values={"disturbance.noise.seed": seeds, **(dispersed or {})})
-            score(spec, scn, result, final_time, F, terms, fail)
+            for fixed, rows in groups:
+                group = scenario_with(scn, fixed)
+                result = run(group, rows.size, controller_params={k: v[rows] for k, v in params.items()},
+                             controller=spec.controller, schedule=[], threads=threads,
+                             episode_values={"disturbance.noise.seed": seeds[rows],
+                                             **{k: v[rows] for k, v in (dispersed or {}).items()}})
+                _score_rows(spec, group, result, None if final_time is None else final_time[rows], rows,
+                            (F, terms, fail))
     for p, why in enumerate(reasons):
         if why:
             F[p] = PENALTY
@@ -164,6 +176,62 @@ def evaluate(spec: TuningSpec, x: np.ndarray, first: int = 0, threads: int | Non
         reasons = [next((f"robust run {j}: {reasons[i * reps + j]}" for j in range(reps) if reasons[i * reps + j]),
                         "") for i in range(n_cand)]
     return Evaluation(F=F, terms=terms, reasons=reasons, values=values)
+
+
+def scalar_groups(params: dict[str, np.ndarray], n: int) -> list[tuple[dict[str, float | int], np.ndarray]]:
+    """The episodes grouped by their values of the scalar parameters among ``params``.
+
+    A law's parameter record holds a scalar parameter once for all its
+    episodes, so the episodes of a group run as one batch with those values
+    set in the scenario (:func:`scenario_with`), and a list parameter keeps
+    its row per episode.
+
+    Parameters
+    ----------
+    params : dict
+        Decoded genes, ``name -> (n, ...)``; the scalar parameters' are ``(n,)``.
+    n : int
+        Episodes.
+
+    Returns
+    -------
+    list of (dict, ndarray)
+        For each distinct set of scalar values, in order of first appearance:
+        the values (ROS types: int for an integer parameter) and the indices
+        of its episodes. Without scalar genes, one group of every episode.
+    """
+    names = [k for k in params if is_scalar(k)]
+    if not names:
+        return [({}, np.arange(n))]
+    integer = {k: spec_for("controller", k).kind == "integer" for k in names}
+    found: dict[tuple, list[int]] = {}
+    for p in range(n):
+        key = tuple(int(round(params[k][p])) if integer[k] else float(params[k][p]) for k in names)
+        found.setdefault(key, []).append(p)
+    return [(dict(zip(names, key, strict=True)), np.asarray(rows)) for key, rows in found.items()]
+
+
+def scenario_with(scn, fixed: dict):
+    """``scn`` with the controller's scalar gene values ``fixed`` set (unchanged when there are none)."""
+    return scn.with_values("controller", **fixed) if fixed else scn
+
+
+def _score_rows(spec: TuningSpec, scn, run, final_time, rows: np.ndarray, into: tuple) -> None:
+    """:func:`score` of the episodes ``rows`` of a population, added into its ``(F, terms, fail)``."""
+    F, terms, fail = into
+    n = F.shape[0]
+    part_f = np.zeros((rows.size, F.shape[1]))
+    part_terms: dict = {}
+
+    def part_fail(mask, why):
+        full = np.zeros(n, dtype=bool)
+        full[rows] = mask
+        fail(full, why)
+
+    score(spec, scn, run, final_time, part_f, part_terms, part_fail)
+    F[rows] += part_f
+    for key, value in part_terms.items():
+        terms.setdefault(key, np.zeros(n))[rows] += value
 
 
 def _slice_size(spec: TuningSpec) -> int:

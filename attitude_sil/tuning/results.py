@@ -30,7 +30,8 @@ class TuningResult:
 
 
 def parameter_values(params: dict[str, np.ndarray], i: int) -> dict:
-    """Row ``i`` of decoded controller parameters as ROS values: ints for integer arrays, floats otherwise.
+    """Row ``i`` of decoded controller parameters as ROS values: ints for integer parameters, floats otherwise;
+    a list for a list parameter, one number for a scalar one (``params[name]`` then (P,)).
 
     ``final_time`` (a searched episode length, not a parameter) is left out.
     """
@@ -38,10 +39,9 @@ def parameter_values(params: dict[str, np.ndarray], i: int) -> dict:
     for name, arr in params.items():
         if name == "final_time":
             continue
-        if spec_for("controller", name).kind == "integer_array":
-            out[name] = [int(round(v)) for v in arr[i]]
-        else:
-            out[name] = [float(v) for v in arr[i]]
+        kind = spec_for("controller", name).kind
+        number = (lambda v: int(round(v))) if kind.startswith("integer") else float
+        out[name] = [number(v) for v in arr[i]] if kind.endswith("array") else number(arr[i])
     return out
 
 

@@ -35,6 +35,7 @@ import numpy as np
 
 from attitude_sil.core import yaml12
 from attitude_sil.core.control import registry
+from attitude_sil.core.paramspec import ParamSpec
 from attitude_sil.core.sim.params import NODE_PARAMS
 from attitude_sil.core.sim.scenario import Scenario, load_scenario
 from attitude_sil.errors import ScenarioError, SpecError
@@ -42,7 +43,7 @@ from attitude_sil.errors import ScenarioError, SpecError
 from .dispersions import check_dispersions
 
 __all__ = ["SpecError", "SECTIONS", "Gene", "TuningSpec", "load_spec", "apply_overrides", "decode", "ALGORITHMS",
-           "COSTS", "output_path"]
+           "COSTS", "output_path", "untunable", "is_scalar"]
 
 ALGORITHMS = ("ga", "binary_ga", "pso", "mixed_ga", "nsga2", "root_locus")
 COSTS = ("paper000_j", "paper001_fitness", "mse", "paper004_objective", "ts_ce")
@@ -198,6 +199,26 @@ def _controller_spec(name: str):
     return None
 
 
+def untunable(spec: ParamSpec) -> str:
+    """Why controller parameter ``spec`` cannot be a gene, in a few words; empty if it can.
+
+    A gene is a number the optimiser moves between ``low`` and ``high``, set
+    on the controller before each episode (in graph mode through its
+    parameter service, as the final best re-run through the graph is): so
+    the parameter must be a number or a list of numbers, and settable while
+    the controller runs.
+    """
+    if spec.kind == "bool":
+        return "it is a switch (true or false), not a number"
+    if spec.kind in ("string", "string_array"):
+        listed = f" ({', '.join(spec.choices)})" if spec.choices else ""
+        return f"it is a choice of names{listed}, not a number"
+    if not spec.runtime:
+        return ("it is fixed once the controller runs (not runtime), and the tuner sets genes on a running "
+                "controller (graph mode, the best's re-run through the graph)")
+    return ""
+
+
 def _gene(path: Path, i: int, raw: Any, controller: str) -> Gene:
     where = f"genome[{i}]"
     if not isinstance(raw, dict):
@@ -231,8 +252,14 @@ def _gene(path: Path, i: int, raw: Any, controller: str) -> Gene:
         close = difflib.get_close_matches(param, names, n=1)
         hint = f" (did you mean {close[0]!r}?)" if close else ""
         raise _fail(path, f"{where}.param {param!r} is not a controller parameter{hint}")
-    if not spec.kind.endswith("array"):
-        raise _fail(path, f"{where}.param {param!r} is not an array parameter")
+    why = untunable(spec)
+    if why:
+        raise _fail(path, f"{where}.param {param!r} cannot be a gene: {why}")
+    scalar = not spec.kind.endswith("array")
+    if spec.kind.startswith("integer") and kind != "int":
+        raise _fail(path, f"{where}.param {param!r} is an integer parameter: its gene needs kind int, got {kind}")
+    if scalar and (raw.get("index") is not None or raw.get("count", 1) != 1):
+        raise _fail(path, f"{where}.param {param!r} is one number, not a list: a gene on it takes no index or count")
     low, high = raw["low"], raw["high"]
     if not all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in (low, high)):
         raise _fail(path, f"{where}: low and high must be numbers, got {low!r} and {high!r}")
@@ -350,12 +377,20 @@ def _robust(p: Path, raw: Any, scenarios: list[Scenario]) -> dict[str, Any]:
     return {"runs": runs, "statistic": statistic, "seed": seed, "dispersions": dispersions}
 
 
+def is_scalar(param: str) -> bool:
+    """Whether gene parameter ``param`` is one number (``geometric.torque_limit``), not a list (``pid.kp``):
+    its decoded values are then one per candidate, ``(P,)``."""
+    spec = _controller_spec(param)
+    return spec is not None and not spec.kind.endswith("array")
+
+
 def decode(spec: TuningSpec, x: np.ndarray) -> tuple[dict[str, np.ndarray], np.ndarray]:
     """Optimiser variables (P, n_var) -> per-episode controller parameters and gene values.
 
     Returns
     -------
-    params : dict ``param -> (P, length)`` arrays starting from the scenario's values
+    params : dict ``param -> (P, length)`` arrays starting from the scenario's values, ``(P,)`` for a
+        scalar parameter (:func:`is_scalar`) and for ``final_time`` ``(P, 1)``
     values : (P, n_genes_flat) decoded gene values (reals, ints, binary decoded), for the results table
     """
     x = np.atleast_2d(np.asarray(x, dtype=float))
@@ -375,6 +410,9 @@ def decode(spec: TuningSpec, x: np.ndarray) -> tuple[dict[str, np.ndarray], np.n
             vals = np.clip(x[:, col:col + g.count], g.low, g.high)
         col += g.width
         values.append(vals)
+        if is_scalar(g.param):
+            params[g.param] = vals[:, 0].copy()
+            continue
         if g.param not in params:
             start = base.get(g.param, [0.0])
             params[g.param] = np.tile(np.asarray(start, dtype=float), (n, 1))
