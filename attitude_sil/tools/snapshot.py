@@ -96,10 +96,12 @@ def check_installed(law: Any, where: str, when: str = "") -> None:
     """
     if not isinstance(law, str) or law in registry.names():
         return
-    # an entry point that is there but did not load has its own line on stderr from the registry
-    state = "whose plugin did not load" if law in registry.declared_names() else "which is not installed"
+    if law in registry.declared_names():  # an entry point that did not load: the registry said why on stderr
+        state, todo = "whose plugin did not load", "the line above says why"
+    else:
+        state, todo = "which is not installed", "install it to verify this bag"
     raise BagError(f"{where}: the bag flew controller_type {law}{when}, {state} (installed: {_installed_list()}); "
-                   "install it to verify this bag")
+                   f"{todo}")
 
 
 def notice(where: str, laws: Iterable[str]) -> str:

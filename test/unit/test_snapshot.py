@@ -51,3 +51,22 @@ def test_a_flown_law_must_be_installed():
                               f"is not installed (installed: {', '.join(registry.names())}); install it to verify "
                               "this bag")
     assert "\n" not in str(err.value)
+
+
+def test_a_flown_law_whose_plugin_did_not_load_says_so(monkeypatch, capsys):
+    from importlib.metadata import EntryPoint
+
+    broken = EntryPoint("broken_law", "no_such_module_for_a_test:LAW", registry.ENTRY_POINT_GROUP)
+    monkeypatch.setattr(registry, "entry_points", lambda group: [broken] if group == broken.group else [])
+    monkeypatch.setattr(registry, "_PROBLEMS", [])
+    registry.refresh()
+    try:
+        assert "broken_law" in registry.declared_names() and "broken_law" not in registry.names()
+        with pytest.raises(BagError) as err:
+            check_installed("broken_law", "bags/a")
+        assert str(err.value) == ("bags/a: the bag flew controller_type broken_law, whose plugin did not load "
+                                  "(installed: fuzzy_pid, ga_flc, geometric, pid); the line above says why")
+    finally:
+        monkeypatch.undo()
+        registry.refresh()
+    capsys.readouterr()  # the registry's own line about the skipped plugin
