@@ -14,12 +14,14 @@ function of the package is declared.
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import os
 import sys
+from collections.abc import Iterator
 from pathlib import Path
 
-__all__ = ["cache_dir", "core_digest", "numba_cache_dir", "use_numba_cache"]
+__all__ = ["cache_dir", "core_digest", "numba_cache_dir", "use_numba_cache", "numba_cache_in"]
 
 
 def cache_dir() -> Path:
@@ -55,3 +57,23 @@ def use_numba_cache() -> Path:
     if config is not None:
         config.CACHE_DIR = str(folder)
     return folder
+
+
+@contextlib.contextmanager
+def numba_cache_in(name: str) -> Iterator[Path]:
+    """Functions made compiled-and-cached inside this block keep their cache in a sub-folder ``name`` of
+    :func:`numba_cache_dir` (numba reads the folder as a function is declared).
+
+    The batch loop is compiled once per set of laws (:mod:`attitude_sil.core.sim.batch`): its signatures
+    name the laws' record classes, and numba reads every signature of a cache index at once, so an index
+    shared by the law sets would fail in a process that lacks one set's classes (a plugin since removed).
+    """
+    import numba  # loaded already by the caller, which declares compiled functions
+
+    folder = numba_cache_dir() / name
+    before = numba.config.CACHE_DIR
+    numba.config.CACHE_DIR = str(folder)
+    try:
+        yield folder
+    finally:
+        numba.config.CACHE_DIR = before

@@ -10,7 +10,7 @@ import numpy as np
 
 from attitude_sil.cli.main import main
 from attitude_sil.core.control import compiled, dispatch, registry
-from attitude_sil.core.sim import batch_loop
+from attitude_sil.core.sim import batch, batch_loop
 from attitude_sil.core.sim.engine import simulate
 from attitude_sil.core.sim.scenario import load_scenario
 
@@ -21,9 +21,10 @@ CONFIG = Path(__file__).resolve().parents[2] / "config"
 def test_the_loop_that_runs_is_the_file_of_the_package():
     tr = simulate(load_scenario(CONFIG / "hst_roll_step.yaml"), n_episodes=3, duration=0.05, driver="compiled")
     assert np.isfinite(tr.q_BN).all()
-    # the batch engine ran batch_loop.chunk itself (its dispatcher compiled or loaded a signature), from the file
-    assert batch_loop.chunk.signatures, "the compiled driver did not run batch_loop.chunk"
-    assert Path(inspect.getsourcefile(batch_loop.chunk.py_func)).resolve() == PACKAGE / "core/sim/batch_loop.py"
+    # the batch engine ran batch_loop.chunk itself, compiled for the registered laws, from the file
+    block, _ = batch.loop_of(registry.dispatch_module())
+    assert block.py_func is batch_loop.chunk and block.signatures, "the compiled driver did not run batch_loop.chunk"
+    assert Path(inspect.getsourcefile(block.py_func)).resolve() == PACKAGE / "core/sim/batch_loop.py"
 
 
 def test_the_generated_table_holds_names_not_behaviour():

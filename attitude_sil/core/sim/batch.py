@@ -34,8 +34,10 @@ from typing import NamedTuple
 
 import numba
 import numpy as np
+from numba import njit
 
 from attitude_sil.core.analysis.metric_rows import Sums
+from attitude_sil.core.cache import numba_cache_in
 from attitude_sil.core.control import registry
 from attitude_sil.core.control.compiled import law_addresses
 from attitude_sil.core.plant.kernels import WheelFailure, WheelParams
@@ -43,7 +45,7 @@ from attitude_sil.core.plant.wheels import no_failure
 from attitude_sil.core.sim import batch_loop
 from attitude_sil.core.trajectory import Trajectory
 
-__all__ = ["COMPILED_DISTURBANCES", "SUMMARY_COLUMNS", "TRAJECTORY_FIELDS", "run_compiled"]
+__all__ = ["COMPILED_DISTURBANCES", "SUMMARY_COLUMNS", "TRAJECTORY_FIELDS", "run_compiled", "loop_of"]
 
 #: disturbance models the compiled driver evaluates in the loop
 COMPILED_DISTURBANCES = frozenset({"constant", "step", "noise"})
@@ -296,13 +298,27 @@ def _chunk_runner(ctrl, used: set[str], sim: SimArrays, outputs: Outputs, spec: 
         _ADDRESSES[key] = law_addresses(ctrl.dispatch, codes, *blocks(0, 1))
     at = _ADDRESSES[key]
 
+    block, one = loop_of(ctrl.dispatch)
+
     def run(lo, hi):
         recs = tuple(zip(*blocks(lo, hi), strict=True))
         tau_noise = _NO_NOISE if noise is None else noise(lo, hi)
-        (batch_loop.chunk_one if hi - lo == 1 else batch_loop.chunk)(lo, hi, sim, recs, tau_noise, lo, outputs, spec,
-                                                                     at)
+        (one if hi - lo == 1 else block)(lo, hi, sim, recs, tau_noise, lo, outputs, spec, at)
 
     return run
+
+
+_LOOPS: dict[str, tuple] = {}
+
+
+def loop_of(table) -> tuple:
+    """:func:`~attitude_sil.core.sim.batch_loop.chunk` and ``chunk_one`` compiled for the law set of the
+    dispatch table ``table``, cached in a folder of that set's own (:func:`~attitude_sil.core.cache.numba_cache_in`)."""
+    if table.__name__ not in _LOOPS:
+        with numba_cache_in(table.__name__):
+            _LOOPS[table.__name__] = tuple(njit(**batch_loop.CHUNK_JIT)(f) for f in (batch_loop.chunk,
+                                                                                    batch_loop.chunk_one))
+    return _LOOPS[table.__name__]
 
 
 def _rows(field, lo: int, hi: int, P: int):

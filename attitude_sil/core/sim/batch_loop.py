@@ -1,7 +1,8 @@
 """The batch engine's compiled loop: every step of a chunk of episodes, in stages over its episodes.
 
-:mod:`attitude_sil.core.sim.batch` runs :func:`chunk` (:func:`chunk_one` for
-a chunk of one episode). Each step runs the stages swaps, commands, wheels
+:mod:`attitude_sil.core.sim.batch` compiles :func:`chunk` (and
+:func:`chunk_one` for a chunk of one episode) for its set of laws
+(:data:`CHUNK_JIT`) and runs it. Each step runs the stages swaps, commands, wheels
 and body over the chunk's episodes, each episode's arithmetic in the order
 of the stepwise driver. The command stage
 (:func:`attitude_sil.core.control.dispatch.command_stage`) runs each law's
@@ -131,7 +132,11 @@ def _plant_start(sim, lo, m):
     return b, xw, xn
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
+#: how :mod:`attitude_sil.core.sim.batch` compiles :func:`chunk` and :func:`chunk_one`, once per set of laws
+#: (each in a cache folder of its own: :func:`attitude_sil.core.cache.numba_cache_in` says why)
+CHUNK_JIT = {"cache": True, "nogil": True, "error_model": "numpy"}
+
+
 def chunk(lo, hi, sim, recs, noise, noise_lo, out, sums, at):
     """Episodes ``lo..hi-1`` from step 0 to K, the stepwise driver's order of calls, kept every ``stride``.
 
@@ -146,7 +151,6 @@ def chunk(lo, hi, sim, recs, noise, noise_lo, out, sums, at):
     _chunk(lo, hi, hi - lo, sim, recs, noise, noise_lo, out, sums, at)
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
 def chunk_one(lo, hi, sim, recs, noise, noise_lo, out, sums, at):
     """:func:`chunk` for one episode (``hi == lo + 1``): the block's width is a constant there, so LLVM
     drops every stage's loop over the episodes (a loop of one would pay its vector preamble every step)."""
