@@ -20,6 +20,7 @@ __all__ = [
     "BagWriteError",
     "RunError",
     "ParamClientError",
+    "NonFiniteWarning",
 ]
 
 
@@ -49,3 +50,8 @@ class RunError(AttitudeSilError, RuntimeError):
 
 class ParamClientError(AttitudeSilError, RuntimeError):
     """A node is not there, has no such parameter, or refused a value."""
+
+
+class NonFiniteWarning(UserWarning):
+    """Episodes of a batch run went non-finite (a law commanded NaN or inf, or the state diverged); names the
+    episodes and the laws they ran."""

@@ -293,6 +293,7 @@ class GraphSession:
         self.recorder.on_controller = _live_swaps(accumulator, schedule, int(round(self.scn.dt * 1e9)))
         self.recorder.start_episode(writer, keeping=keep_trajectory,
                                     sink=None if keep_trajectory else assembler.add)
+        self.recorder.controller_type = (controller_params or {}).get("controller_type", self.controller)
         try:
             if controller_params:
                 set_remote_parameters(self.recorder, self.spin, "controller", controller_params)
@@ -563,6 +564,16 @@ def episode_complete(newest_stamp: dict[str, int], step_topics: list[str], final
             and all(newest_stamp.get(t, -1) >= final_ns for t in step_topics))
 
 
+def nonfinite_command(bad: tuple[str, int, list[float]], law: str, dt: float) -> str:
+    """The line that stops an episode whose controller commanded non-finite values (``bad``: the recorder's
+    first such command, (topic, stamp ns, values))."""
+    topic, t, values = bad
+    who = "the external controller" if law == EXTERNAL else f"controller_type {law}"
+    shown = ", ".join(f"{v:.6g}" for v in values)
+    return (f"{who} commanded a non-finite {topic} at step {int(round(t * 1e-9 / dt))} (t={t * 1e-9:.6f} s): "
+            f"[{shown}]; the episode stops")
+
+
 def spin_episode(recorder: Recorder, spin, plant, children, k_steps: int, scn: Scenario, prog: Progress,
                  schedule: list[tuple[float, int, str]], foreign: ForeignPublishers | None = None,
                  topics: list[str] | None = None, restart: Callable[[], None] | None = None) -> None:
@@ -618,6 +629,8 @@ def spin_episode(recorder: Recorder, spin, plant, children, k_steps: int, scn: S
             return
         if plant is not None and plant.error:
             raise RunError(plant.error)
+        if recorder.bad_command is not None:
+            raise RunError(nonfinite_command(recorder.bad_command, recorder.controller_type, dt))
         if recorder.error:
             raise RunError(f"{recorder.error}; the bag is readable up to there")
         if recorder.qos_problems:

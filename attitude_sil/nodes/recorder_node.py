@@ -116,6 +116,10 @@ class Recorder(Node):
         self._registered: set[str] = set()
         self.writer = writer
         self.error = ""  # why recording stopped, if it did
+        # the first command of the episode that was not finite: (topic, stamp ns, values), and the law active
+        # as the graph's parameter events tell it (the runner sets the episode's first)
+        self.bad_command: tuple[str, int, list[float]] | None = None
+        self.controller_type = ""
         self.qos_problems: list[str] = []  # publishers whose QoS this recorder cannot match
         # a list to time the controller into: wall s from each step's attitude to its command, as they arrive
         self.latency: list[float] | None = None
@@ -182,6 +186,7 @@ class Recorder(Node):
         self.clock_ns = 0
         self._clock_known = self.history
         self.error = ""
+        self.bad_command = None
         for kept in self.kept.values():
             kept.clear()
         self.writer = writer
@@ -261,6 +266,8 @@ class Recorder(Node):
         elif name in self._widths and not self._valid(name, data):
             # the nodes refuse non-finite values and non-unit quaternions: so does the bag
             self._refuse(name, t, "is not finite or not a unit quaternion")
+            if name in COMMAND_TOPICS and self.bad_command is None:  # a law that misbehaves: the runner stops
+                self.bad_command = (name, t, stamped_values(data, self._widths[name]).tolist())
             return
         else:
             self.sim_now = max(self.sim_now, t)
@@ -350,6 +357,7 @@ class Recorder(Node):
         if event.node == ns + "/plant" and isinstance(values.get("input_timeout"), float):
             self.plant_input_timeout = values["input_timeout"]
         if event.node == ns + "/controller" and "controller_type" in values:
+            self.controller_type = values["controller_type"]
             if self.live is not None:
                 self.live.set_controller(values["controller_type"], t)
             if self.on_controller is not None and event.changed_parameters:

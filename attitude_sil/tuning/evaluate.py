@@ -159,7 +159,7 @@ def evaluate(spec: TuningSpec, x: np.ndarray, first: int = 0, threads: int | Non
             for fixed, rows in groups:
                 group = scenario_with(scn, fixed)
                 result = run(group, rows.size, controller_params={k: v[rows] for k, v in params.items()},
-                             controller=spec.controller, schedule=[], threads=threads,
+                             controller=spec.controller, schedule=[], threads=threads, warn_nonfinite=False,
                              episode_values={"disturbance.noise.seed": seeds[rows],
                                              **{k: v[rows] for k, v in (dispersed or {}).items()}})
                 _score_rows(spec, group, result, None if final_time is None else final_time[rows], rows,
@@ -263,7 +263,8 @@ def score(spec: TuningSpec, scn, run: EpisodeSummary | Trajectory, final_time, F
     name = cost["name"]
     s = run if isinstance(run, EpisodeSummary) else summarize(run, scn.values["scenario"],
                                                               step_time=scn.param("guidance", "step_time"))
-    fail(~s.finite, "diverged: non-finite state")
+    law = spec.controller or scn.param("controller", "controller_type")
+    fail(~s.finite, f"diverged: non-finite state under {law}")
     wheels = scn.values["wheels"]
     if wheels["actuator"] == "reaction_wheels" and s.peak_wheel_speed is not None:
         limit = wheels["motor.speed_max_rpm"] * 2 * np.pi / 60

@@ -243,7 +243,7 @@ def run_chunk(spec: MonteCarloSpec, lo: int, hi: int, threads: int | None = None
     runs = np.arange(lo, hi)
     values = episode_values(spec.scenario, spec.dispersions, spec.seed, runs)
     seeds = spec.scenario.param("disturbance", "noise.seed") + runs
-    s = simulate_summary(spec.scenario, hi - lo, controller=spec.controller, threads=threads,
+    s = simulate_summary(spec.scenario, hi - lo, controller=spec.controller, threads=threads, warn_nonfinite=False,
                          episode_values={"disturbance.noise.seed": seeds, **values})
     out: dict[str, np.ndarray] = {"run": runs}
     out.update(value_columns(values))
@@ -427,7 +427,11 @@ def summarize_campaign(spec: MonteCarloSpec, table: dict[str, np.ndarray], inter
         all_ok &= ok
         summary["requirements"][metric] = {**rule, "pass_rate": float(ok.mean()), "failed_runs": int((~ok).sum())}
     summary["pass_rate"] = float(all_ok.mean())
-    summary["diverged_runs"] = int((~table["finite"].astype(bool)).sum())
+    diverged = ~table["finite"].astype(bool)
+    summary["diverged_runs"] = int(diverged.sum())
+    if diverged.any():  # the law that flew them: the campaign's (a scheduled swap is in the scenario)
+        summary["diverged_under"] = summary["controller"]
+        summary["diverged_run_ids"] = [int(r) for r in table["run"][diverged][:20]]
     summary["worst"] = [{"run": int(table["run"][i]), spec.worst["metric"]: float(table[spec.worst["metric"]][i])}
                         for i in worst_runs(spec, table)] if spec.worst["metric"] in table else []
     return summary

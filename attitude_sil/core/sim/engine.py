@@ -13,6 +13,7 @@ lockstep order; both give the same numbers. The models are built by
 from __future__ import annotations
 
 import dataclasses
+import warnings
 from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -38,7 +39,7 @@ from attitude_sil.core.sim.build import (
 from attitude_sil.core.sim.models import SENSING_FIELDS, Guidance, Plant, Sensing, Wheels
 from attitude_sil.core.sim.scenario import Scenario
 from attitude_sil.core.trajectory import EpisodeSummary, Trajectory
-from attitude_sil.errors import ScenarioError
+from attitude_sil.errors import NonFiniteWarning, ScenarioError
 
 __all__ = ["RunOptions", "simulate", "simulate_summary", "compiled_plan", "DRIVERS", "KEEPABLE"]
 
@@ -92,6 +93,11 @@ class RunOptions:
     threads : int, optional
         Threads of the compiled driver (default one per core); any count gives
         the same numbers.
+    warn_nonfinite : bool
+        Warn (:class:`~attitude_sil.errors.NonFiniteWarning`) when episodes go
+        non-finite, naming them and their laws (default); a caller that
+        reports them itself (the tuner's failures, a campaign's table) sets
+        it False.
     episode_values : dict, optional
         Scenario values per episode, ``{"node.param": (P, ...) array}``: any
         ``controller`` parameter and those of
@@ -111,6 +117,7 @@ class RunOptions:
     driver: str = "auto"
     threads: int | None = None
     episode_values: dict | None = None
+    warn_nonfinite: bool = True
 
     def updated(self, changes: dict[str, Any]) -> RunOptions:
         """These options with ``changes`` (field names) set; an unknown name is a TypeError, as for a call."""
@@ -160,7 +167,12 @@ def simulate(scn: Scenario, n_episodes: int = 1, options: RunOptions | None = No
         raise ScenarioError("keep: name at least one trajectory array (simulate_summary keeps none)")
     if int(stride) < 1:
         raise ScenarioError(f"stride must be >= 1, got {stride!r}")
-    return _Run(scn, n_episodes, opts).trajectory(opts.threads, int(stride), keep)
+    run = _Run(scn, n_episodes, opts)
+    tr = run.trajectory(opts.threads, int(stride), keep)
+    fields = [a.reshape(a.shape[0], -1) for a in (tr.q_BN, tr.omega_BN_B, tr.u_cmd) if a is not None]
+    if fields and opts.warn_nonfinite:
+        run.warn_nonfinite(np.all([np.all(np.isfinite(a), axis=1) for a in fields], axis=0))
+    return tr
 
 
 def simulate_summary(scn: Scenario, n_episodes: int = 1, options: RunOptions | None = None,
@@ -187,8 +199,12 @@ def simulate_summary(scn: Scenario, n_episodes: int = 1, options: RunOptions | N
         r = np.broadcast_to(euler_from_quat(end)[..., axis], (n_episodes,))
         _, sums = run_compiled(run.models, run.K, run.dt, threads=opts.threads, keep=(), swaps=run.swaps,
                                laws=run.laws, sums=(axis, y0, r, values["metrics.settling_band"]))
-        return step_summary(sums, values, r - y0)
-    return summarize(run.trajectory(opts.threads), values, step_time=scn.param("guidance", "step_time"))
+        summary = step_summary(sums, values, r - y0)
+    else:
+        summary = summarize(run.trajectory(opts.threads), values, step_time=scn.param("guidance", "step_time"))
+    if opts.warn_nonfinite:
+        run.warn_nonfinite(summary.finite)
+    return summary
 
 
 class _Run:
@@ -234,6 +250,24 @@ class _Run:
             raise ScenarioError(f"a controller_type per episode runs in the compiled driver only, and this run "
                                 f"does not fit it ({why})")
 
+    def laws_of(self, p: int) -> str:
+        """The law(s) episode ``p`` ran: its first, then each swap (``pid, fuzzy_pid from step 500``)."""
+        first = self.laws[p] if self.laws is not None else self.models[4].active
+        return ", ".join([first, *(f"{law} from step {k}" for k, law in sorted(self.swaps.items()))])
+
+    def warn_nonfinite(self, finite: np.ndarray) -> None:
+        """A :class:`~attitude_sil.errors.NonFiniteWarning` naming the episodes that went non-finite and their
+        laws (nothing when every episode stayed finite)."""
+        bad = np.flatnonzero(~np.asarray(finite, dtype=bool))
+        if bad.size == 0:
+            return
+        by_laws: dict[str, list[int]] = {}
+        for p in bad:
+            by_laws.setdefault(self.laws_of(int(p)), []).append(int(p))
+        parts = [f"episodes {_first(ps)} under {laws}" for laws, ps in by_laws.items()]
+        warnings.warn(f"{bad.size} of {len(finite)} episodes went non-finite (a law commanded NaN or inf, or the "
+                      f"state diverged): {'; '.join(parts)}", NonFiniteWarning, stacklevel=3)
+
     def trajectory(self, threads: int | None, stride: int = 1, keep=KEEPABLE) -> Trajectory:
         """Run the models in the chosen driver; the arrays not in ``keep`` are None."""
         if self.compiled:
@@ -245,6 +279,12 @@ class _Run:
         for name in set(KEEPABLE) - set(keep):
             setattr(tr, name, None)
         return tr
+
+
+def _first(items: list[int], n: int = 10) -> str:
+    """The first ``n`` of a list of episode numbers, and how many more."""
+    head = ", ".join(str(x) for x in items[:n])
+    return head + (f" and {len(items) - n} more" if len(items) > n else "")
 
 
 def _simulate_stepwise(plant, wheels, dist, guide, ctrl, swaps: dict, K: int, dt: float,
