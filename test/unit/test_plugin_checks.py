@@ -95,3 +95,33 @@ def test_the_whole_error_is_behind_the_verbose_flag(plugins, capsys, monkeypatch
     registry.dispatch_module()
     err = capsys.readouterr().err
     assert err.splitlines()[0].endswith("; skipped") and "TypingError" in err and len(err.splitlines()) > 3
+
+
+def test_the_batch_engine_refuses_law_values_as_the_node_does():
+    """Per-episode gains get the controller node's own check and words (range, shape, rule), with the episode."""
+    from attitude_sil.core.sim.engine import simulate_summary
+    from attitude_sil.core.sim.params import spec_for
+    from attitude_sil.core.sim.scenario import load_scenario
+    from attitude_sil.errors import ScenarioError
+    from conftest import CONFIG
+
+    scn = load_scenario(CONFIG / "hst_roll_step.yaml")
+    kp = np.array([[1.0, 2.0, 3.0], [1.0, -2.0, 3.0], [1.0, 2.0, 3.0]])
+    with pytest.raises(ValueError) as node:  # what the node answers to a parameter set of episode 1's value
+        spec_for("controller", "pid.kp").validate(kp[1].tolist(), "controller")
+    with pytest.raises(ScenarioError) as batch:
+        simulate_summary(scn, 3, duration=0.1, controller_params={"pid.kp": kp})
+    assert str(batch.value) == f"{node.value} (episode 1)" == "controller.pid.kp[1] must be >= 0.0, got -2.0 " \
+                                                               "(episode 1)"
+    with pytest.raises(ScenarioError, match=r"^controller.pid.kp must have 3 elements, got 2 \(episode 0\)$"):
+        simulate_summary(scn, 3, duration=0.1, controller_params={"pid.kp": np.ones((3, 2))})
+    with pytest.raises(ScenarioError, match=r"controller.pid.kp: a value of shape \(2, 3\) is neither a list for "
+                                            r"every episode nor one per episode \(3, ...\)"):
+        simulate_summary(scn, 3, duration=0.1, controller_params={"pid.kp": np.ones((2, 3))})
+    with pytest.raises(ScenarioError, match=r"controller.geometric.k entries must be distinct .* \(episode 2\)"):
+        simulate_summary(scn, 3, duration=0.1, controller="geometric",
+                         episode_values={"controller.geometric.k": np.array([[1.0, 2, 3], [1, 2, 4], [2, 2, 2]])})
+    with pytest.raises(ScenarioError, match="controller has no parameter 'pid.kq'"):
+        simulate_summary(scn, 3, duration=0.1, controller_params={"pid.kq": kp})
+    s = simulate_summary(scn, 3, duration=0.1, controller_params={"pid.kp": np.abs(kp)})  # in range: it runs
+    assert s.finite.all()

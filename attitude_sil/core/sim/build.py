@@ -28,14 +28,14 @@ from attitude_sil.core.plant.wheels import GEOMETRIES, MotorParams, WheelAssembl
 from attitude_sil.core.sensing.mekf import Mekf, MekfSettings
 from attitude_sil.core.sensing.models import SensorSuite
 from attitude_sil.core.sim.models import Guidance, Plant, Sensing, Wheels, per_episode
-from attitude_sil.core.sim.params import NODE_PARAMS
+from attitude_sil.core.sim.params import NODE_PARAMS, spec_for
 from attitude_sil.core.sim.scenario import Scenario, effective_values
 from attitude_sil.errors import ScenarioError
 
 __all__ = ["build_plant", "build_wheels", "build_disturbance", "build_guidance", "build_controller", "build_sensing",
            "law_bank", "check_episode", "schedule_from_scenario", "flexible_states", "flexible_settling",
            "initial_attitude", "motor_params", "EPISODE_VALUES", "EPISODE_MOTOR", "EPISODE_FAILURE",
-           "split_episode_values", "episode_laws"]
+           "split_episode_values", "episode_laws", "check_episode_parameters"]
 
 
 def initial_attitude(values: dict, rpy0_deg=None) -> np.ndarray:
@@ -269,7 +269,64 @@ def build_controller(scn: Scenario, n_episodes: int = 1, params: dict | None = N
     ...) to per-episode arrays with a leading P axis.
     """
     c = scn.values["controller"]
+    if params:
+        check_episode_parameters(params, n_episodes)
     return ControllerBank(c, c["control_period"], n_episodes, per_episode=params)
+
+
+def check_episode_parameters(params: dict, n_episodes: int) -> None:
+    """Refuse per-episode controller values as the controller node refuses a parameter set: the same rule and
+    the same words (the parameter, its range or shape, the value), with the episode it came from.
+
+    Parameters
+    ----------
+    params : dict
+        Controller parameter name (``pid.kp``) -> one value for every episode, or a value per episode with a
+        leading axis of ``n_episodes``.
+    n_episodes : int
+
+    Raises
+    ------
+    ScenarioError
+        An unknown parameter, a value of another shape, or one that breaks the parameter's rule.
+    """
+    for name, value in params.items():
+        try:
+            spec = spec_for("controller", name)
+        except KeyError:
+            raise ScenarioError(f"controller has no parameter {name!r}") from None
+        a = np.asarray(value)
+        if spec.kind.endswith("_array"):
+            rows = [a] if a.ndim == 1 else (list(a) if a.ndim == 2 and a.shape[0] == n_episodes else None)
+        else:
+            rows = [a] if a.ndim == 0 else (list(a) if a.shape == (n_episodes,) else None)
+        if rows is None:
+            one = "a list" if spec.kind.endswith("_array") else "one value"
+            raise ScenarioError(f"controller.{name}: a value of shape {a.shape} is neither {one} for every "
+                                f"episode nor one per episode ({n_episodes}, ...)")
+        for p in _suspects(spec, rows):
+            try:
+                spec.validate(rows[p].tolist(), "controller")
+            except ValueError as exc:
+                raise ScenarioError(f"{exc}" + (f" (episode {p})" if len(rows) > 1 else "")) from None
+
+
+def _suspects(spec, rows: list) -> list[int]:
+    """The rows a spec's check must see: all of them where it has a rule of its own, else those outside its range
+    (found at once over the episodes: a Monte Carlo's rows are many)."""
+    if spec.rule is not None or spec.kind in ("bool", "string", "string_array") or len(rows) == 1:
+        return list(range(len(rows)))
+    a = np.asarray(rows, dtype=float).reshape(len(rows), -1)
+    bad = ~np.isfinite(a).all(axis=1)
+    if spec.min is not None:
+        bad |= ((a <= spec.min) if spec.min_exclusive else (a < spec.min)).any(axis=1)
+    if spec.max is not None:
+        bad |= (a > spec.max).any(axis=1)
+    if spec.kind.startswith("integer"):
+        bad |= (a != np.round(a)).any(axis=1)
+    if spec.lengths is not None and spec.kind.endswith("_array") and a.shape[1] not in spec.lengths:
+        bad[:] = True
+    return [int(p) for p in np.flatnonzero(bad)[:1]]
 
 
 def check_episode(scn: Scenario, controller: str | None = None) -> None:
