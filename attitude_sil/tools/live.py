@@ -36,6 +36,7 @@ from rclpy.signals import SignalHandlerOptions
 
 from attitude_sil.core import yaml12
 from attitude_sil.core.analysis.metrics import episode_report
+from attitude_sil.core.control import registry
 from attitude_sil.core.plant.scene import body_scene
 from attitude_sil.core.sim.paramfile import node_key, section_node
 from attitude_sil.core.sim.params import NODE_PARAMS, SCENARIO_NODE
@@ -62,6 +63,7 @@ from attitude_sil.ros.services import call_reset, get_remote_parameters
 from attitude_sil.ros.signals import StopSignals
 from attitude_sil.storage.reader import open_bag
 from attitude_sil.storage.writer import PARAMETERS_KEY, SCENARIO_KEY, BagWriter, check_bag_dir
+from attitude_sil.tools.snapshot import drop_uninstalled, flatten, notice
 
 __all__ = ["RecordResult", "bag_metrics", "check_topics", "graph_scenario", "play_episode", "record_graph",
            "scenario_settings"]
@@ -440,6 +442,24 @@ def _snapshot_values(text: str, where: str) -> dict[str, dict]:
     return out
 
 
+def _installed_laws_only(values: dict[str, dict], where: str, notes: list[str]) -> str | None:
+    """The snapshot's controller section without the parameters of laws not installed here (a note names them).
+
+    The metrics run no law, so a bag that flew one not installed is read as well (its law named in a note and
+    returned, the section's ``controller_type`` left to its default); else None.
+    """
+    kept, missing = drop_uninstalled(flatten(values["controller"]))
+    if missing:
+        notes.append(notice(where, missing))
+    flown = kept.get("controller_type")
+    if not isinstance(flown, str) or flown in registry.names():
+        values["controller"] = kept
+        return None
+    notes.append(f"{where}: the bag flew controller_type {flown}, not installed here; its metrics need no law")
+    values["controller"] = {k: v for k, v in kept.items() if k != "controller_type"}
+    return flown
+
+
 def bag_metrics(bag: str | Path, scenario: str | Path | None = None) -> tuple[dict, list[str]]:
     """The ``run --json`` metrics of the episode a bag holds, and notes on how they were found.
 
@@ -467,8 +487,10 @@ def bag_metrics(bag: str | Path, scenario: str | Path | None = None) -> tuple[di
     try:
         if snapshot:
             values = _snapshot_values(snapshot, str(bag))
-            scn = graph_scenario(values, settings, f"{bag} (parameter snapshot)")
             law = None if "controller" in values else EXTERNAL  # a controller of the user's flew (run --external)
+            if law is None:
+                law = _installed_laws_only(values, str(bag), notes)
+            scn = graph_scenario(values, settings, f"{bag} (parameter snapshot)")
         else:
             scn = load_scenario(scenario)
             notes.append(f"no parameter snapshot in {bag}: node parameters from {scenario}")

@@ -13,6 +13,7 @@ under another name (nothing new to compile).
   one line naming the law and what is installed, exit 2, no traceback.
 """
 
+import json
 import os
 import subprocess
 import sys
@@ -100,3 +101,17 @@ def test_a_bag_that_flew_the_uninstalled_law_is_refused_in_one_line(bags, run, w
     # where it is installed the same bag verifies: the refusal is about the environment, not the bag
     res = _attitude_sil("replay", bag[run], "--verify-controller", env=with_plugin, timeout=300)
     assert res.returncode == 0 and res.stdout.startswith("PASS"), res.stdout + res.stderr
+
+
+def test_metrics_of_the_bags_read_without_the_plugin(bags):
+    # attitude-sil metrics reads the same snapshot: the PID bag with the same note, the plugin's bag with a note
+    # that names the law it flew (metrics run no law), both exit 0 with the metrics of what was recorded
+    without, _, bag = bags
+    res = _attitude_sil("metrics", bag["pid"], "--json", env=without, timeout=300)
+    assert res.returncode == 0, res.stdout + res.stderr
+    assert f"ignoring the recorded parameters of {PLUGIN}, a law not installed here" in res.stderr
+    assert json.loads(res.stdout.splitlines()[-1])["controller_type"] == "pid"
+    res = _attitude_sil("metrics", bag["flew"], "--json", env=without, timeout=300)
+    assert res.returncode == 0, res.stdout + res.stderr
+    assert f"the bag flew controller_type {PLUGIN}, not installed here; its metrics need no law" in res.stderr
+    assert json.loads(res.stdout.splitlines()[-1])["controller_type"] == PLUGIN
