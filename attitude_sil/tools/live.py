@@ -40,7 +40,14 @@ from attitude_sil.core.control import registry
 from attitude_sil.core.plant.scene import body_scene
 from attitude_sil.core.sim.paramfile import node_key, section_node
 from attitude_sil.core.sim.params import NODE_PARAMS, SCENARIO_NODE
-from attitude_sil.core.sim.scenario import GRAPH_NODES, Scenario, load_scenario, scenario_from_dict, yaml_problem
+from attitude_sil.core.sim.scenario import (
+    GRAPH_NODES,
+    Scenario,
+    flatten_parameters,
+    load_scenario,
+    scenario_from_dict,
+    yaml_problem,
+)
 from attitude_sil.errors import AttitudeSilError, BagError, RunError, ScenarioError
 from attitude_sil.graph.launcher import namespace_kwargs
 from attitude_sil.graph.session import Progress, spin_episode
@@ -63,7 +70,7 @@ from attitude_sil.ros.services import call_reset, get_remote_parameters
 from attitude_sil.ros.signals import StopSignals
 from attitude_sil.storage.reader import open_bag
 from attitude_sil.storage.writer import PARAMETERS_KEY, SCENARIO_KEY, BagWriter, check_bag_dir
-from attitude_sil.tools.snapshot import drop_uninstalled, flatten, notice
+from attitude_sil.tools.snapshot import drop_uninstalled, notice
 
 __all__ = ["RecordResult", "bag_metrics", "check_topics", "graph_scenario", "play_episode", "record_graph",
            "scenario_settings"]
@@ -448,7 +455,7 @@ def _installed_laws_only(values: dict[str, dict], where: str, notes: list[str]) 
     The metrics run no law, so a bag that flew one not installed is read as well (its law named in a note and
     returned, the section's ``controller_type`` left to its default); else None.
     """
-    kept, missing = drop_uninstalled(flatten(values["controller"]))
+    kept, missing = drop_uninstalled(flatten_parameters(values["controller"]))
     if missing:
         notes.append(notice(where, missing))
     flown = kept.get("controller_type")

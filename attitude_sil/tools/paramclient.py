@@ -33,6 +33,7 @@ from rclpy.parameter_client import AsyncParameterClient
 
 from attitude_sil.core import yaml12
 from attitude_sil.core.sim.paramfile import sections_for
+from attitude_sil.core.sim.scenario import flatten_parameters
 from attitude_sil.errors import ParamClientError, RunError
 from attitude_sil.ros.contract import check_node_name, check_parameter_name
 from attitude_sil.ros.environment import localhost_environment
@@ -291,16 +292,6 @@ class LoadReport:
         return not all(ok for _, ok in self.lines)
 
 
-def _flatten(params: dict, prefix: str = "") -> dict[str, Any]:
-    out: dict[str, Any] = {}
-    for key, value in params.items():
-        if isinstance(value, dict):
-            out.update(_flatten(value, f"{prefix}{key}."))
-        else:
-            out[f"{prefix}{key}"] = value
-    return out
-
-
 def file_values(path: str | Path, fqn: str) -> dict[str, Any]:
     """The parameters a ROS 2 parameter file gives node ``fqn``: every section that applies, in file order.
 
@@ -326,7 +317,7 @@ def file_values(path: str | Path, fqn: str) -> dict[str, Any]:
         params = section.get("ros__parameters") if isinstance(section, dict) else None
         if not isinstance(params, dict):
             raise ParamClientError(f"{p}: {key}: expected 'ros__parameters:' with a mapping of values")
-        values.update(_flatten(params))
+        values.update(flatten_parameters(params))
     return values
 
 

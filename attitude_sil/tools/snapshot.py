@@ -25,19 +25,7 @@ from attitude_sil.core.control import registry
 from attitude_sil.core.sim.params import NODE_PARAMS
 from attitude_sil.errors import BagError
 
-__all__ = ["uninstalled_law", "drop_uninstalled", "check_installed", "notice", "flatten"]
-
-
-def flatten(params: Mapping[str, Any], prefix: str = "") -> dict[str, Any]:
-    """``{'pid': {'kp': [..]}}`` -> ``{'pid.kp': [..]}``, as ROS reads nested parameter YAML."""
-    out: dict[str, Any] = {}
-    for key, value in params.items():
-        name = f"{prefix}{key}"
-        if isinstance(value, Mapping):
-            out.update(flatten(value, name + "."))
-        else:
-            out[name] = value
-    return out
+__all__ = ["uninstalled_law", "drop_uninstalled", "check_installed", "notice"]
 
 
 def uninstalled_law(name: str) -> str | None:

@@ -36,7 +36,7 @@ from rclpy.parameter import Parameter, parameter_value_to_python
 from attitude_sil.core import yaml12
 from attitude_sil.core.sim.paramfile import sections_for
 from attitude_sil.core.sim.params import GLOBAL_NODE, SCENARIO_NODE, spec_for
-from attitude_sil.core.sim.scenario import load_scenario, scenario_from_dict, yaml_problem
+from attitude_sil.core.sim.scenario import flatten_parameters, load_scenario, scenario_from_dict, yaml_problem
 from attitude_sil.errors import AttitudeSilError, BagError, ScenarioError
 from attitude_sil.nodes.controller_node import ControllerNode
 from attitude_sil.ros.contract import COMMAND_TOPICS, CONTROLLER_INPUTS, FEEDBACK_REMAP, STEP_TOPICS, message_class
@@ -46,7 +46,7 @@ from attitude_sil.ros.parameters import typed_parameter
 from attitude_sil.ros.qos import LOCKSTEP_QOS
 from attitude_sil.storage.reader import BagReader, open_bag
 from attitude_sil.storage.writer import PARAMETERS_KEY, SCENARIO_KEY
-from attitude_sil.tools.snapshot import check_installed, drop_uninstalled, flatten, notice
+from attitude_sil.tools.snapshot import check_installed, drop_uninstalled, notice
 
 __all__ = ["VerifyResult", "verify_controller", "controller_parameters", "recorded_parameters"]
 
@@ -139,7 +139,7 @@ def recorded_parameters(bag_path: str | Path, params_file: str | Path | None = N
     for key, section in sections.items():
         params = section.get("ros__parameters") if isinstance(section, dict) else None
         if isinstance(params, dict):  # anything else is the schema's to refuse, below
-            params = flatten(params)
+            params = flatten_parameters(params)
             check_installed(params.get("controller_type"), str(path))
             kept, laws = drop_uninstalled(params)
             sections[key] = {**section, "ros__parameters": kept}

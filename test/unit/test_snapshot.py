@@ -3,8 +3,9 @@
 import pytest
 
 from attitude_sil.core.control import registry
+from attitude_sil.core.sim.scenario import flatten_parameters as flatten
 from attitude_sil.errors import BagError
-from attitude_sil.tools.snapshot import check_installed, drop_uninstalled, flatten, notice, uninstalled_law
+from attitude_sil.tools.snapshot import check_installed, drop_uninstalled, notice, uninstalled_law
 
 
 def test_a_parameter_of_a_law_not_installed_names_that_law():

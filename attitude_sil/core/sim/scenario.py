@@ -21,6 +21,7 @@ from __future__ import annotations
 import copy
 import difflib
 import sys
+from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -35,7 +36,7 @@ from attitude_sil.errors import ScenarioError
 
 __all__ = ["ScenarioError", "Scenario", "load_scenario", "scenario_from_dict", "with_parameter_file", "yaml_problem",
            "GRAPH_NODES", "SENSOR_NODES", "ALL_NODES", "PRESETS", "default_config_dir", "derived_values",
-           "effective_values"]
+           "effective_values", "flatten_parameters"]
 
 #: the preset scenarios of the five papers (``config/<name>.yaml``)
 PRESETS = ("hst_roll_step", "hawaiisat_lvlh", "flexible_axis", "cubesat_1u", "pitch_axis")
@@ -250,7 +251,7 @@ def scenario_from_dict(data: Any, source: str = "<dict>", check: bool = True) ->
             params = {}
         if not isinstance(params, dict):
             raise ScenarioError(f"{source}: {raw_node}.ros__parameters must be a mapping")
-        sections.setdefault(node, {}).update(_flatten(params))
+        sections.setdefault(node, {}).update(flatten_parameters(params))
     # wildcard first, node sections override it
     order = [GLOBAL_NODE] + [n for n in sections if n != GLOBAL_NODE]
     for node in order:
@@ -275,13 +276,13 @@ def scenario_from_dict(data: Any, source: str = "<dict>", check: bool = True) ->
     return scn
 
 
-def _flatten(params: dict, prefix: str = "") -> dict[str, Any]:
+def flatten_parameters(params: Mapping[str, Any], prefix: str = "") -> dict[str, Any]:
     """``{'pid': {'kp': [..]}}`` -> ``{'pid.kp': [..]}`` as ROS does for nested YAML."""
     out: dict[str, Any] = {}
     for key, value in params.items():
         name = f"{prefix}{key}"
-        if isinstance(value, dict):
-            out.update(_flatten(value, name + "."))
+        if isinstance(value, Mapping):
+            out.update(flatten_parameters(value, name + "."))
         else:
             out[name] = value
     return out
@@ -325,7 +326,7 @@ def with_parameter_file(scn: Scenario, path: str | Path) -> Scenario:
                 or not isinstance(section["ros__parameters"] or {}, dict):
             raise ScenarioError(f"{p}: {raw_node}: expected 'ros__parameters:' with a mapping of values")
         try:
-            scn = scn.with_values(node, **_flatten(section["ros__parameters"] or {}))
+            scn = scn.with_values(node, **flatten_parameters(section["ros__parameters"] or {}))
         except ScenarioError as exc:
             raise ScenarioError(f"{p}: {exc}") from None
     return scn
