@@ -20,6 +20,7 @@ __all__ = [
     "BagWriteError",
     "RunError",
     "ParamClientError",
+    "SchedulerLostError",
     "NonFiniteWarning",
 ]
 
@@ -50,6 +51,24 @@ class RunError(AttitudeSilError, RuntimeError):
 
 class ParamClientError(AttitudeSilError, RuntimeError):
     """A node is not there, has no such parameter, or refused a value."""
+
+
+class SchedulerLostError(AttitudeSilError, RuntimeError):
+    """The Dask scheduler a batch evaluation ran on went away mid-run; names its address and how it was lost.
+
+    Attributes
+    ----------
+    address : str
+        The scheduler's address, as the client was given it.
+    """
+
+    def __init__(self, message: str, address: str) -> None:
+        super().__init__(message)
+        self.address = address
+
+    def __reduce__(self):
+        # rebuilt from both arguments (the default would pass the message alone)
+        return type(self), (str(self), self.address)
 
 
 class NonFiniteWarning(UserWarning):

@@ -7,8 +7,10 @@ builds every parser without loading numba, rclpy or the tuner.
 from __future__ import annotations
 
 import argparse
+import shlex
 import signal
 import sys
+from pathlib import Path
 
 
 def add(sub: argparse._SubParsersAction) -> None:
@@ -33,6 +35,48 @@ def add(sub: argparse._SubParsersAction) -> None:
     mc.set_defaults(func=execute)
 
 
+def resume_command(args: argparse.Namespace) -> str:
+    """The command line that continues this campaign: the user's own, with ``--resume``.
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        The verb's parsed arguments.
+
+    Returns
+    -------
+    str
+        ``attitude-sil montecarlo SPEC ... --resume``, quoted for a POSIX shell.
+    """
+    cmd = ["attitude-sil", "montecarlo", args.spec]
+    if args.runs is not None:
+        cmd += ["--runs", str(args.runs)]
+    if args.output is not None:
+        cmd += ["--output", args.output]
+    for item in args.set or []:
+        cmd += ["--set", item]
+    if args.scheduler is not None:
+        cmd += ["--scheduler", args.scheduler]
+    if args.workers is not None:
+        cmd += ["--workers", str(args.workers)]
+    cmd += [flag for flag, on in (("--no-bags", args.no_bags), ("--quiet", args.quiet), ("--json", args.json)) if on]
+    return shlex.join([*cmd, "--resume"])
+
+
+def _chunks_kept(log: Path) -> int:
+    """How many whole chunk lines ``chunks.jsonl`` holds after its header (a line cut short ends the count)."""
+    import json
+
+    count = 0
+    for line in log.read_text().splitlines()[1:] if log.is_file() else []:
+        try:
+            json.loads(line)
+        except ValueError:
+            break
+        count += 1
+    return count
+
+
 def execute(args: argparse.Namespace) -> int:
     """Run the verb; returns the exit code."""
     import json
@@ -40,7 +84,7 @@ def execute(args: argparse.Namespace) -> int:
 
     from attitude_sil.cli.common import announce_domain, scheduler_address, set_overrides
     from attitude_sil.cli.format import format_campaign
-    from attitude_sil.errors import AttitudeSilError
+    from attitude_sil.errors import AttitudeSilError, SchedulerLostError
     from attitude_sil.graph.session import run_graph
     from attitude_sil.ros.signals import StopSignals
     from attitude_sil.tuning.executor import make_executor
@@ -72,10 +116,20 @@ def execute(args: argparse.Namespace) -> int:
             print(f"\r[{'#' * fill}{'.' * (width - fill)}] {done}/{total} runs{rate}", end="", file=sys.stderr,
                   flush=True)
 
-    with make_executor(address, workers, in_process=args.in_process) as executor, \
-            StopSignals(on_first=on_first, second_stops_now=True) as stop:
-        result = run_campaign(spec, executor, resume=args.resume, progress=progress,
-                              should_stop=lambda: stop.requested)
+    try:
+        with make_executor(address, workers, in_process=args.in_process) as executor, \
+                StopSignals(on_first=on_first, second_stops_now=True) as stop:
+            result = run_campaign(spec, executor, resume=args.resume, progress=progress,
+                                  should_stop=lambda: stop.requested)
+    except SchedulerLostError as exc:
+        if show:
+            print(file=sys.stderr)  # end the progress bar's line
+        # every finished chunk is in chunks.jsonl: the resume command runs only the others, anywhere
+        here = "drop --scheduler" if args.scheduler is not None else "add --in-process"
+        raise SchedulerLostError(
+            f"{exc} after {_chunks_kept(spec.output / 'chunks.jsonl')} of {len(spec.chunks())} chunks; nothing "
+            f"finished is lost: {resume_command(args)} finishes the campaign (start the scheduler again, or "
+            f"{here} to finish here)", exc.address) from None
     if show:
         print(file=sys.stderr)
     out = spec.output

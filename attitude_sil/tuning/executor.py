@@ -14,6 +14,8 @@ results. An :class:`Executor` runs such calls:
   :class:`distributed.LocalCluster`), one engine thread per task. Dask re-runs
   the tasks of a worker that dies. ``tls://`` addresses use Dask's security
   configuration (``distributed.comm.tls.*``: CA, client certificate and key).
+  A scheduler lost mid-run is one :class:`~attitude_sil.errors.SchedulerLostError`
+  naming its address, never distributed's own traceback.
 
 Chunks carry their own seeds and episode indices (noise seed = base seed +
 global episode index, dispersions drawn per run index), so a result is the same
@@ -22,7 +24,9 @@ bit for bit whichever back-end ran it and however the work was cut.
 
 from __future__ import annotations
 
+import contextlib
 import ipaddress
+import logging
 import multiprocessing as mp
 import os
 import sys
@@ -31,7 +35,7 @@ from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from typing import Any
 from urllib.parse import urlsplit
 
-from attitude_sil.errors import AttitudeSilError
+from attitude_sil.errors import AttitudeSilError, SchedulerLostError
 
 __all__ = ["Executor", "InProcess", "LocalProcesses", "DaskCluster", "make_executor", "check_scheduler_address",
            "SCHEDULER_ENV"]
@@ -147,6 +151,40 @@ def _is_loopback(host: str) -> bool:
         return False
 
 
+#: how the connection went when no socket error says it
+CONNECTION_CLOSED = "its connection closed"
+
+
+def _cause_name(exc: BaseException) -> str:
+    """The socket's own error class (e.g. ``ConnectionResetError``), else :data:`CONNECTION_CLOSED`.
+
+    distributed wraps a reset connection in its CommClosedError, from tornado's StreamClosedError, which keeps
+    the socket's error as ``real_error`` (None when the peer closed the stream in order).
+    """
+    while True:
+        inner = exc.__cause__ or getattr(exc, "real_error", None)
+        if not isinstance(inner, BaseException):
+            break
+        exc = inner
+    name = type(exc).__name__
+    return CONNECTION_CLOSED if name in ("CommClosedError", "StreamClosedError") else name
+
+
+@contextlib.contextmanager
+def _quiet_client_logs() -> Iterator[None]:
+    """Mute distributed's client loggers: closing a client that lost its scheduler logs its reconnection's end
+    (a traceback, or 'Failed to reconnect') though the error that matters has been said."""
+    loggers = [logging.getLogger(name) for name in ("distributed.client", "distributed.utils")]
+    before = [lg.disabled for lg in loggers]
+    for lg in loggers:
+        lg.disabled = True
+    try:
+        yield
+    finally:
+        for lg, was in zip(loggers, before, strict=True):
+            lg.disabled = was
+
+
 class DaskCluster(Executor):
     """The workers of a Dask distributed scheduler (or of a :class:`distributed.LocalCluster` given as ``client``).
 
@@ -182,6 +220,8 @@ class DaskCluster(Executor):
             except (OSError, TimeoutError) as exc:
                 raise AttitudeSilError(f"cannot reach the Dask scheduler at {address}: {exc}") from None
         self.client = client
+        self.address = client.scheduler.address if address is None else address
+        self.lost = False
         try:
             self.client.wait_for_workers(1, timeout=timeout)
         except TimeoutError:
@@ -192,23 +232,65 @@ class DaskCluster(Executor):
 
     def close(self) -> None:
         if self.own and self.client is not None:
-            self.client.close()
+            if self.lost or self.client.status != "running":
+                # the client is still trying to reconnect: closing ends that at once, without its logs
+                with _quiet_client_logs():
+                    self.client.close(timeout=5)
+            else:
+                self.client.close()
         self.client = None
+
+    def _lost_error(self, exc: BaseException, future=None) -> SchedulerLostError | None:
+        """The error to raise for ``exc`` if it means the scheduler is lost, else None (a task's own error).
+
+        A task that raised is its own error whatever the scheduler's state (its future's status is
+        ``error``). Otherwise the scheduler is lost when the client cancelled the futures because its
+        connection closed, when the client no longer runs (it is reconnecting or gave up), or when a
+        connection error met the scheduler (fetching a finished result goes through it).
+        """
+        from distributed.client import FutureCancelledError
+
+        if future is not None and future.status == "error":
+            return None
+        cancelled = isinstance(exc, FutureCancelledError) and exc.reason == "scheduler-connection-lost"
+        if not (cancelled or isinstance(exc, OSError) or self.client.status != "running"):
+            return None
+        return self._lost(_cause_name(exc) if isinstance(exc, OSError) else CONNECTION_CLOSED)
+
+    def _lost(self, how: str) -> SchedulerLostError:
+        """The one-line error for a lost scheduler; the client is closed without waiting for it from then on."""
+        self.lost = True
+        return SchedulerLostError(f"lost the Dask scheduler at {self.address} ({how})", self.address)
 
     def as_completed(self, fn, calls, should_stop=None):
         from distributed import as_completed
 
+        if self.client.status != "running":  # lost between two calls (a tuner's generations)
+            raise self._lost(CONNECTION_CLOSED)
         # pure=False: identical calls are still separate tasks. A task whose worker dies is re-run on another
         # by the scheduler (distributed.scheduler.allowed-failures); one that raises is not retried.
         futures = [self.client.submit(fn, *args, pure=False) for args in calls]
         index = {f.key: i for i, f in enumerate(futures)}
+        finished = as_completed(futures, loop=self.client.loop)
         try:
-            for f in as_completed(futures, loop=self.client.loop):
-                yield index[f.key], f.result()
+            while True:
+                f = None
+                try:
+                    f = next(finished)
+                    result = f.result()
+                except StopIteration:
+                    return
+                except Exception as exc:  # a task's own error, or distributed's on a lost connection
+                    lost = self._lost_error(exc, f)
+                    if lost is None:
+                        raise
+                    raise lost from None
+                yield index[f.key], result
                 if should_stop is not None and should_stop():
                     return
         finally:
-            self.client.cancel([f for f in futures if not f.done()])
+            if not self.lost:
+                self.client.cancel([f for f in futures if not f.done()])
 
 
 def make_executor(scheduler: str | None = None, workers: int = 1, in_process: bool = False) -> Executor:
