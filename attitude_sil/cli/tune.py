@@ -7,8 +7,10 @@ builds every parser without loading numba, rclpy or the tuner.
 from __future__ import annotations
 
 import argparse
+import shlex
 import signal
 import sys
+from pathlib import Path
 
 
 def add(sub: argparse._SubParsersAction) -> None:
@@ -27,6 +29,42 @@ def add(sub: argparse._SubParsersAction) -> None:
     tune.set_defaults(func=execute)
 
 
+def resume_command(args: argparse.Namespace) -> str:
+    """The command line that continues this tuning run: the user's own, with ``--resume``.
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        The verb's parsed arguments.
+
+    Returns
+    -------
+    str
+        ``attitude-sil tune SPEC ... --resume``, quoted for a POSIX shell.
+    """
+    cmd = ["attitude-sil", "tune", args.spec]
+    for item in args.set or []:
+        cmd += ["--set", item]
+    if args.scheduler is not None:
+        cmd += ["--scheduler", args.scheduler]
+    cmd += [flag for flag, on in (("--no-record", args.no_record), ("--quiet", args.quiet), ("--json", args.json))
+            if on]
+    return shlex.join([*cmd, "--resume"])
+
+
+def _generations_kept(log: Path) -> int:
+    """How many generations ``evaluations.jsonl`` holds (a line cut short ends the count)."""
+    import json
+
+    generations = set()
+    for line in log.read_text().splitlines() if log.is_file() else []:
+        try:
+            generations.add(json.loads(line)["generation"])
+        except (ValueError, KeyError, TypeError):
+            break
+    return len(generations)
+
+
 def execute(args: argparse.Namespace) -> int:
     """Run the verb; returns the exit code."""
     import json
@@ -36,7 +74,7 @@ def execute(args: argparse.Namespace) -> int:
 
     from attitude_sil.cli.common import announce_domain, scheduler_address, set_overrides
     from attitude_sil.cli.format import format_bar
-    from attitude_sil.errors import AttitudeSilError
+    from attitude_sil.errors import AttitudeSilError, SchedulerLostError
     from attitude_sil.graph.tuner_node import TunerNode, tune
     from attitude_sil.ros.environment import localhost_environment
     from attitude_sil.ros.signals import StopSignals
@@ -70,6 +108,13 @@ def execute(args: argparse.Namespace) -> int:
         with StopSignals(on_first=on_first, second_stops_now=True) as stop:
             outcome = tune(spec, resume=args.resume, overrides=overrides, record=not args.no_record,
                            on_progress=progress, should_stop=lambda: stop.requested, scheduler=address)
+    except SchedulerLostError as exc:
+        # every scored generation is in evaluations.jsonl: the resume command replays them and scores the rest
+        here = "drop --scheduler" if args.scheduler is not None else "unset DASK_SCHEDULER_ADDRESS"
+        raise SchedulerLostError(
+            f"{exc} after {_generations_kept(spec.output / 'evaluations.jsonl')} generation(s); nothing finished "
+            f"is lost: {resume_command(args)} finishes the tuning run (start the scheduler again, or {here} to "
+            "finish here)", exc.address) from None
     finally:
         node.destroy_node()
         rclpy.try_shutdown(context=context)
