@@ -3,22 +3,28 @@
 A small campaign (through the ``attitude-sil montecarlo --scheduler`` command) and
 a small tuning run through the cluster give the local results bit for bit; a
 worker killed (SIGKILL) while it holds chunks has them re-run by Dask and the
-campaign is still complete and identical. Everything is shut down in a finally.
+campaign is still complete and identical. A scheduler killed mid-campaign is one line naming it and the
+``--resume`` command, which finishes the campaign without it, identical to a local run byte for byte; a task's
+own error on a live scheduler stays its own. Everything is shut down in a finally.
 """
 
 from __future__ import annotations
 
 import json
 import os
+import re
+import shlex
 import signal
 import socket
 import subprocess
 import sys
+import time
 
 import numpy as np
 import pytest
 from distributed import Client
 
+from attitude_sil.errors import SchedulerLostError
 from attitude_sil.tuning.evaluate import Evaluator
 from attitude_sil.tuning.executor import DaskCluster, InProcess
 from attitude_sil.tuning.montecarlo import load_mc_spec, run_campaign
@@ -40,28 +46,42 @@ def _dask(*args) -> subprocess.Popen:
                             stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
 
 
-@pytest.fixture(scope="module")
-def cluster():
+def _start_cluster(workers: int) -> tuple[str, list[subprocess.Popen]]:
+    """A scheduler and ``workers`` worker processes on 127.0.0.1, the workers connected; stop with _stop."""
     port = _free_port()
     address = f"tcp://127.0.0.1:{port}"
     procs = [_dask("scheduler", "--host", "127.0.0.1", "--port", str(port), "--no-dashboard")]
     try:
-        for _ in range(2):  # no nanny: the process we kill is the worker itself
+        for _ in range(workers):  # no nanny: the process we kill is the worker itself
             procs.append(_dask("worker", address, "--host", "127.0.0.1", "--nthreads", "1", "--no-nanny",
                                "--no-dashboard", "--death-timeout", "60"))
         with Client(address, timeout=60) as client:
-            client.wait_for_workers(2, timeout=120)
+            client.wait_for_workers(workers, timeout=120)
+    except BaseException:
+        _stop(procs)
+        raise
+    return address, procs
+
+
+def _stop(procs: list[subprocess.Popen]) -> None:
+    for p in reversed(procs):
+        if p.poll() is None:
+            os.killpg(p.pid, signal.SIGTERM)
+    for p in procs:
+        try:
+            p.wait(timeout=5)
+        except subprocess.TimeoutExpired:
+            os.killpg(p.pid, signal.SIGKILL)
+            p.wait()
+
+
+@pytest.fixture(scope="module")
+def cluster():
+    address, procs = _start_cluster(2)
+    try:
         yield address, procs
     finally:
-        for p in reversed(procs):
-            if p.poll() is None:
-                os.killpg(p.pid, signal.SIGTERM)
-        for p in procs:
-            try:
-                p.wait(timeout=5)
-            except subprocess.TimeoutExpired:
-                os.killpg(p.pid, signal.SIGKILL)
-                p.wait()
+        _stop(procs)
 
 
 def _spec_file(tmp_path, name: str, runs: int, chunk: int, duration: float):
@@ -133,3 +153,68 @@ def test_a_killed_worker_has_its_chunks_rerun_and_the_campaign_is_complete(clust
     with InProcess() as ex:
         local = run_campaign(local_spec, ex)
     _same(local.table, result.table)
+
+
+def test_a_tasks_own_error_on_the_cluster_is_not_a_lost_scheduler(cluster):
+    address, _ = cluster
+    with DaskCluster(address) as ex:
+        # os.stat raises an OSError on the worker, as a connection error would in the client: it stays the task's
+        with pytest.raises(FileNotFoundError):
+            list(ex.as_completed(os.stat, [("/nonexistent/attitude_sil",)]))
+        with pytest.raises(ValueError, match="invalid literal") as raised:
+            ex.map(int, [("x",)])
+        assert not isinstance(raised.value, SchedulerLostError) and not ex.lost
+        assert ex.map(abs, [(-1,), (-2,)]) == [1, 2]  # the scheduler still serves
+
+
+def test_a_lost_scheduler_is_one_line_and_its_resume_command_finishes_the_campaign(tmp_path):
+    # a cluster of its own: the module's is shared with the other tests
+    address, procs = _start_cluster(1)
+    scheduler = procs[0]
+    path = _spec_file(tmp_path, "mc", runs=200, chunk=2, duration=10.0)
+    log = tmp_path / "mc" / "chunks.jsonl"
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    env.pop("DASK_SCHEDULER_ADDRESS", None)
+    try:
+        cli = subprocess.Popen([sys.executable, "-m", "attitude_sil.cli", "montecarlo", str(path), "--scheduler",
+                                address, "--no-bags"], cwd=ROOT, env=env, stdin=subprocess.DEVNULL,
+                               stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        try:
+            # the scheduler dies once two chunks are back (the header and two lines), with most still to run
+            deadline = time.monotonic() + 300
+            while cli.poll() is None and not (log.is_file() and len(log.read_text().splitlines()) >= 3):
+                assert time.monotonic() < deadline, "no chunk came back from the cluster"
+                time.sleep(0.05)
+            os.killpg(scheduler.pid, signal.SIGKILL)
+            scheduler.wait(timeout=30)
+            out, err = cli.communicate(timeout=120)
+        finally:
+            if cli.poll() is None:
+                cli.kill()
+                cli.wait()
+    finally:
+        _stop(procs)
+    assert cli.returncode == 2, err
+    assert "Traceback" not in err and len(err.splitlines()) == 1, err
+    line = err.splitlines()[-1]
+    found = re.fullmatch(rf"attitude-sil: error: lost the Dask scheduler at {re.escape(address)} "
+                         r"\((its connection closed|\w+Error)\) after (\d+) of 100 chunks; nothing finished is lost: "
+                         r"(attitude-sil montecarlo .+ --resume) finishes the campaign "
+                         r"\(start the scheduler again, or drop --scheduler to finish here\)", line)
+    assert found, line
+    kept = len(log.read_text().splitlines()) - 1
+    assert 2 <= kept < 100 and int(found[2]) == kept  # it names what the log holds; the rest did not run
+    command = shlex.split(found[3])
+    assert command == ["attitude-sil", "montecarlo", str(path), "--scheduler", address, "--no-bags", "--resume"]
+
+    # the command it gives, without the scheduler, finishes the campaign here
+    i = command.index("--scheduler")
+    resumed = subprocess.run([sys.executable, "-m", "attitude_sil.cli", *command[1:i], *command[i + 2:], "--json"],
+                             cwd=ROOT, env=env, stdin=subprocess.DEVNULL, capture_output=True, text=True,
+                             timeout=300)
+    assert resumed.returncode == 0, resumed.stderr
+    assert json.loads(resumed.stdout.splitlines()[-1])["completed_runs"] == 200
+    with InProcess() as ex:  # one chunk, every core, never interrupted
+        run_campaign(load_mc_spec(_spec_file(tmp_path, "local", runs=200, chunk=200, duration=10.0)), ex)
+    for name in ("runs.csv", "runs.json"):
+        assert (tmp_path / "mc" / name).read_bytes() == (tmp_path / "local" / name).read_bytes(), name
