@@ -55,3 +55,18 @@ def test_no_stub_that_raises_in_the_package():
              for node in ast.walk(ast.parse(path.read_text()))
              if isinstance(node, ast.Raise) and "NotImplementedError" in ast.unparse(node)]
     assert not found, f"stubs that raise: {found}"
+
+
+def test_a_swap_to_a_law_without_enter_is_bumpless():
+    """The generic entry (core/control/dispatch.py): the state zeroed, the first command equal to the last."""
+    from attitude_sil.core.sim.build import law_bank
+
+    q = np.array([[0.0, 0.0, np.sin(0.05), np.cos(0.05)]])
+    args = (q, np.zeros((1, 3)), np.array([[0.0, 0.0, 0.0, 1.0]]), np.zeros((1, 3)))
+    for old, new in (("pid", "ga_flc"), ("fuzzy_pid", "ga_flc")):
+        bank = law_bank(old, 1)
+        u_last = bank.compute(*args, 0)
+        bank.request(new)
+        u = bank.compute(*args, 1)
+        assert bank.has_offset[0] and abs(u_last[0, 2]) > 1.0
+        assert np.allclose(u, u_last, rtol=0.0, atol=1e-9), (old, new, u, u_last)

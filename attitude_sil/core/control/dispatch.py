@@ -88,9 +88,11 @@ def zero_row(st, p):
         a[p, :] = 0
 
 
-@overload(zero_row, inline="always")
+@overload(zero_row)
 def _zero_row(st, p):
-    # one loop per field: the fields' dtypes differ (float, bool), so no loop over the record can type them all
+    # one loop per field: the fields' dtypes differ (float, bool), so no loop over the record can type them all.
+    # Not inline="always": numba's own inlining of this overload lost a store that follows the call in the
+    # caller (generic_enter_row's has_off[p] = True; test_engine_source holds it); as a call, LLVM inlines it
     if not isinstance(st, types.BaseTuple):
         return None
     lines = ["def impl(st, p):"]
