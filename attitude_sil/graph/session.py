@@ -564,10 +564,15 @@ def episode_complete(newest_stamp: dict[str, int], step_topics: list[str], final
             and all(newest_stamp.get(t, -1) >= final_ns for t in step_topics))
 
 
-def nonfinite_command(bad: tuple[str, int, list[float]], law: str, dt: float) -> str:
+#: wall s a non-finite command may wait for a finite one of its step before the run stops on it: the graph's own
+#: controller follows a foreign node's stray at once; a law that made it never does
+NONFINITE_GRACE_S = 1.0
+
+
+def nonfinite_command(bad: tuple[str, int, list[float], float], law: str, dt: float) -> str:
     """The line that stops an episode whose controller commanded non-finite values (``bad``: the recorder's
-    first such command, (topic, stamp ns, values))."""
-    topic, t, values = bad
+    such command that no finite one of its step followed, (topic, stamp ns, values, wall s))."""
+    topic, t, values, _ = bad
     who = "the external controller" if law == EXTERNAL else f"controller_type {law}"
     shown = ", ".join(f"{v:.6g}" for v in values)
     return (f"{who} commanded a non-finite {topic} at step {int(round(t * 1e-9 / dt))} (t={t * 1e-9:.6f} s): "
@@ -629,8 +634,9 @@ def spin_episode(recorder: Recorder, spin, plant, children, k_steps: int, scn: S
             return
         if plant is not None and plant.error:
             raise RunError(plant.error)
-        if recorder.bad_command is not None:
-            raise RunError(nonfinite_command(recorder.bad_command, recorder.controller_type, dt))
+        bad = recorder.bad_command
+        if bad is not None and time.monotonic() - bad[3] > NONFINITE_GRACE_S:
+            raise RunError(nonfinite_command(bad, recorder.controller_type, dt))
         if recorder.error:
             raise RunError(f"{recorder.error}; the bag is readable up to there")
         if recorder.qos_problems:

@@ -116,9 +116,9 @@ class Recorder(Node):
         self._registered: set[str] = set()
         self.writer = writer
         self.error = ""  # why recording stopped, if it did
-        # the first command of the episode that was not finite: (topic, stamp ns, values), and the law active
-        # as the graph's parameter events tell it (the runner sets the episode's first)
-        self.bad_command: tuple[str, int, list[float]] | None = None
+        # a non-finite command that no finite one of its step has followed yet: (topic, stamp ns, values, wall s
+        # it came), and the law active as the graph's parameter events tell it (the runner sets the first)
+        self.bad_command: tuple[str, int, list[float], float] | None = None
         self.controller_type = ""
         self.qos_problems: list[str] = []  # publishers whose QoS this recorder cannot match
         # a list to time the controller into: wall s from each step's attitude to its command, as they arrive
@@ -266,11 +266,13 @@ class Recorder(Node):
         elif name in self._widths and not self._valid(name, data):
             # the nodes refuse non-finite values and non-unit quaternions: so does the bag
             self._refuse(name, t, "is not finite or not a unit quaternion")
-            if name in COMMAND_TOPICS and self.bad_command is None:  # a law that misbehaves: the runner stops
-                self.bad_command = (name, t, stamped_values(data, self._widths[name]).tolist())
+            if name in COMMAND_TOPICS and self.bad_command is None:  # the runner stops unless a finite one follows
+                self.bad_command = (name, t, stamped_values(data, self._widths[name]).tolist(), time.monotonic())
             return
         else:
             self.sim_now = max(self.sim_now, t)
+        if self.bad_command is not None and name in COMMAND_TOPICS and t >= self.bad_command[1]:
+            self.bad_command = None  # its step got a finite command: a stray (a foreign node's), not the law's
         self.counts[name] += 1
         self.last_stamp[name] = t
         if t > self.newest_stamp.get(name, -1):

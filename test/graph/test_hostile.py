@@ -132,6 +132,7 @@ def test_the_episode_ends_on_its_last_command_not_on_a_count_a_foreign_one_can_f
 
     class Recorder:
         counts, newest_stamp, error, qos_problems, plant_input_timeout = Counter(), {}, "", [], None
+        bad_command, controller_type = None, "pid"
 
     class Progress:
         def update(self, t):
