@@ -42,6 +42,7 @@ import numpy as np
 
 from attitude_sil.core.analysis.metrics import summarize
 from attitude_sil.core.plant.quaternion import euler_from_quat
+from attitude_sil.core.sim.build import episode_parameter_faults
 from attitude_sil.core.sim.engine import simulate, simulate_summary
 from attitude_sil.core.sim.params import spec_for
 from attitude_sil.core.trajectory import EpisodeSummary, Trajectory
@@ -99,6 +100,25 @@ def _add(terms: dict, key: str, value: np.ndarray) -> None:
 EPISODES_PER_SLICE = 128
 
 
+def _runnable(params: dict[str, np.ndarray], n: int, fail) -> dict[str, np.ndarray]:
+    """``params`` with the rows of the candidates that break a parameter's rule (failed here, in the controller
+    node's words) set to the parameters' defaults: the engine refuses such values, and their cost is the penalty
+    whatever they would give."""
+    faults = episode_parameter_faults(params, n)
+    if not faults:
+        return params
+    bad = np.zeros(n, dtype=bool)
+    bad[list(faults)] = True
+    for p, why in faults.items():
+        fail(np.arange(n) == p, why)
+    out = {}
+    for name, v in params.items():
+        v = np.array(v)
+        v[bad] = spec_for("controller", name).default
+        out[name] = v
+    return out
+
+
 def evaluate(spec: TuningSpec, x: np.ndarray, first: int = 0, threads: int | None = None) -> Evaluation:
     """Run and score the candidates ``x`` (P, n_var) in this process.
 
@@ -145,6 +165,7 @@ def evaluate(spec: TuningSpec, x: np.ndarray, first: int = 0, threads: int | Non
         k = params["geometric.k"]
         fail((k[:, 0] == k[:, 1]) | (k[:, 1] == k[:, 2]) | (k[:, 0] == k[:, 2]),
              "equal k_i (paper 001: the entries of K must differ)")
+    params = _runnable(params, n, fail)
     for base in spec.scenarios:
         for cond in spec.conditions:
             scn = scenario_for(spec, base, cond)

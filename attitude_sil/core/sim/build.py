@@ -35,7 +35,8 @@ from attitude_sil.errors import ScenarioError
 __all__ = ["build_plant", "build_wheels", "build_disturbance", "build_guidance", "build_controller", "build_sensing",
            "law_bank", "check_episode", "schedule_from_scenario", "flexible_states", "flexible_settling",
            "initial_attitude", "motor_params", "EPISODE_VALUES", "EPISODE_MOTOR", "EPISODE_FAILURE",
-           "split_episode_values", "episode_laws", "check_episode_parameters"]
+           "split_episode_values", "episode_laws", "check_episode_parameters",
+           "episode_parameter_faults"]
 
 
 def initial_attitude(values: dict, rpy0_deg=None) -> np.ndarray:
@@ -288,8 +289,25 @@ def check_episode_parameters(params: dict, n_episodes: int) -> None:
     Raises
     ------
     ScenarioError
-        An unknown parameter, a value of another shape, or one that breaks the parameter's rule.
+        An unknown parameter, a value of another shape, or one that breaks the parameter's rule (the first
+        episode that does).
     """
+    faults = episode_parameter_faults(params, n_episodes)
+    if faults:
+        p = min(faults)
+        raise ScenarioError(faults[p] + (f" (episode {p})" if n_episodes > 1 else ""))
+
+
+def episode_parameter_faults(params: dict, n_episodes: int) -> dict[int, str]:
+    """Each episode whose controller values break a parameter's rule, and the node's words for the first one
+    it breaks (a tuner fails those candidates and runs the rest).
+
+    Raises
+    ------
+    ScenarioError
+        An unknown parameter or a value of another shape (not one episode's fault).
+    """
+    faults: dict[int, str] = {}
     for name, value in params.items():
         try:
             spec = spec_for("controller", name)
@@ -308,7 +326,9 @@ def check_episode_parameters(params: dict, n_episodes: int) -> None:
             try:
                 spec.validate(rows[p].tolist(), "controller")
             except ValueError as exc:
-                raise ScenarioError(f"{exc}" + (f" (episode {p})" if len(rows) > 1 else "")) from None
+                for e in (range(n_episodes) if len(rows) == 1 else (p,)):  # a value for all: every episode's
+                    faults.setdefault(e, str(exc))
+    return faults
 
 
 def _suspects(spec, rows: list) -> list[int]:
@@ -326,7 +346,7 @@ def _suspects(spec, rows: list) -> list[int]:
         bad |= (a != np.round(a)).any(axis=1)
     if spec.lengths is not None and spec.kind.endswith("_array") and a.shape[1] not in spec.lengths:
         bad[:] = True
-    return [int(p) for p in np.flatnonzero(bad)[:1]]
+    return [int(p) for p in np.flatnonzero(bad)]
 
 
 def check_episode(scn: Scenario, controller: str | None = None) -> None:
