@@ -77,3 +77,25 @@ def launch_actions(monkeypatch) -> list:
             setattr(mod, cls, type(cls, (_Recorded,), {}))
         monkeypatch.setitem(sys.modules, module, mod)
     return runpy.run_path(str(LAUNCH_FILE))["generate_launch_description"]().args[0]
+
+
+#: the example law plugin, the base of the broken ones (test_plugin_checks, test_plugin_faults)
+EXAMPLE = (ROOT / "examples" / "custom_law" / "quat_pd.py").read_text()
+
+#: law name -> (the example's line, its broken replacement): one break each
+BREAKS = {
+    "bad_default": ('double_array("kp", [50.0] * 3,', 'double_array("kp", [-1.0] * 3,'),
+    "dict_record": ('    return Params(lanes(values["kp"], n), lanes(values["kd"], n), float(values["output_limit"]))',
+                    '    return {"kp": lanes(values["kp"], n)}'),
+    "bad_shape": ('double_array("kd", [50.0] * 3, "rate gain per body axis, V s/rad", lengths=(3,),',
+                  'double_array("kd", [50.0] * 2, "rate gain per body axis, V s/rad",'),
+    "no_compile": ("        raw = par.kp[p, i] * e[i]", "        raw = par.gain[p, i] * e[i]"),
+}
+
+
+def write_plugin(folder: Path, name: str) -> None:
+    """The example law as module ``name`` with the break of that name, in ``folder``."""
+    old, new = BREAKS.get(name, ("", ""))
+    source = EXAMPLE.replace('name="quat_pd"', f'name="{name}"')
+    assert old in source, (name, old)
+    (folder / f"{name}.py").write_text(source.replace(old, new))

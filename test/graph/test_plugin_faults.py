@@ -20,12 +20,11 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from unit.test_plugin_checks import BREAKS, write_plugin
 
 from attitude_sil.core.sim.engine import simulate, simulate_summary
 from attitude_sil.core.sim.scenario import load_scenario
 from attitude_sil.errors import NonFiniteWarning
-from conftest import CONFIG, ROOT
+from conftest import BREAKS, CONFIG, ROOT, write_plugin
 
 #: a law that passes every check and commands NaN from step ``START`` on
 NAN_LAW = '''

@@ -11,34 +11,13 @@ through an entry point, so the registry reads it as it reads any plugin.
 from __future__ import annotations
 
 from importlib.metadata import EntryPoint
-from pathlib import Path
 
 import numpy as np
 import pytest
 
 from attitude_sil.core.control import registry
 from attitude_sil.core.sim.build import law_bank
-from conftest import ROOT
-
-EXAMPLE = (ROOT / "examples" / "custom_law" / "quat_pd.py").read_text()
-
-#: law name -> (the example's line, its broken replacement): one break each
-BREAKS = {
-    "bad_default": ('double_array("kp", [50.0] * 3,', 'double_array("kp", [-1.0] * 3,'),
-    "dict_record": ('    return Params(lanes(values["kp"], n), lanes(values["kd"], n), float(values["output_limit"]))',
-                    '    return {"kp": lanes(values["kp"], n)}'),
-    "bad_shape": ('double_array("kd", [50.0] * 3, "rate gain per body axis, V s/rad", lengths=(3,),',
-                  'double_array("kd", [50.0] * 2, "rate gain per body axis, V s/rad",'),
-    "no_compile": ("        raw = par.kp[p, i] * e[i]", "        raw = par.gain[p, i] * e[i]"),
-}
-
-
-def write_plugin(folder: Path, name: str) -> None:
-    """The example law as module ``name`` with the break of that name, in ``folder``."""
-    old, new = BREAKS.get(name, ("", ""))
-    source = EXAMPLE.replace('name="quat_pd"', f'name="{name}"')
-    assert old in source, (name, old)
-    (folder / f"{name}.py").write_text(source.replace(old, new))
+from conftest import BREAKS, write_plugin
 
 
 @pytest.fixture
