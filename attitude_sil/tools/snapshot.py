@@ -31,8 +31,8 @@ __all__ = ["uninstalled_law", "drop_uninstalled", "check_installed", "notice"]
 def uninstalled_law(name: str) -> str | None:
     """The law a controller parameter belongs to when that law is not installed, else None.
 
-    ``quat_pd.kd`` gives ``quat_pd`` where no installed law is called
-    ``quat_pd``. A name the controller declares, or whose prefix is one of
+    ``my_law.kd`` gives ``my_law`` where no installed law is called
+    ``my_law``. A name the controller declares, or whose prefix is one of
     its groups (``pid.kq``, ``orbit.x``: a misspelling, not a missing law),
     or that has no prefix, gives None: the schema judges those.
     """
