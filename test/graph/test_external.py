@@ -126,7 +126,10 @@ def test_external_controller_with_a_process_per_node(builtin):
 def test_hand_started_graph_with_a_default_qos_controller(builtin, tmp_path, capfd):
     # the setting: four node executables and a controller of the user's, then episode and record --episode
     short = tmp_path / "short.yaml"
-    short.write_text(f"/**/plant:\n  ros__parameters:\n    duration: {DURATION}\n")
+    # paced at real time: the recorder joins the graph and reads volatile as ros2 bag record does, so a graph
+    # that outruns it (as fast as possible, on a loaded machine) overwrites what the default-QoS controller's
+    # depth-10 history still held for it; paced, the count below holds however busy the machine is
+    short.write_text(f"/**/plant:\n  ros__parameters:\n    duration: {DURATION}\n    real_time_factor: 1.0\n")
     procs = [_start(["-m", f"attitude_sil.nodes.{name}_node", "--ros-args", "--params-file", str(SCENARIO),
                      "--params-file", str(short)]) for name in ("plant", "wheels", "disturbance", "guidance")]
     procs.append(_start([str(EXAMPLE)]))
