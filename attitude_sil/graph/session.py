@@ -55,6 +55,7 @@ from attitude_sil.ros.contract import (
     COMMAND_TOPICS,
     EXTERNAL,
     PRODUCERS,
+    ROLE_OUTPUTS,
     SENSING_STEP_TOPICS,
     UNKNOWN_NODE,
     WHEEL_TORQUE,
@@ -579,6 +580,49 @@ def nonfinite_command(bad: tuple[str, int, list[float], float], law: str, dt: fl
             f"[{shown}]; the episode stops")
 
 
+#: the roles that answer the plant's step k, in the order their outputs depend on each other
+STEP_ROLES = ("guidance", "disturbance", "sensors", "estimator", "controller", "wheels")
+
+
+def _with_culprit(line: str, recorder: Recorder, step_topics: list[str], elapsed: float) -> str:
+    """A stopped episode's line, with the wall time since it started and who its last step waited for."""
+    culprit = stall_culprit(recorder, step_topics)
+    return f"{line} ({elapsed:.1f} s into the episode)" + (f"; {culprit}" if culprit else "")
+
+
+def stall_culprit(recorder: Recorder, step_topics: list[str], refused_only: bool = False) -> str:
+    """Who the step the plant waits on waits for: the first role, in the lockstep's order, none of whose messages
+    of one of its outputs came stamped with that step, what came instead, and what may cause it ('' if every
+    output of the step is in; with ``refused_only``, also '' unless that role's messages came and were refused,
+    the sign of a node that stamps with its own clock rather than a first message lost).
+
+    The step is the plant's newest ``attitude``; the outputs are those of
+    :data:`~attitude_sil.ros.contract.ROLE_OUTPUTS` among ``step_topics``
+    and the command topics.
+    """
+    step_ns = recorder.newest_stamp.get(ATTITUDE)
+    if step_ns is None:
+        return "the plant published no attitude"
+    wanted = set(step_topics) | set(COMMAND_TOPICS)
+    for role in STEP_ROLES:
+        for alternatives in ROLE_OUTPUTS[role]:
+            topics = [t for t in alternatives if t in wanted]
+            if not topics or max(recorder.newest_stamp.get(t, -1) for t in topics) >= step_ns:
+                continue
+            name = " or ".join(topics)
+            newest = max(recorder.newest_stamp.get(t, -1) for t in topics)
+            taken = "none taken" if newest < 0 else f"the newest taken stamped {newest * 1e-9:.6f} s"
+            refused = sum(recorder.refused.get(t, 0) for t in topics)
+            if refused_only and not refused:
+                return ""
+            stamps = [recorder.refused_stamp[t] for t in topics if t in recorder.refused_stamp]
+            instead = taken if not refused else (f"{refused} message(s) refused, the last stamped "
+                                                 f"{max(stamps) * 1e-9:.6f} s; {taken}")
+            return (f"the {role} sent no {name} stamped {step_ns * 1e-9:.6f} s ({instead}): a node that runs on "
+                    "a timer and stamps with its own clock? docs/flight-software.md")
+    return ""
+
+
 def spin_episode(recorder: Recorder, spin, plant, children, k_steps: int, scn: Scenario, prog: Progress,
                  schedule: list[tuple[float, int, str]], foreign: ForeignPublishers | None = None,
                  topics: list[str] | None = None, restart: Callable[[], None] | None = None) -> None:
@@ -619,6 +663,7 @@ def spin_episode(recorder: Recorder, spin, plant, children, k_steps: int, scn: S
         return sum(counts[t] for t in COMMAND_TOPICS)
 
     final_ns = k_steps * int(round(dt * 1e9))
+    started = time.monotonic()
 
     while True:
         spin(0.1)
@@ -633,7 +678,7 @@ def spin_episode(recorder: Recorder, spin, plant, children, k_steps: int, scn: S
                 and episode_complete(recorder.newest_stamp, step_topics, final_ns)):
             return
         if plant is not None and plant.error:
-            raise RunError(plant.error)
+            raise RunError(_with_culprit(plant.error, recorder, step_topics, time.monotonic() - started))
         bad = recorder.bad_command
         if bad is not None and time.monotonic() - bad[3] > NONFINITE_GRACE_S:
             raise RunError(nonfinite_command(bad, recorder.controller_type, dt))
@@ -649,11 +694,15 @@ def spin_episode(recorder: Recorder, spin, plant, children, k_steps: int, scn: S
             prog.update(max(n - 1, 0) * dt)
         elif n == 0 and restart is not None and restarts < MAX_RESTARTS and now - last_change > restart_after:
             restarts += 1
-            recorder.get_logger().debug(f"step 0 did not complete within {restart_after:g} s (a first message "
-                                        "written before DDS matched its reader, or slow); episode restarted")
+            culprit = stall_culprit(recorder, step_topics, refused_only=True)  # a lost first message: quiet
+            if restarts == 1 and culprit:
+                print(f"attitude-sil: step 0 not complete after {now - started:.1f} s: {culprit}; the episode "
+                      "starts again (a first message DDS had not yet matched is the usual cause)", file=sys.stderr)
+            recorder.get_logger().debug(f"step 0 did not complete within {restart_after:g} s; episode restarted")
             restart()
             last_change = time.monotonic()
         elif now - last_change > (recorder.plant_input_timeout or input_timeout) + 2.0:
             missing = [t for t in step_topics if counts[t] < needed]
-            raise RunError(f"episode stalled at t={max(n - 1, 0) * dt:.3f} s: no progress on {', '.join(missing)}")
+            raise RunError(_with_culprit(f"episode stalled at t={max(n - 1, 0) * dt:.3f} s: no progress on "
+                                         f"{', '.join(missing)}", recorder, step_topics, now - started))
         check_children(children)

@@ -44,6 +44,7 @@ class DisturbanceNode(LockstepNode):
         if kind == StepSequencer.NEW:
             self.new_episode()
         elif kind != StepSequencer.NEXT:
+            self.refuse_stamp(ATTITUDE, t, kind)
             return
         tau = self.core.torque(q, t)[0]
         self.pub.publish(stamped_vector_cdr(tau, t, "body"))

@@ -87,6 +87,7 @@ class EstimatorNode(LockstepNode):
             self.star = {s: v for s, v in self.star.items() if s == 0}  # what a past episode left is not ours
             self._start(variance)
         elif kind != StepSequencer.NEXT:
+            self.refuse_stamp(IMU, t, kind)
             return
         self.imu[t] = (rate, variance)
         self._advance()

@@ -133,6 +133,7 @@ class Recorder(Node):
         self.last_stamp: dict[str, int] = {}  # the latest stamp taken per topic, ns
         self.newest_stamp: dict[str, int] = {}  # the greatest stamp taken per topic, ns (a stray can be older)
         self.refused: dict[str, int] = defaultdict(int)  # stray messages not recorded, per topic
+        self.refused_stamp: dict[str, int] = {}  # the stamp of the last one refused per topic, ns
         self.clock_ns = 0  # the latest /clock, ns
         self.sim_now = 0  # latest lockstep stamp seen, ns
         self.newest_ns = 0  # the latest stamp taken on any topic this episode, ns
@@ -181,6 +182,7 @@ class Recorder(Node):
         self.last_stamp.clear()
         self.newest_stamp.clear()
         self.refused.clear()
+        self.refused_stamp.clear()
         self.sim_now = 0
         self.newest_ns = 0
         self.clock_ns = 0
@@ -373,6 +375,7 @@ class Recorder(Node):
 
     def _refuse(self, name: str, t: int, why: str) -> None:
         self.refused[name] += 1
+        self.refused_stamp[name] = t
         self.get_logger().warning(f"{name} stamped {t * 1e-9:.6f} s {why} (clock {self.clock_ns * 1e-9:.6f} s); "
                                   "not recorded", throttle_duration_sec=1.0)
 

@@ -47,12 +47,8 @@ class WheelsNode(LockstepNode):
         kind = self.seq.classify(t, self.dt_ns)
         if kind == StepSequencer.NEW:
             self.new_episode()
-        elif kind in (StepSequencer.DUPLICATE, StepSequencer.STALE):
-            return
-        elif kind == StepSequencer.MISMATCH:
-            after = "no episode yet" if self.seq.last_ns is None else f"{self.seq.last_ns * 1e-9:.6f} s"
-            self.get_logger().error(f"command stamped {t * 1e-9:.6f} s does not follow {after}; ignored",
-                                    throttle_duration_sec=1.0)
+        elif kind != StepSequencer.NEXT:
+            self.refuse_stamp(TORQUE_CMD if torque_mode else VOLTAGE_CMD, t, kind)
             return
         out = self.core.advance(v, torque_mode)
         self.pub_torque.publish(stamped_vector_cdr(out.tau_c_B[0], t, "body"))

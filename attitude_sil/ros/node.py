@@ -186,6 +186,15 @@ class LockstepNode(SchemaNode):
         self.inputs = StepInputs(self.step_inputs)
         self.dt_ns = 0
 
+    def refuse_stamp(self, topic: str, t: int, kind: str) -> None:
+        """One throttled line for a message of ``topic`` whose stamp ``t`` (ns) the lockstep cannot take
+        (``kind``: the :class:`~attitude_sil.core.sim.lockstep.StepSequencer` verdict), naming the stamp it
+        expects."""
+        last = self.seq.last_ns
+        expected = "0.000000 s (an episode's first step)" if last is None else f"{(last + self.dt_ns) * 1e-9:.6f} s"
+        self.get_logger().error(f"{topic} stamped {t * 1e-9:.6f} s refused ({kind}); expected {expected}",
+                                throttle_duration_sec=1.0)
+
     def new_episode(self) -> None:
         """The control period and the subclass's models (``rebuild()``) from the current parameters."""
         self.dt_ns = int(round(self.param("control_period") * 1e9))
@@ -217,8 +226,7 @@ class LockstepNode(SchemaNode):
         if kind == StepSequencer.NEW:
             self.new_episode()
         elif kind != StepSequencer.NEXT:
-            self.get_logger().error(f"inputs stamped {t * 1e-9:.6f} s out of sequence ({kind}); ignored",
-                                    throttle_duration_sec=1.0)
+            self.refuse_stamp(f"{name} (with the step's other inputs)", t, kind)
             return None
         self.inputs.taken(t)
         return slot

@@ -49,16 +49,18 @@ def test_a_step_advances_only_when_every_input_of_that_step_is_in():
     assert ls.k == 1 and ls.t_ns == DT and ls.inputs == {}
 
 
-def test_stale_inputs_are_dropped_and_future_nonfinite_or_second_ones_refused():
+def test_stale_future_nonfinite_or_second_inputs_are_refused_naming_the_stamp_expected():
     ls = PlantLockstep(PLANT_INPUTS)
     ls.start(10, DT, 0.0, -1.0)
     ls.published(0.0)
     _feed_all(ls, 0)
     ls.advanced(True, 0.0, 0.0, -1.0)
     ls.published(0.0)
-    assert ls.offer("wheel_torque", 0, ZERO) is Action.NONE  # from step 0: stale, dropped
+    assert ls.offer("wheel_torque", 0, ZERO) is Action.REFUSED  # from step 0: stale, refused with a line
+    assert ls.refusal == "plant: wheel_torque stamped 0.000000 s refused (stale); expected 0.010000 s"
     assert ls.offer("wheel_torque", 2 * DT, ZERO) is Action.REFUSED  # a future stamp: refused, the run goes on
-    assert "stamped 0.020000 s while waiting for step 0.010000 s" in ls.refusal and ls.running
+    assert ls.refusal == "plant: wheel_torque stamped 0.020000 s refused (ahead of the step); expected 0.010000 s"
+    assert ls.running and "wheel_torque" not in ls.inputs
     assert ls.offer("disturbance_torque", DT, np.array([[np.nan, 0.0, 0.0]])) is Action.REFUSED
     assert "not finite" in ls.refusal and "disturbance_torque" not in ls.inputs
     assert ls.offer("wheel_torque", DT, np.ones((1, 3))) is Action.NONE

@@ -165,18 +165,19 @@ class PlantLockstep:
     def offer(self, name: str, t_ns: int, value: np.ndarray) -> Action:
         """An input message arrived; returns ADVANCE when it completes step k, REFUSED or NONE.
 
-        Stale stamps (earlier steps or episodes) are dropped quietly; a stamp
-        ahead of step k, a non-finite value, or a second message for an input
-        already held is refused (:attr:`refusal` says why) and the step waits
+        A stamp other than step k's (an earlier step or episode, or one ahead),
+        a non-finite value, or a second message for an input already held is
+        refused (:attr:`refusal` says why, naming the stamp expected) and the step waits
         for its producer's message: the plant never integrates with a
         mismatched input, and a stray message does not stop the run (a missing
         one does, at ``input_timeout``).
         """
-        if not self.running or t_ns < self.t_ns:
+        if not self.running:
             return Action.NONE
-        if t_ns > self.t_ns:
-            self.refusal = (f"plant: {name} stamped {t_ns * 1e-9:.6f} s while waiting for step "
-                            f"{self.t_ns * 1e-9:.6f} s; refused")
+        if t_ns != self.t_ns:
+            kind = "stale" if t_ns < self.t_ns else "ahead of the step"
+            self.refusal = (f"plant: {name} stamped {t_ns * 1e-9:.6f} s refused ({kind}); expected "
+                            f"{self.t_ns * 1e-9:.6f} s")
             return Action.REFUSED
         if not np.all(np.isfinite(value)):
             self.refusal = f"plant: {name} at t={t_ns * 1e-9:.6f} s is not finite: {np.ravel(value).tolist()}; refused"
