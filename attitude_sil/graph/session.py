@@ -623,6 +623,20 @@ def stall_culprit(recorder: Recorder, step_topics: list[str], refused_only: bool
     return ""
 
 
+def _raise_if_stopped(recorder: Recorder, plant, step_topics: list[str], started: float, dt: float) -> None:
+    """The RunError of an episode that cannot go on: the plant (in this process) failed, a command stayed
+    non-finite, recording failed, or a publisher cannot match."""
+    if plant is not None and plant.error:
+        raise RunError(_with_culprit(plant.error, recorder, step_topics, time.monotonic() - started))
+    bad = recorder.bad_command
+    if bad is not None and time.monotonic() - bad[3] > NONFINITE_GRACE_S:
+        raise RunError(nonfinite_command(bad, recorder.controller_type, dt))
+    if recorder.error:
+        raise RunError(f"{recorder.error}; the bag is readable up to there")
+    if recorder.qos_problems:
+        raise RunError(recorder.qos_problems[0])
+
+
 def spin_episode(recorder: Recorder, spin, plant, children, k_steps: int, scn: Scenario, prog: Progress,
                  schedule: list[tuple[float, int, str]], foreign: ForeignPublishers | None = None,
                  topics: list[str] | None = None, restart: Callable[[], None] | None = None) -> None:
@@ -677,15 +691,7 @@ def spin_episode(recorder: Recorder, spin, plant, children, k_steps: int, scn: S
         if (n >= needed and commands() >= needed and all(counts[t] >= needed for t in step_topics)
                 and episode_complete(recorder.newest_stamp, step_topics, final_ns)):
             return
-        if plant is not None and plant.error:
-            raise RunError(_with_culprit(plant.error, recorder, step_topics, time.monotonic() - started))
-        bad = recorder.bad_command
-        if bad is not None and time.monotonic() - bad[3] > NONFINITE_GRACE_S:
-            raise RunError(nonfinite_command(bad, recorder.controller_type, dt))
-        if recorder.error:
-            raise RunError(f"{recorder.error}; the bag is readable up to there")
-        if recorder.qos_problems:
-            raise RunError(recorder.qos_problems[0])
+        _raise_if_stopped(recorder, plant, step_topics, started, dt)
         now = time.monotonic()
         if foreign is not None:
             foreign.check(now)
