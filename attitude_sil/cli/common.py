@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import os
+import shlex
 import sys
 
 import yaml
@@ -62,3 +63,21 @@ def set_overrides(items: list[str] | None) -> dict:
         except yaml.YAMLError:
             raise AttitudeSilError(f"--set {key}: {value!r} is not a YAML value") from None
     return overrides
+
+
+def resume_command(args: argparse.Namespace) -> str:
+    """The command line that continues a stopped campaign or tuning run: the user's own, with ``--resume``.
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        The verb's parsed arguments; ``args.argv`` is the command line they were parsed from
+        (:func:`attitude_sil.cli.main.main` keeps it).
+
+    Returns
+    -------
+    str
+        ``attitude-sil VERB ... --resume``, quoted for a POSIX shell.
+    """
+    argv = list(args.argv)
+    return shlex.join(["attitude-sil", *argv, *([] if "--resume" in argv else ["--resume"])])

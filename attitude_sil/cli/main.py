@@ -67,7 +67,9 @@ def _parser() -> argparse.ArgumentParser:
 
 def main(argv: list[str] | None = None) -> int:
     """Entry point of ``attitude-sil``; returns the exit code."""
+    argv = list(sys.argv[1:] if argv is None else argv)
     args = _parser().parse_args(argv)
+    args.argv = argv  # the command line as typed, for a command that tells how to resume it
     try:
         return args.func(args)
     except KeyboardInterrupt as exc:

@@ -7,7 +7,6 @@ builds every parser without loading numba, rclpy or the tuner.
 from __future__ import annotations
 
 import argparse
-import shlex
 import signal
 import sys
 from pathlib import Path
@@ -35,33 +34,6 @@ def add(sub: argparse._SubParsersAction) -> None:
     mc.set_defaults(func=execute)
 
 
-def resume_command(args: argparse.Namespace) -> str:
-    """The command line that continues this campaign: the user's own, with ``--resume``.
-
-    Parameters
-    ----------
-    args : argparse.Namespace
-        The verb's parsed arguments.
-
-    Returns
-    -------
-    str
-        ``attitude-sil montecarlo SPEC ... --resume``, quoted for a POSIX shell.
-    """
-    cmd = ["attitude-sil", "montecarlo", args.spec]
-    if args.runs is not None:
-        cmd += ["--runs", str(args.runs)]
-    if args.output is not None:
-        cmd += ["--output", args.output]
-    for item in args.set or []:
-        cmd += ["--set", item]
-    if args.scheduler is not None:
-        cmd += ["--scheduler", args.scheduler]
-    if args.workers is not None:
-        cmd += ["--workers", str(args.workers)]
-    cmd += [flag for flag, on in (("--no-bags", args.no_bags), ("--quiet", args.quiet), ("--json", args.json)) if on]
-    return shlex.join([*cmd, "--resume"])
-
 
 def _chunks_kept(log: Path) -> int:
     """How many whole chunk lines ``chunks.jsonl`` holds after its header (a line cut short ends the count)."""
@@ -82,7 +54,7 @@ def execute(args: argparse.Namespace) -> int:
     import json
     import os
 
-    from attitude_sil.cli.common import announce_domain, scheduler_address, set_overrides
+    from attitude_sil.cli.common import announce_domain, resume_command, scheduler_address, set_overrides
     from attitude_sil.cli.format import format_campaign
     from attitude_sil.errors import AttitudeSilError, SchedulerLostError
     from attitude_sil.graph.session import run_graph

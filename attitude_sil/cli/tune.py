@@ -7,7 +7,6 @@ builds every parser without loading numba, rclpy or the tuner.
 from __future__ import annotations
 
 import argparse
-import shlex
 import signal
 import sys
 from pathlib import Path
@@ -28,28 +27,6 @@ def add(sub: argparse._SubParsersAction) -> None:
                       "(default: $DASK_SCHEDULER_ADDRESS, else the spec's evaluation.workers)")
     tune.set_defaults(func=execute)
 
-
-def resume_command(args: argparse.Namespace) -> str:
-    """The command line that continues this tuning run: the user's own, with ``--resume``.
-
-    Parameters
-    ----------
-    args : argparse.Namespace
-        The verb's parsed arguments.
-
-    Returns
-    -------
-    str
-        ``attitude-sil tune SPEC ... --resume``, quoted for a POSIX shell.
-    """
-    cmd = ["attitude-sil", "tune", args.spec]
-    for item in args.set or []:
-        cmd += ["--set", item]
-    if args.scheduler is not None:
-        cmd += ["--scheduler", args.scheduler]
-    cmd += [flag for flag, on in (("--no-record", args.no_record), ("--quiet", args.quiet), ("--json", args.json))
-            if on]
-    return shlex.join([*cmd, "--resume"])
 
 
 def _generations_kept(log: Path) -> int:
@@ -72,7 +49,7 @@ def execute(args: argparse.Namespace) -> int:
     import rclpy
     from rclpy.signals import SignalHandlerOptions
 
-    from attitude_sil.cli.common import announce_domain, scheduler_address, set_overrides
+    from attitude_sil.cli.common import announce_domain, resume_command, scheduler_address, set_overrides
     from attitude_sil.cli.format import format_bar
     from attitude_sil.errors import AttitudeSilError, SchedulerLostError
     from attitude_sil.graph.tuner_node import TunerNode, tune
