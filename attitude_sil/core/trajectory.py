@@ -12,8 +12,17 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["EpisodeSummary", "Trajectory", "WheelStep"]
+__all__ = ["EpisodeSummary", "Trajectory", "WheelStep", "all_finite"]
 
+
+
+def all_finite(*arrays: np.ndarray | None) -> np.ndarray | None:
+    """Per episode, whether every value of ``arrays`` (each (P, ...); None skipped) stayed finite, (P,) bool;
+    None when every array is None."""
+    rows = [a.reshape(a.shape[0], -1) for a in arrays if a is not None]
+    if not rows:
+        return None
+    return np.all([np.all(np.isfinite(a), axis=1) for a in rows], axis=0)
 
 @dataclass
 class WheelStep:

@@ -58,6 +58,7 @@ from attitude_sil.core.plant.quaternion import euler_from_quat
 from attitude_sil.core.sim.build import flexible_settling
 from attitude_sil.core.sim.engine import simulate
 from attitude_sil.core.sim.scenario import PRESETS, Scenario, default_config_dir, load_scenario
+from attitude_sil.core.trajectory import all_finite
 from attitude_sil.errors import AttitudeSilError
 from attitude_sil.tuning.linearize import PAPER_000_TABLE_1, PAPER_000_TABLE_1_DURATION, rmse_table
 
@@ -314,8 +315,7 @@ def _finite(tr) -> np.ndarray:
     The metrics read a NaN sample as inside every band, so a run that went wrong could look settled: a
     group of rows gives NaN for such an episode instead, and a NaN row FAILs whatever its kind.
     """
-    fields = (tr.q_BN, tr.omega_BN_B, tr.tau_c_B)
-    return np.all([np.all(np.isfinite(f.reshape(f.shape[0], -1)), axis=1) for f in fields], axis=0)
+    return all_finite(tr.q_BN, tr.omega_BN_B, tr.tau_c_B)
 
 
 def _where_finite(ok: np.ndarray, values) -> np.ndarray:

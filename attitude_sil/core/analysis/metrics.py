@@ -13,7 +13,7 @@ import numpy as np
 from attitude_sil.core.analysis.metric_rows import Sums
 from attitude_sil.core.analysis.pointing import pointing_columns, pointing_errors, pointing_metrics, pointing_start
 from attitude_sil.core.plant.quaternion import euler_from_quat, quat_error, quat_multiply
-from attitude_sil.core.trajectory import EpisodeSummary, Trajectory
+from attitude_sil.core.trajectory import EpisodeSummary, Trajectory, all_finite
 
 
 def principal_angle(q_BN: np.ndarray, q_RN: np.ndarray) -> np.ndarray:
@@ -267,7 +267,7 @@ def summarize(tr: Trajectory, scenario_values: dict, step_time: float = 0.0) -> 
         m = scenario_metrics(tr.t, tr.q_BN, tr.q_RN, tr.tau_c_B, scenario_values, step_time=step_time)
     if tr.q_BN_est is not None:  # the sensing loop ran: the pointing figures of a budget, per episode
         m.update(pointing_columns(tr.t, tr.q_BN, tr.q_RN, tr.q_BN_est, scenario_values, m["settling_time_s"]))
-    finite = np.all(np.isfinite(tr.omega_BN_B), axis=(1, 2)) & np.all(np.isfinite(tr.u_cmd), axis=(1, 2))
+    finite = all_finite(tr.omega_BN_B, tr.u_cmd)  # the running sums' rule (Sums.finite): rate and command
     peak_ws = None if tr.wheel_speed is None else np.max(np.abs(np.nan_to_num(tr.wheel_speed, nan=np.inf)), axis=(1, 2))
     return EpisodeSummary(metrics=m, finite=finite,
                           peak_command=np.max(np.abs(np.nan_to_num(tr.u_cmd, nan=np.inf)), axis=(1, 2)),

@@ -38,7 +38,7 @@ from attitude_sil.core.sim.build import (
 )
 from attitude_sil.core.sim.models import SENSING_FIELDS, Guidance, Plant, Sensing, Wheels
 from attitude_sil.core.sim.scenario import Scenario
-from attitude_sil.core.trajectory import EpisodeSummary, Trajectory
+from attitude_sil.core.trajectory import EpisodeSummary, Trajectory, all_finite
 from attitude_sil.errors import NonFiniteWarning, ScenarioError
 
 __all__ = ["RunOptions", "simulate", "simulate_summary", "compiled_plan", "DRIVERS", "KEEPABLE"]
@@ -169,9 +169,9 @@ def simulate(scn: Scenario, n_episodes: int = 1, options: RunOptions | None = No
         raise ScenarioError(f"stride must be >= 1, got {stride!r}")
     run = _Run(scn, n_episodes, opts)
     tr = run.trajectory(opts.threads, int(stride), keep)
-    fields = [a.reshape(a.shape[0], -1) for a in (tr.q_BN, tr.omega_BN_B, tr.u_cmd) if a is not None]
-    if fields and opts.warn_nonfinite:
-        run.warn_nonfinite(np.all([np.all(np.isfinite(a), axis=1) for a in fields], axis=0))
+    finite = all_finite(tr.q_BN, tr.omega_BN_B, tr.u_cmd)
+    if finite is not None and opts.warn_nonfinite:
+        run.warn_nonfinite(finite)
     return tr
 
 
