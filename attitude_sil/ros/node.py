@@ -189,7 +189,10 @@ class LockstepNode(SchemaNode):
     def refuse_stamp(self, topic: str, t: int, kind: str) -> None:
         """One throttled line for a message of ``topic`` whose stamp ``t`` (ns) the lockstep cannot take
         (``kind``: the :class:`~attitude_sil.core.sim.lockstep.StepSequencer` verdict), naming the stamp it
-        expects."""
+        expects. A duplicate, a repeat of the step just taken (the plant publishes a step again, e.g. at a
+        hold's release), is dropped without a line: it changes nothing."""
+        if kind == StepSequencer.DUPLICATE:
+            return
         last = self.seq.last_ns
         expected = "0.000000 s (an episode's first step)" if last is None else f"{(last + self.dt_ns) * 1e-9:.6f} s"
         self.get_logger().error(f"{topic} stamped {t * 1e-9:.6f} s refused ({kind}); expected {expected}",
