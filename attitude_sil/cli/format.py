@@ -31,7 +31,11 @@ def format_table(metrics: dict) -> str:
              ("final error angle", "final_error_rad", "rad"),
              ("controller latency mean", "controller_latency_mean_ms", "ms"),
              ("controller latency p99", "controller_latency_p99_ms", "ms"),
-             ("controller latency max", "controller_latency_max_ms", "ms")]
+             ("controller latency max", "controller_latency_max_ms", "ms"),
+             ("controller timing", "command_timing", ""), ("controller period", "command_period_ms", "ms"),
+             ("command delay (sim)", "command_delay_ms", "ms"), ("commands received", "command_count", ""),
+             ("steps without new cmd", "command_stale_steps", ""),
+             ("missed periods", "command_missed_periods", "")]
     rows += [(label, metrics[key], unit) for label, key, unit in extra if key in metrics]
     lines = [f"scenario {metrics['scenario']}"]
     for label, value, unit in rows:

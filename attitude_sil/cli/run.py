@@ -10,6 +10,7 @@ import argparse
 import math
 
 from attitude_sil.core.control import registry
+from attitude_sil.core.sim.lockstep import COMMAND_TIMINGS
 from attitude_sil.errors import AttitudeSilError
 from attitude_sil.ros.contract import ROLE_OUTPUTS
 from attitude_sil.storage.foxglove import DEFAULT_HOST, DEFAULT_PORT, check_port
@@ -54,6 +55,14 @@ def add(sub: argparse._SubParsersAction) -> None:
                      "(docs/flight-software.md)")
     run.add_argument("--external-timeout", type=float, default=60.0, metavar="S",
                      help="wall seconds to wait for the external node(s) (default 60)")
+    run.add_argument("--external-timing", choices=COMMAND_TIMINGS,
+                     help="how your controller runs: stamped (answers each step's inputs with their stamp; the "
+                     "default), sim_timer (a timer on sim time: its commands take effect one period later, "
+                     "deterministic) or wall (a timer on the wall clock, with --real-time: the newest command is "
+                     "held); docs/flight-software.md")
+    run.add_argument("--external-rate", type=float, metavar="HZ",
+                     help="your controller's timer rate (default: the control rate); with sim_timer its period is a "
+                     "whole number of control periods")
     run.add_argument("--foxglove", nargs="?", const=DEFAULT_PORT, type=port_number, metavar="PORT",
                      help=f"serve every topic live to Foxglove over WebSocket (default port {DEFAULT_PORT}); "
                      "paces the run at real time")
@@ -87,6 +96,21 @@ def _live_options(args: argparse.Namespace) -> tuple[str, float | None]:
     if args.foxglove is not None:
         check_port(args.foxglove, host)
     return host, wait
+
+
+def _command_timing(scn, args: argparse.Namespace):
+    """``--external-timing`` and ``--external-rate`` laid over the scenario's ``wheels.command_timing`` and
+    ``wheels.command_rate`` (the graph session checks them against ``--external``)."""
+    if args.external_rate is not None:
+        if not (math.isfinite(args.external_rate) and args.external_rate > 0):
+            raise AttitudeSilError(f"--external-rate must be a finite rate in Hz > 0, got {args.external_rate}")
+        if (args.external_timing or scn.param("wheels", "command_timing")) == "stamped":
+            raise AttitudeSilError("--external-rate goes with --external-timing sim_timer or wall (a stamped "
+                                   "controller answers every step)")
+        scn = scn.with_values("wheels", command_rate=args.external_rate)
+    if args.external_timing is not None:
+        scn = scn.with_values("wheels", command_timing=args.external_timing)
+    return scn
 
 
 def execute(args: argparse.Namespace) -> int:
@@ -125,6 +149,7 @@ def execute(args: argparse.Namespace) -> int:
             raise AttitudeSilError(f"--swap: {exc}") from None
     if args.feedback is not None:
         scn = scn.with_values("scenario", feedback=args.feedback)
+    scn = _command_timing(scn, args)
     if not (math.isfinite(args.external_timeout) and args.external_timeout > 0):
         raise AttitudeSilError(f"--external-timeout must be a finite number of seconds > 0, got "
                                f"{args.external_timeout}")

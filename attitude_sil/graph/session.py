@@ -24,17 +24,18 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-import numpy as np
 import rclpy
 from rclpy.experimental import EventsExecutor
 from rclpy.signals import SignalHandlerOptions
 
+from attitude_sil.core.analysis.latency import CommandArrivals, latency_summary
 from attitude_sil.core.analysis.metrics import episode_report
 from attitude_sil.core.analysis.running_metrics import EpisodeAccumulator
 from attitude_sil.core.control import registry
 from attitude_sil.core.plant.scene import body_scene
 from attitude_sil.core.sim.build import check_episode, schedule_from_scenario
 from attitude_sil.core.sim.engine import simulate
+from attitude_sil.core.sim.lockstep import command_period_ns
 from attitude_sil.core.sim.params import spec_for
 from attitude_sil.core.sim.scenario import Scenario
 from attitude_sil.core.trajectory import Trajectory
@@ -51,6 +52,7 @@ from attitude_sil.graph.launcher import (
 from attitude_sil.graph.trajectory import KEPT_TOPICS, StepAssembler, trajectory_from_messages
 from attitude_sil.nodes.recorder_node import Recorder
 from attitude_sil.ros.contract import (
+    APPLIED_COMMAND_TOPIC,
     ATTITUDE,
     COMMAND_TOPICS,
     EXTERNAL,
@@ -191,6 +193,10 @@ class GraphSession:
         if controller is not None:
             spec_for("controller", "controller_type").validate(controller, "controller")
         self.external = check_external(external, controller, scn)
+        self.timing = scn.param("wheels", "command_timing")
+        if self.timing == "wall" and not real_time:
+            raise RunError("--external-timing wall: the plant must run at real time for a controller on the wall "
+                           "clock; add --real-time")
         self.external_timeout = external_timeout
         self.quiet = quiet
         self.scn = scn
@@ -233,9 +239,10 @@ class GraphSession:
         try:
             kw = namespace_kwargs(self.namespace)
             outside = [t for t, producer in PRODUCERS.items() if producer in self.external]
-            self.recorder = Recorder(None, keep=KEPT_TOPICS, topics=recorded_topics(self.scn.has_sensors),
+            self.recorder = Recorder(None, keep=KEPT_TOPICS,
+                                     topics=recorded_topics(self.scn.has_sensors, applied=self.timing != "stamped"),
                                      live=self.live, context=self.context, volatile_topics=outside, **kw)
-            self.recorder.latency = [] if "controller" in self.external else None
+            self.recorder.latency = [] if "controller" in self.external and self.timing != "wall" else None
             self.recorder.set_scene(body_scene(self.scn.values))  # the 3D view's frames and body model
             self.executor = EventsExecutor(context=self.context)
             self.executor.add_node(self.recorder)
@@ -290,7 +297,7 @@ class GraphSession:
         schedule = _schedule(self.scn, self.duration)
         accumulator = EpisodeAccumulator(self.scn.values["scenario"], self.scn.param("guidance", "step_time"),
                                          self.controller, schedule or None)
-        assembler = StepAssembler(accumulator, estimate=self.scn.has_sensors)
+        assembler = StepAssembler(accumulator, estimate=self.scn.has_sensors, applied=self.timing != "stamped")
         self.recorder.on_controller = _live_swaps(accumulator, schedule, int(round(self.scn.dt * 1e9)))
         self.recorder.start_episode(writer, keeping=keep_trajectory,
                                     sink=None if keep_trajectory else assembler.add)
@@ -308,6 +315,8 @@ class GraphSession:
             prog.t0 = wall0
             if self.recorder.latency is not None:
                 self.recorder.latency.clear()
+            self.recorder.arrivals = CommandArrivals(command_period_of(self.scn) * 1e-9) \
+                if self.timing == "wall" else None
             spin_episode(self.recorder, self.spin, self.plant, self.children, self.scn.steps(self.duration),
                          self.scn, prog, schedule, self.foreign, self.episode_topics(),
                          lambda: call_reset(self.recorder, self.spin, self.connect_timeout))
@@ -332,11 +341,27 @@ class GraphSession:
         else:
             traj = None
             metrics = assembler.accumulator.report(self.scn.name, self.duration, wall)
-        if self.recorder.latency:
-            metrics.update(latency_summary(self.recorder.latency))
+        metrics.update(self._timing_summary())
         bag = None if writer is None else writer.run_dir
         metrics["bag"] = None if bag is None else str(bag)
         return RunResult(metrics=metrics, bag=bag, counts=dict(self.recorder.counts), trajectory=traj)
+
+    def _timing_summary(self) -> dict:
+        """The outside controller's timing for the summary: its latency, and on a timer its style, its period
+        and, on sim time, the delay of one period with which its commands take effect (on the wall clock, the
+        steps and periods it missed)."""
+        out: dict = {}
+        if self.recorder.latency:
+            out.update(latency_summary(self.recorder.latency))
+        if self.timing == "stamped":
+            return out
+        period_ms = command_period_of(self.scn) * 1e-6
+        out.update(command_timing=self.timing, command_period_ms=period_ms)
+        if self.timing == "sim_timer":
+            out["command_delay_ms"] = period_ms  # logical execution time: a tick's command acts one period later
+        elif self.recorder.arrivals is not None:
+            out.update(self.recorder.arrivals.summary())
+        return out
 
     def episode_topics(self) -> list[str]:
         """The topics an episode fills, one message per step each: the lockstep's, and the sensing loop's
@@ -487,14 +512,35 @@ def check_external(external, controller: str | None, scn: Scenario) -> tuple[str
         if schedule_from_scenario(scn):
             raise RunError("--external controller: the run schedules controller swaps (--swap or the scenario's "
                            "schedule.*), which only attitude-sil's controller can make")
+    check_command_timing(names, scn)
     return names
 
 
-def latency_summary(latency_s: list[float]) -> dict[str, float]:
-    """The external controller's latency per step (attitude in -> command out, as the recorder sees them), ms."""
-    ms = np.asarray(latency_s) * 1e3
-    return {"controller_latency_mean_ms": float(ms.mean()), "controller_latency_p99_ms": float(np.percentile(ms, 99)),
-            "controller_latency_max_ms": float(ms.max())}
+def check_command_timing(external: tuple[str, ...], scn: Scenario) -> None:
+    """``wheels.command_timing`` other than ``stamped`` (``--external-timing``) is for an outside controller on a
+    timer of its own, beside the package's plant, wheels (and, on sim time, guidance); its rate fits the step.
+
+    Raises
+    ------
+    RunError
+        A timer style without ``--external controller``, with a node it needs played from outside, or with a
+        rate whose period is not a whole number of control periods.
+    """
+    timing = scn.param("wheels", "command_timing")
+    if timing == "stamped":
+        return
+    if "controller" not in external:
+        raise RunError(f"--external-timing {timing} (wheels.command_timing) is for a controller of yours on a timer: "
+                       "add --external controller (attitude-sil's controller answers each step's stamp)")
+    needs = ("plant", "wheels", "guidance") if timing == "sim_timer" else ("plant", "wheels")
+    outside = [n for n in needs if n in external]
+    if outside:
+        raise RunError(f"--external-timing {timing} needs attitude-sil's {outside[0]} (it holds the commands and "
+                       "orders /clock after the step's setpoints); leave out --external " + outside[0])
+    try:
+        command_period_of(scn)
+    except ValueError as exc:
+        raise RunError(f"--external-rate: {exc}") from None
 
 
 #: how long the first step of an episode may take before the episode is started again (spin_episode), wall s
@@ -550,8 +596,60 @@ class ForeignPublishers:
         return new
 
 
-def episode_complete(newest_stamp: dict[str, int], step_topics: list[str], final_ns: int) -> bool:
-    """Every step topic, and one of the command topics, holds the episode's last step (stamp ``final_ns``).
+def command_period_of(scn: Scenario) -> int:
+    """An outside controller's timer period (``wheels.command_rate``; 0: the control period), ns."""
+    return command_period_ns(scn.param("wheels", "command_rate"), int(round(scn.dt * 1e9)))
+
+
+#: what a stall line says of a controller that sent nothing the lockstep could take, per ``command_timing``
+_STYLE_HINT = {
+    "stamped": "a timer-driven node? see --external-timing, docs/flight-software.md",
+    "sim_timer": "its timer fires at whole periods of sim time from 0: is its use_sim_time true, and --external-rate "
+                 "its rate? docs/flight-software.md",
+    "wall": "docs/flight-software.md",
+}
+
+
+@dataclass(frozen=True)
+class CommandWatch:
+    """Where the runner finds each step's command, and at which steps the controller owes one.
+
+    Attributes
+    ----------
+    topics : tuple of str
+        One of these carries each step's command: the controller's command
+        topics, or the wheels' applied ones for a controller on a timer.
+    tick_ns : int or None
+        The controller owes a command stamped t_k at every step (None), at
+        the steps that are whole multiples of this period (``sim_timer``), or
+        at none (0: ``wall``).
+    hint : str
+        What a stall line suggests when the controller's command is missing.
+    """
+
+    topics: tuple[str, ...] = COMMAND_TOPICS
+    tick_ns: int | None = None
+    hint: str = _STYLE_HINT["stamped"]
+
+    @classmethod
+    def of(cls, scn: Scenario) -> CommandWatch:
+        """The watch for ``scn``'s ``wheels.command_timing`` and ``wheels.command_rate``."""
+        timing = scn.param("wheels", "command_timing")
+        if timing == "stamped":
+            return cls()
+        return cls(tuple(APPLIED_COMMAND_TOPIC.values()), 0 if timing == "wall" else command_period_of(scn),
+                   _STYLE_HINT[timing])
+
+    def owes(self, step_ns: int) -> bool:
+        """The controller owes a command stamped ``step_ns`` (ns)."""
+        if self.tick_ns is None:
+            return True
+        return self.tick_ns > 0 and step_ns > 0 and step_ns % self.tick_ns == 0
+
+
+def episode_complete(newest_stamp: dict[str, int], step_topics: list[str], final_ns: int,
+                     commands: tuple[str, ...] = COMMAND_TOPICS) -> bool:
+    """Every step topic, and one of the ``commands`` topics, holds the episode's last step (stamp ``final_ns``).
 
     By the greatest stamp taken on each topic (``Recorder.newest_stamp``), on
     top of the counts (:func:`spin_episode` asks both): counts alone were
@@ -561,7 +659,7 @@ def episode_complete(newest_stamp: dict[str, int], step_topics: list[str], final
     latest stamp would not do either, a stray taken after the last step
     being older.
     """
-    return (max(newest_stamp.get(t, -1) for t in COMMAND_TOPICS) >= final_ns
+    return (max(newest_stamp.get(t, -1) for t in commands) >= final_ns
             and all(newest_stamp.get(t, -1) >= final_ns for t in step_topics))
 
 
@@ -584,13 +682,15 @@ def nonfinite_command(bad: tuple[str, int, list[float], float], law: str, dt: fl
 STEP_ROLES = ("guidance", "disturbance", "sensors", "estimator", "controller", "wheels")
 
 
-def _with_culprit(line: str, recorder: Recorder, step_topics: list[str], elapsed: float) -> str:
+def _with_culprit(line: str, recorder: Recorder, step_topics: list[str], elapsed: float,
+                  watch: CommandWatch = CommandWatch()) -> str:
     """A stopped episode's line, with the wall time since it started and who its last step waited for."""
-    culprit = stall_culprit(recorder, step_topics)
+    culprit = stall_culprit(recorder, step_topics, watch=watch)
     return f"{line} ({elapsed:.1f} s into the episode)" + (f"; {culprit}" if culprit else "")
 
 
-def stall_culprit(recorder: Recorder, step_topics: list[str], refused_only: bool = False) -> str:
+def stall_culprit(recorder: Recorder, step_topics: list[str], refused_only: bool = False,
+                  watch: CommandWatch = CommandWatch()) -> str:
     """Who the step the plant waits on waits for: the first role, in the lockstep's order, none of whose messages
     of one of its outputs came stamped with that step, what came instead, and what may cause it ('' if every
     output of the step is in; with ``refused_only``, also '' unless that role's messages came and were refused,
@@ -598,12 +698,12 @@ def stall_culprit(recorder: Recorder, step_topics: list[str], refused_only: bool
 
     The step is the plant's newest ``attitude``; the outputs are those of
     :data:`~attitude_sil.ros.contract.ROLE_OUTPUTS` among ``step_topics``
-    and the command topics.
+    and the command topics where the controller owes a command (``watch``).
     """
     step_ns = recorder.newest_stamp.get(ATTITUDE)
     if step_ns is None:
         return "the plant published no attitude"
-    wanted = set(step_topics) | set(COMMAND_TOPICS)
+    wanted = set(step_topics) | (set(COMMAND_TOPICS) if watch.owes(step_ns) else set())
     for role in STEP_ROLES:
         for alternatives in ROLE_OUTPUTS[role]:
             topics = [t for t in alternatives if t in wanted]
@@ -618,16 +718,17 @@ def stall_culprit(recorder: Recorder, step_topics: list[str], refused_only: bool
             stamps = [recorder.refused_stamp[t] for t in topics if t in recorder.refused_stamp]
             instead = taken if not refused else (f"{refused} message(s) refused, the last stamped "
                                                  f"{max(stamps) * 1e-9:.6f} s; {taken}")
-            return (f"the {role} sent no {name} stamped {step_ns * 1e-9:.6f} s ({instead}): a node that runs on "
-                    "a timer and stamps with its own clock? docs/flight-software.md")
+            hint = watch.hint if role == "controller" else "docs/flight-software.md"
+            return f"the {role} sent no {name} stamped {step_ns * 1e-9:.6f} s ({instead}): {hint}"
     return ""
 
 
-def _raise_if_stopped(recorder: Recorder, plant, step_topics: list[str], started: float, dt: float) -> None:
+def _raise_if_stopped(recorder: Recorder, plant, step_topics: list[str], started: float, dt: float,
+                      watch: CommandWatch) -> None:
     """The RunError of an episode that cannot go on: the plant (in this process) failed, a command stayed
     non-finite, recording failed, or a publisher cannot match."""
     if plant is not None and plant.error:
-        raise RunError(_with_culprit(plant.error, recorder, step_topics, time.monotonic() - started))
+        raise RunError(_with_culprit(plant.error, recorder, step_topics, time.monotonic() - started, watch))
     bad = recorder.bad_command
     if bad is not None and time.monotonic() - bad[3] > NONFINITE_GRACE_S:
         raise RunError(nonfinite_command(bad, recorder.controller_type, dt))
@@ -673,8 +774,10 @@ def spin_episode(recorder: Recorder, spin, plant, children, k_steps: int, scn: S
     step_topics = episode_topics() if topics is None else topics
     pending = list(schedule)
 
+    watch = CommandWatch.of(scn)
+
     def commands() -> int:
-        return sum(counts[t] for t in COMMAND_TOPICS)
+        return sum(counts[t] for t in watch.topics)
 
     final_ns = k_steps * int(round(dt * 1e9))
     started = time.monotonic()
@@ -689,9 +792,9 @@ def spin_episode(recorder: Recorder, spin, plant, children, k_steps: int, scn: S
             set_remote_parameters(recorder, spin, "plant", {"hold_at": pending[0][0] if pending else -1.0})
             last_change = time.monotonic()
         if (n >= needed and commands() >= needed and all(counts[t] >= needed for t in step_topics)
-                and episode_complete(recorder.newest_stamp, step_topics, final_ns)):
+                and episode_complete(recorder.newest_stamp, step_topics, final_ns, watch.topics)):
             return
-        _raise_if_stopped(recorder, plant, step_topics, started, dt)
+        _raise_if_stopped(recorder, plant, step_topics, started, dt, watch)
         now = time.monotonic()
         if foreign is not None:
             foreign.check(now)
@@ -700,7 +803,7 @@ def spin_episode(recorder: Recorder, spin, plant, children, k_steps: int, scn: S
             prog.update(max(n - 1, 0) * dt)
         elif n == 0 and restart is not None and restarts < MAX_RESTARTS and now - last_change > restart_after:
             restarts += 1
-            culprit = stall_culprit(recorder, step_topics, refused_only=True)  # a lost first message: quiet
+            culprit = stall_culprit(recorder, step_topics, True, watch)  # a lost first message: quiet
             if restarts == 1 and culprit:
                 print(f"attitude-sil: step 0 not complete after {now - started:.1f} s: {culprit}; the episode "
                       "starts again (a first message DDS had not yet matched is the usual cause)", file=sys.stderr)
@@ -710,5 +813,5 @@ def spin_episode(recorder: Recorder, spin, plant, children, k_steps: int, scn: S
         elif now - last_change > (recorder.plant_input_timeout or input_timeout) + 2.0:
             missing = [t for t in step_topics if counts[t] < needed]
             raise RunError(_with_culprit(f"episode stalled at t={max(n - 1, 0) * dt:.3f} s: no progress on "
-                                         f"{', '.join(missing)}", recorder, step_topics, now - started))
+                                         f"{', '.join(missing)}", recorder, step_topics, now - started, watch))
         check_children(children)

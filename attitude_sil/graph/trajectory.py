@@ -13,6 +13,7 @@ from rclpy.serialization import deserialize_message
 from attitude_sil.core.analysis.running_metrics import EpisodeAccumulator
 from attitude_sil.core.trajectory import Trajectory
 from attitude_sil.ros.contract import (
+    APPLIED_COMMAND_TOPIC,
     ATTITUDE,
     ATTITUDE_SETPOINT,
     BODY_RATE,
@@ -32,12 +33,20 @@ from attitude_sil.ros.contract import (
 from attitude_sil.ros.convert import decode_step_messages
 from attitude_sil.storage.cdr import stamped_values
 
-__all__ = ["KEPT_TOPICS", "StepAssembler", "trajectory_from_messages"]
+__all__ = ["KEPT_TOPICS", "StepAssembler", "command_topics", "trajectory_from_messages"]
 
 #: the topics an episode keeps in memory to build its trajectory
 KEPT_TOPICS = (ATTITUDE, BODY_RATE, ATTITUDE_SETPOINT, RATE_SETPOINT, WHEEL_TORQUE, WHEEL_MOMENTUM,
-               DISTURBANCE_TORQUE, WHEEL_STATE, *COMMAND_TOPIC.values(), ESTIMATE_ATTITUDE, ESTIMATE_BODY_RATE,
-               ESTIMATE_GYRO_BIAS, ESTIMATE_ATTITUDE_SIGMA)
+               DISTURBANCE_TORQUE, WHEEL_STATE, *COMMAND_TOPIC.values(), *APPLIED_COMMAND_TOPIC.values(),
+               ESTIMATE_ATTITUDE, ESTIMATE_BODY_RATE, ESTIMATE_GYRO_BIAS, ESTIMATE_ATTITUDE_SIGMA)
+
+
+def command_topics(kept) -> dict[str, str]:
+    """Where each step's command is: the wheels' applied commands where there are any (a controller on a timer
+    of its own sends commands at its ticks, not one per step), else the controller's command topics."""
+    if any(kept.get(topic) for topic in APPLIED_COMMAND_TOPIC.values()):
+        return APPLIED_COMMAND_TOPIC
+    return COMMAND_TOPIC
 
 #: Trajectory field <- topic of the sensing loop (absent without it)
 _ESTIMATE_FIELDS = {"q_BN_est": ESTIMATE_ATTITUDE, "omega_BN_B_est": ESTIMATE_BODY_RATE,
@@ -78,13 +87,14 @@ def trajectory_from_messages(kept: dict[str, list[tuple[int, bytes]]]) -> Trajec
     Trajectory
         Arrays of shape (1, n, .) where n is the number of steps present on
         every topic, with the command of each step taken from whichever
-        command topic carried it (``kind`` says which).
+        command topic carried it (``kind`` says which): the wheels'
+        ``applied/*`` where the bag has them (:func:`command_topics`).
     """
     arrays: dict[str, tuple[np.ndarray, np.ndarray]] = {}
     for name, topic in _FIELDS.items():
         arrays[name] = decode_step_messages(topic, kept.get(topic, []))
     commands: dict[int, tuple[str, np.ndarray]] = {}
-    for kind, topic in COMMAND_TOPIC.items():
+    for kind, topic in command_topics(kept).items():
         times, values = decode_step_messages(topic, kept.get(topic, []))
         for t, v in zip(times, values, strict=True):
             commands.setdefault(int(t), (kind, v))
@@ -116,7 +126,8 @@ class StepAssembler:
     """Hands an :class:`EpisodeAccumulator` each step of a live episode once its messages are all in.
 
     A step needs ``attitude``, ``attitude_setpoint``, ``wheel_torque`` and its
-    command (``voltage_cmd`` or ``torque_cmd``), and ``estimate/attitude`` with
+    command (``voltage_cmd`` or ``torque_cmd``; with ``applied`` the wheels'
+    ``applied/*`` of it), and ``estimate/attitude`` with
     ``estimate=True`` (the sensing loop runs); steps go to the accumulator in
     stamp order, the first copy of a message counting (as
     :func:`trajectory_from_messages` takes them). Only the steps not yet
@@ -125,8 +136,10 @@ class StepAssembler:
 
     _WIDTH = {ATTITUDE: 4, ATTITUDE_SETPOINT: 4, WHEEL_TORQUE: 3}
 
-    def __init__(self, accumulator: EpisodeAccumulator, estimate: bool = False) -> None:
+    def __init__(self, accumulator: EpisodeAccumulator, estimate: bool = False, applied: bool = False) -> None:
         self.accumulator = accumulator
+        # where each step's command is: the wheels' applied commands for a controller on a timer of its own
+        self.commands = tuple((APPLIED_COMMAND_TOPIC if applied else COMMAND_TOPIC).values())
         # the stamped parts of a step and their widths (with the sensing loop, a step waits for its estimate too)
         self.width = {**self._WIDTH, ESTIMATE_ATTITUDE: 4} if estimate else dict(self._WIDTH)
         self.pending: dict[int, dict[str, np.ndarray]] = {}
@@ -135,7 +148,7 @@ class StepAssembler:
 
     def add(self, topic: str, stamp_ns: int, data: bytes) -> None:
         """One message of a kept topic (the recorder's sink)."""
-        if topic in COMMAND_TOPIC.values():
+        if topic in self.commands:
             part = "command"
             width = 3
         elif topic in self.width:

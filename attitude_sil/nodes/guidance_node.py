@@ -1,16 +1,20 @@
 """``guidance`` node: the attitude and rate setpoints.
 
-On each ``/clock`` tick t_k it publishes ``attitude_setpoint`` (q_RN, frame
-``inertial``) and ``rate_setpoint`` (omega_RN in R, rad/s) stamped t_k
+For each step the plant publishes (its ``attitude``, stamped t_k) it publishes
+``attitude_setpoint`` (q_RN, frame ``inertial``) and ``rate_setpoint``
+(omega_RN in R, rad/s) stamped t_k
 (:class:`attitude_sil.core.sim.models.Guidance`: a step from
 ``initial_setpoint_rpy_deg`` to ``setpoint_rpy_deg`` at ``step_time``).
-Setpoint parameters changed at runtime apply from the next tick.
+Setpoint parameters changed at runtime apply from the next step. It follows
+``attitude`` rather than ``/clock`` because a plant whose controller runs on
+a sim-time timer publishes ``/clock`` only once the setpoints are out
+(``command_timing: sim_timer``).
 """
 
 from __future__ import annotations
 
 from attitude_sil.core.sim.build import build_guidance
-from attitude_sil.ros.contract import ATTITUDE_SETPOINT, CLOCK, RATE_SETPOINT
+from attitude_sil.ros.contract import ATTITUDE, ATTITUDE_SETPOINT, RATE_SETPOINT
 from attitude_sil.ros.convert import stamp_to_ns
 from attitude_sil.ros.node import SchemaNode, run_node
 from attitude_sil.storage.cdr import stamped_vector_cdr
@@ -25,14 +29,14 @@ class GuidanceNode(SchemaNode):
         super().__init__(**kwargs)
         self.pub_q = self.step_publisher(ATTITUDE_SETPOINT)
         self.pub_w = self.step_publisher(RATE_SETPOINT)
-        self.step_subscription(CLOCK, self._on_clock)
+        self.step_subscription(ATTITUDE, self._on_step)
         self.on_parameters_set([])
 
     def on_parameters_set(self, names: list[str]) -> None:
         self.core = build_guidance(self.scenario(), 1)
 
-    def _on_clock(self, msg) -> None:
-        t = stamp_to_ns(msg.clock)
+    def _on_step(self, msg) -> None:
+        t = stamp_to_ns(msg.header.stamp)
         q_RN, w_RN = self.core.setpoint(t * 1e-9)
         self.pub_q.publish(stamped_vector_cdr(q_RN[0], t, "inertial"))
         self.pub_w.publish(stamped_vector_cdr(w_RN[0], t, "reference"))

@@ -19,6 +19,12 @@ change parameters of other nodes deterministically (the runner applies
 scheduled controller swaps this way); setting ``hold_at`` to a later time (or
 -1) releases it.
 
+With ``command_timing: sim_timer`` (a controller on a sim-time timer,
+docs/flight-software.md) ``/clock`` of step k goes out after the state, once
+the step's ``attitude_setpoint`` and ``rate_setpoint`` are in and the state
+is acknowledged by every reader: a timer fires when ``/clock`` reaches its
+tick, and so finds every input of the tick already delivered.
+
 The decisions (which input completes a step, hold, pacing, timeout,
 autostart) are :class:`attitude_sil.core.sim.lockstep.PlantLockstep`; this node
 carries them out with rclpy timers and publishers.
@@ -34,8 +40,16 @@ from std_srvs.srv import Trigger
 from attitude_sil.core.sim.build import build_plant
 from attitude_sil.core.sim.lockstep import Action, PlantLockstep
 from attitude_sil.errors import AttitudeSilError
-from attitude_sil.ros.contract import ATTITUDE, BODY_RATE, CLOCK, FLEXIBLE_MODE, PLANT_INPUTS
-from attitude_sil.ros.convert import stamp_to_ns, vector_to_array
+from attitude_sil.ros.contract import (
+    ATTITUDE,
+    ATTITUDE_SETPOINT,
+    BODY_RATE,
+    CLOCK,
+    FLEXIBLE_MODE,
+    PLANT_INPUTS,
+    RATE_SETPOINT,
+)
+from attitude_sil.ros.convert import message_to_array, stamp_to_ns
 from attitude_sil.ros.node import SchemaNode, run_node, steady_clock
 from attitude_sil.storage.cdr import clock_cdr, stamped_vector_cdr
 
@@ -52,9 +66,13 @@ class PlantNode(SchemaNode):
         self.pub_rate = self.step_publisher(BODY_RATE)
         self.pub_flex = self.step_publisher(FLEXIBLE_MODE) if self.param("model") == "flexible_axis" else None
         self.subs = [self.step_subscription(name, lambda m, n=name: self._on_input(n, m)) for name in PLANT_INPUTS]
+        # a controller on a sim-time timer: /clock waits for the step's setpoints
+        gate = (ATTITUDE_SETPOINT, RATE_SETPOINT) if self.param("command_timing") == "sim_timer" else ()
+        for name in gate:
+            self.step_subscription(name, lambda m, n=name: self._on_input(n, m))
         self.create_service(Trigger, "~/reset", self._on_reset)
         self._wall = steady_clock()
-        self.lockstep = PlantLockstep(PLANT_INPUTS)
+        self.lockstep = PlantLockstep(PLANT_INPUTS, gate)
         self._pace_timer = None
         self._watchdog = self.create_timer(0.05, self._on_watchdog, clock=self._wall)
 
@@ -105,6 +123,8 @@ class PlantNode(SchemaNode):
             self.core.advance(*(inp[name] for name in PLANT_INPUTS))
             finite = bool(np.all(np.isfinite(self.core.state.omega_BN_B)))
             self._do(ls.advanced(finite, time.monotonic(), self.param("real_time_factor"), self.param("hold_at")))
+        elif action is Action.CLOCK:
+            self._publish_clock()
         elif action is Action.PACE:
             self._pace_timer = self.create_timer(max(ls.publish_at - time.monotonic(), 0.0), self._on_paced,
                                                  clock=self._wall)
@@ -121,18 +141,24 @@ class PlantNode(SchemaNode):
     def _publish_state(self) -> None:
         t_ns = self.lockstep.t_ns
         s = self.core.state
-        self.pub_clock.publish(clock_cdr(t_ns))
+        if not self.lockstep.clock_gate:
+            self.pub_clock.publish(clock_cdr(t_ns))
         self.pub_attitude.publish(stamped_vector_cdr(s.q_BN[0], t_ns, "inertial"))
         self.pub_rate.publish(stamped_vector_cdr(s.omega_BN_B[0], t_ns, "body"))
         if self.pub_flex is not None and hasattr(self.core, "alpha"):
             self.pub_flex.publish(stamped_vector_cdr(self.core.alpha[0], t_ns, "body"))
+
+    def _publish_clock(self) -> None:
+        """The clock gate opened: ``/clock`` of step k."""
+        self.pub_clock.publish(clock_cdr(self.lockstep.t_ns))
+        self._do(self.lockstep.clocked())
 
     def fail(self, reason: str) -> None:
         """Stop the episode with an error the runner reports."""
         self._do(self.lockstep.fail(reason))
 
     def _on_input(self, name: str, msg) -> None:
-        value = vector_to_array(msg)[None]
+        value = message_to_array(msg)[None]
         self._do(self.lockstep.offer(name, stamp_to_ns(msg.header.stamp), value))
 
     def _cancel_pacing(self) -> None:

@@ -42,6 +42,7 @@ from rclpy.node import Node
 from rclpy.parameter import parameter_value_to_python
 from rclpy.serialization import deserialize_message
 
+from attitude_sil.core.analysis.latency import CommandArrivals
 from attitude_sil.core.plant.quaternion import unit_or_none
 from attitude_sil.core.plant.scene import BODY, INERTIAL, BodyScene
 from attitude_sil.errors import BagWriteError
@@ -123,6 +124,9 @@ class Recorder(Node):
         self.qos_problems: list[str] = []  # publishers whose QoS this recorder cannot match
         # a list to time the controller into: wall s from each step's attitude to its command, as they arrive
         self.latency: list[float] | None = None
+        # a controller on the wall clock (command_timing: wall): its commands' arrivals against the steps. Its
+        # commands carry its clock's stamps: they are logged at the sim time they come
+        self.arrivals: CommandArrivals | None = None
         # called as the graph's controller changes law: (controller_type, stamp of the last command taken or -1)
         self.on_controller: Callable[[str, int], None] | None = None
         # the plant's input_timeout (s) as last set while the graph runs (None: as at start); the runner's stall
@@ -244,6 +248,8 @@ class Recorder(Node):
             if self.latency is not None and name == ATTITUDE:
                 self._attitude_at[t] = time.monotonic()
             return
+        if name in COMMAND_TOPICS and self.arrivals is not None:
+            t = self.sim_now  # a wall-clock controller's stamp is its own: logged at the sim time it came
         if name == PARAMETER_EVENTS:
             # events carry the node's clock: wall time until use_sim_time is on. Log
             # them at the sim time of the lockstep instead, so a bag spans sim time only.
@@ -281,6 +287,8 @@ class Recorder(Node):
             self.newest_stamp[name] = t
         if self.latency is not None:
             self._time_controller(name, t)
+        elif self.arrivals is not None:
+            self._time_arrivals(name)
         self.newest_ns = max(self.newest_ns, t)
         if self.writer is not None:
             try:
@@ -345,6 +353,14 @@ class Recorder(Node):
             sent = self._attitude_at.pop(t, None)
             if sent is not None:
                 self.latency.append(time.monotonic() - sent)
+
+    def _time_arrivals(self, name: str) -> None:
+        if name == ATTITUDE:
+            self.arrivals.attitude(time.monotonic())
+        elif name in COMMAND_TOPICS:
+            self.arrivals.command(time.monotonic())
+        elif name == CLOCK:
+            self.arrivals.step()
 
     def _on_parameter_event(self, data: bytes, t: int) -> None:
         # a live view's Parameters panel follows every change; a swap of our controller's law goes to the live

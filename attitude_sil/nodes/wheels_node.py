@@ -6,13 +6,30 @@ motor model) stamped t_k it integrates the motors exactly over
 and publishes, stamped t_k: ``wheel_torque`` (mean torque on the body over the
 step, so momentum is exchanged exactly), ``wheel_momentum`` (h_w at t_k, in B)
 and ``wheel_state`` (per wheel angle, speed and motor torque at t_k).
+
+With ``command_timing`` ``sim_timer`` or ``wall`` (a controller on a timer of
+its own, docs/flight-software.md) a step starts on ``/clock`` instead, with
+the command that :class:`~attitude_sil.core.sim.lockstep.CommandHold` holds
+(at a tick of a ``sim_timer`` controller, once that tick's command is in),
+and the command applied goes out on ``applied/voltage_cmd`` (or
+``applied/torque_cmd``) stamped t_k, for the record and the metrics.
 """
 
 from __future__ import annotations
 
+import numpy as np
+
 from attitude_sil.core.sim.build import build_wheels
-from attitude_sil.core.sim.lockstep import StepSequencer
-from attitude_sil.ros.contract import TORQUE_CMD, VOLTAGE_CMD, WHEEL_MOMENTUM, WHEEL_STATE, WHEEL_TORQUE
+from attitude_sil.core.sim.lockstep import CommandHold, StepSequencer, command_period_ns
+from attitude_sil.ros.contract import (
+    APPLIED_COMMAND_TOPIC,
+    CLOCK,
+    TORQUE_CMD,
+    VOLTAGE_CMD,
+    WHEEL_MOMENTUM,
+    WHEEL_STATE,
+    WHEEL_TORQUE,
+)
 from attitude_sil.ros.convert import stamp_to_ns, vector_to_array
 from attitude_sil.ros.node import LockstepNode, run_node
 from attitude_sil.storage.cdr import joint_state_cdr, stamped_vector_cdr
@@ -31,11 +48,22 @@ class WheelsNode(LockstepNode):
         self.pub_state = self.step_publisher(WHEEL_STATE)
         self.step_subscription(VOLTAGE_CMD, lambda m: self._on_command(m, False))
         self.step_subscription(TORQUE_CMD, lambda m: self._on_command(m, True))
+        self.hold: CommandHold | None = None  # a controller on a timer of its own: the command held
+        if self.param("command_timing") != "stamped":
+            self.pub_applied = {mode: self.step_publisher(APPLIED_COMMAND_TOPIC["torque" if mode else "voltage"])
+                                for mode in (False, True)}
+            self.step_subscription(CLOCK, self._on_clock)
+        self.step_ns: int | None = None  # held commands: the step started on /clock, not yet taken
         self.new_episode()
 
     def rebuild(self) -> None:
         scn = self.scenario()
         self.core = build_wheels(scn, 1)
+        timing = self.param("command_timing")
+        if timing != "stamped":
+            zero = (np.zeros((1, 3)), self.param("actuator") == "torque")
+            self.hold = CommandHold(timing, command_period_ns(self.param("command_rate"), self.dt_ns), zero)
+            self.step_ns = None
 
     def _on_command(self, msg, torque_mode: bool) -> None:
         t = stamp_to_ns(msg.header.stamp)
@@ -44,12 +72,44 @@ class WheelsNode(LockstepNode):
             self.get_logger().error(f"command at t={t * 1e-9:.6f} s is not finite: {v[0].tolist()}; ignored",
                                     throttle_duration_sec=1.0)
             return
+        if self.hold is not None:
+            why = self.hold.offer(t, v, torque_mode, self.step_ns if self.step_ns is not None else self.seq.last_ns)
+            if why:
+                self.get_logger().error(f"{TORQUE_CMD if torque_mode else VOLTAGE_CMD} stamped {t * 1e-9:.6f} s "
+                                        f"refused ({why})", throttle_duration_sec=1.0)
+            self._step_held()
+            return
         kind = self.seq.classify(t, self.dt_ns)
         if kind == StepSequencer.NEW:
             self.new_episode()
         elif kind != StepSequencer.NEXT:
             self.refuse_stamp(TORQUE_CMD if torque_mode else VOLTAGE_CMD, t, kind)
             return
+        self._advance(t, v, torque_mode)
+
+    def _on_clock(self, msg) -> None:
+        """A held-command step starts on ``/clock``."""
+        t = stamp_to_ns(msg.clock)
+        kind = self.seq.classify(t, self.dt_ns)
+        if kind == StepSequencer.NEW:
+            self.new_episode()  # a hold of its own, with no command yet
+        elif kind != StepSequencer.NEXT:
+            self.refuse_stamp(CLOCK, t, kind)
+            return
+        self.step_ns = t
+        self._step_held()
+
+    def _step_held(self) -> None:
+        """Take the step in hand with the command held, unless it is a tick whose command is still to come."""
+        t = self.step_ns
+        if t is None or self.hold.waits_at(t):
+            return
+        self.step_ns = None
+        v, torque_mode = self.hold.applied(t)
+        self.pub_applied[torque_mode].publish(stamped_vector_cdr(v[0], t, "body"))
+        self._advance(t, v, torque_mode)
+
+    def _advance(self, t: int, v: np.ndarray, torque_mode: bool) -> None:
         out = self.core.advance(v, torque_mode)
         self.pub_torque.publish(stamped_vector_cdr(out.tau_c_B[0], t, "body"))
         self.pub_momentum.publish(stamped_vector_cdr(out.h_wheels_B[0], t, "body"))

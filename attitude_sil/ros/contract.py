@@ -17,7 +17,8 @@ from attitude_sil.errors import AttitudeSilError
 __all__ = ["CLOCK", "ATTITUDE", "BODY_RATE", "ATTITUDE_SETPOINT", "RATE_SETPOINT", "VOLTAGE_CMD", "TORQUE_CMD",
            "WHEEL_TORQUE", "WHEEL_MOMENTUM", "WHEEL_STATE", "DISTURBANCE_TORQUE", "ATTITUDE_ERROR", "FLEXIBLE_MODE",
            "PLANT_INPUTS", "clock_remap",
-           "STEP_TOPICS", "COMMAND_TOPICS", "COMMAND_TOPIC", "CONTROLLER_INPUTS", "MODEL_TOPICS", "RECORDED_TOPICS",
+           "STEP_TOPICS", "COMMAND_TOPICS", "COMMAND_TOPIC", "APPLIED_COMMAND_TOPIC", "APPLIED_TOPICS",
+           "CONTROLLER_INPUTS", "MODEL_TOPICS", "RECORDED_TOPICS",
            "graph_subscribers", "PRODUCERS", "PARAMETER_EVENTS", "message_class", "check_namespace", "check_node_name",
            "check_parameter_name", "ROLE_OUTPUTS", "OPTIONAL_TOPICS", "ROLE_INPUTS", "episode_topics", "EXTERNAL",
            "UNKNOWN_NODE", "IMU", "STAR_TRACKER", "WHEEL_SPEED", "ESTIMATE_ATTITUDE", "ESTIMATE_BODY_RATE",
@@ -105,6 +106,12 @@ COMMAND_TOPICS = (VOLTAGE_CMD, TORQUE_CMD)
 #: the command topic of each kind of law (:meth:`attitude_sil.core.control.bank.ControllerBank.kind_of`)
 COMMAND_TOPIC = {"voltage": VOLTAGE_CMD, "torque": TORQUE_CMD}
 
+#: the command the wheels applied over each step, stamped t_k, when the controller runs on a timer of its own
+#: (``command_timing`` ``sim_timer`` or ``wall``: its commands come at its ticks, not one per step); a run's
+#: metrics read these where a bag has them
+APPLIED_COMMAND_TOPIC = {"voltage": "applied/voltage_cmd", "torque": "applied/torque_cmd"}
+APPLIED_TOPICS: dict[str, str] = {t: "geometry_msgs/msg/Vector3Stamped" for t in APPLIED_COMMAND_TOPIC.values()}
+
 #: what the plant needs, all stamped t_k, before it integrates to t_k+1
 PLANT_INPUTS = (WHEEL_TORQUE, WHEEL_MOMENTUM, DISTURBANCE_TORQUE)
 
@@ -146,6 +153,7 @@ PRODUCERS = {
     WHEEL_STATE: "wheels", DISTURBANCE_TORQUE: "disturbance", ATTITUDE_ERROR: "controller",
     IMU: "sensors", STAR_TRACKER: "sensors", WHEEL_SPEED: "sensors", ESTIMATE_ATTITUDE: "estimator",
     ESTIMATE_BODY_RATE: "estimator", ESTIMATE_GYRO_BIAS: "estimator", ESTIMATE_ATTITUDE_SIGMA: "estimator",
+    **{t: "wheels" for t in APPLIED_TOPICS},
 }
 
 #: the nodes that publish the sensing loop's topics (the sensors and the estimator)
@@ -166,7 +174,7 @@ ROLE_OUTPUTS: dict[str, tuple[tuple[str, ...], ...]] = {
 
 #: what each node may read, all stamped t_k, for step k
 ROLE_INPUTS: dict[str, tuple[str, ...]] = {
-    "plant": PLANT_INPUTS, "wheels": COMMAND_TOPICS, "disturbance": (ATTITUDE,), "guidance": (CLOCK,),
+    "plant": PLANT_INPUTS, "wheels": COMMAND_TOPICS, "disturbance": (ATTITUDE,), "guidance": (ATTITUDE,),
     "controller": CONTROLLER_INPUTS,
     "sensors": (ATTITUDE, BODY_RATE, WHEEL_STATE),
     "estimator": (IMU, STAR_TRACKER),
@@ -219,14 +227,16 @@ BODY_MODEL = "body_model"
 VIEW_TOPICS: dict[str, str] = {TF: "tf2_msgs/msg/TFMessage", BODY_MODEL: "visualization_msgs/msg/MarkerArray"}
 
 #: everything a run records
-RECORDED_TOPICS: dict[str, str] = {**STEP_TOPICS, **MODEL_TOPICS, **SENSING_TOPICS,
+RECORDED_TOPICS: dict[str, str] = {**STEP_TOPICS, **MODEL_TOPICS, **SENSING_TOPICS, **APPLIED_TOPICS,
                                    PARAMETER_EVENTS: "rcl_interfaces/msg/ParameterEvent"}
 
 
-def recorded_topics(sensing: bool) -> dict[str, str]:
+def recorded_topics(sensing: bool, applied: bool = False) -> dict[str, str]:
     """What a run records: :data:`RECORDED_TOPICS`, the sensing loop's topics only where it runs (a run
-    without it has no empty ``imu``, ``estimate/*``, ... channels in its bag)."""
-    return {k: v for k, v in RECORDED_TOPICS.items() if sensing or k not in SENSING_TOPICS}
+    without it has no empty ``imu``, ``estimate/*``, ... channels in its bag), and the wheels' applied
+    commands (:data:`APPLIED_TOPICS`) with ``applied`` (a controller on a timer of its own)."""
+    return {k: v for k, v in RECORDED_TOPICS.items()
+            if (sensing or k not in SENSING_TOPICS) and (applied or k not in APPLIED_TOPICS)}
 
 
 def message_class(type_name: str):

@@ -46,6 +46,39 @@ def stamp_ns(stamp) -> int:
     return stamp.sec * 1_000_000_000 + stamp.nanosec
 
 
+class Pid:
+    """Paper 000's per-axis PID on the quaternion error, the arithmetic of attitude_sil's ``pid`` law."""
+
+    def __init__(self) -> None:
+        self.reset()
+
+    def reset(self) -> None:
+        self.integral = [0.0, 0.0, 0.0]
+        self.filt = [0.0, 0.0, 0.0]
+
+    def step(self, q_BN: tuple, q_RN: tuple, p: dict, u_max: float, dt: float) -> tuple[float, float, float]:
+        """The command (V per body axis) held over the next ``dt`` s for attitude ``q_BN`` and setpoint
+        ``q_RN`` (x, y, z, w), with gains ``p`` (kp, ki, kd, n: 3 values each) and the limit ``u_max`` V."""
+        bx, by, bz, bw = q_BN
+        rx, ry, rz, rw = -q_RN[0], -q_RN[1], -q_RN[2], q_RN[3]
+        e = [rw * bx + bw * rx + ry * bz - rz * by,
+             rw * by + bw * ry + rz * bx - rx * bz,
+             rw * bz + bw * rz + rx * by - ry * bx]
+        ew = rw * bw - rx * bx - ry * by - rz * bz
+        e = [x if ew < 0.0 else -x for x in e]  # -vec(q_BR), the short way round
+        u = []
+        for i in range(3):
+            a = math.exp(-p["n"][i] * dt)
+            deriv = (1.0 - a) / dt * (e[i] - self.filt[i])  # mean of N (e - x_f(t)) over the period
+            raw = p["kp"][i] * e[i] + p["ki"][i] * (self.integral[i] + 0.5 * e[i] * dt) + p["kd"][i] * deriv
+            out = min(max(raw, -u_max), u_max)
+            if not (out != raw and e[i] * raw > 0.0):  # no integration into the limit
+                self.integral[i] += e[i] * dt
+            self.filt[i] = a * self.filt[i] + (1.0 - a) * e[i]
+            u.append(out)
+        return u[0], u[1], u[2]
+
+
 class PidController(Node):
     """Per-axis PID on the quaternion error, one command per step of the simulator's lockstep."""
 
@@ -61,11 +94,10 @@ class PidController(Node):
         self.create_subscription(QuaternionStamped, "attitude_setpoint", lambda m: self.on_input("r", m), 10)
         self.pending: dict[int, dict[str, tuple]] = {}
         self.answered: dict[int, tuple[float, float, float]] = {}
-        self.reset()
+        self.law = Pid()
 
     def reset(self) -> None:
-        self.integral = [0.0, 0.0, 0.0]
-        self.filt = [0.0, 0.0, 0.0]
+        self.law.reset()
         self.answered.clear()
 
     def on_input(self, key: str, msg: QuaternionStamped) -> None:
@@ -83,7 +115,9 @@ class PidController(Node):
         else:
             if t == 0:
                 self.reset()
-            u = self.step(slot["q"], slot["r"])
+            gains = {name: self.get_parameter(name).value for name in HST_GA_GAINS}
+            u = self.law.step(slot["q"], slot["r"], gains, self.get_parameter("output_limit").value,
+                              self.get_parameter("control_period").value)
             self.answered[t] = u
         delay = self.get_parameter("compute_delay").value
         if delay > 0.0:
@@ -93,29 +127,6 @@ class PidController(Node):
         out.header.frame_id = "body"
         out.vector.x, out.vector.y, out.vector.z = u
         self.pub.publish(out)
-
-    def step(self, q_BN: tuple, q_RN: tuple) -> tuple[float, float, float]:
-        bx, by, bz, bw = q_BN
-        rx, ry, rz, rw = -q_RN[0], -q_RN[1], -q_RN[2], q_RN[3]
-        e = [rw * bx + bw * rx + ry * bz - rz * by,
-             rw * by + bw * ry + rz * bx - rx * bz,
-             rw * bz + bw * rz + rx * by - ry * bx]
-        ew = rw * bw - rx * bx - ry * by - rz * bz
-        e = [x if ew < 0.0 else -x for x in e]  # -vec(q_BR), the short way round
-        p = {name: self.get_parameter(name).value for name in HST_GA_GAINS}
-        u_max = self.get_parameter("output_limit").value
-        dt = self.get_parameter("control_period").value
-        u = []
-        for i in range(3):
-            a = math.exp(-p["n"][i] * dt)
-            deriv = (1.0 - a) / dt * (e[i] - self.filt[i])  # mean of N (e - x_f(t)) over the period
-            raw = p["kp"][i] * e[i] + p["ki"][i] * (self.integral[i] + 0.5 * e[i] * dt) + p["kd"][i] * deriv
-            out = min(max(raw, -u_max), u_max)
-            if not (out != raw and e[i] * raw > 0.0):  # no integration into the limit
-                self.integral[i] += e[i] * dt
-            self.filt[i] = a * self.filt[i] + (1.0 - a) * e[i]
-            u.append(out)
-        return u[0], u[1], u[2]
 
 
 def main() -> int:

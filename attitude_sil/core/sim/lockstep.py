@@ -14,7 +14,11 @@ so the rules are unit-tested directly and the nodes only carry them out.
   them all.
 * :class:`PlantLockstep` - the plant's episode: which input completes a step,
   when to publish, hold (``hold_at``), pace (``real_time_factor``), time out
-  (``input_timeout``) and autostart.
+  (``input_timeout``) and autostart; with a clock gate, ``/clock`` goes out
+  only once the step's setpoints have (a flight computer on a sim-time timer).
+* :class:`CommandHold` - the command the wheels apply each step when an
+  outside flight computer runs on a timer of its own (``command_timing``
+  ``sim_timer`` or ``wall``), not on the stamps of the lockstep.
 """
 
 from __future__ import annotations
@@ -24,7 +28,8 @@ from enum import Enum
 
 import numpy as np
 
-__all__ = ["StepSequencer", "StepInputs", "PlantLockstep", "Action"]
+__all__ = ["StepSequencer", "StepInputs", "PlantLockstep", "Action", "CommandHold", "COMMAND_TIMINGS",
+           "command_period_ns"]
 
 
 class StepSequencer:
@@ -97,6 +102,7 @@ class Action(Enum):
     ADVANCE = "advance"  #: every input of step k is in: integrate to k+1, then call :meth:`PlantLockstep.advanced`
     HOLD = "hold"  #: stopped before step k at ``hold_at``
     PACE = "pace"  #: publish at :attr:`PlantLockstep.publish_at` (wall s), then call :meth:`PlantLockstep.paced`
+    CLOCK = "clock"  #: the clock gate opened: publish ``/clock`` of step k, then call :meth:`PlantLockstep.clocked`
     START = "start"  #: autostart: the graph is wired, start an episode
     REFUSED = "refused"  #: an input was refused (:attr:`PlantLockstep.refusal` says why); the step waits on
     FAIL = "fail"  #: the episode stopped; :attr:`PlantLockstep.error` says why
@@ -111,6 +117,12 @@ class PlantLockstep:
     inputs_needed : tuple of str
         The inputs that complete a step (the plant node passes the topic
         contract's ``PLANT_INPUTS``).
+    clock_gate : tuple of str
+        Inputs stamped t_k that must arrive before ``/clock`` of step k goes
+        out (empty: ``/clock`` goes with the state). The plant of a graph whose
+        controller runs on a sim-time timer passes the setpoints: the timer
+        fires when ``/clock`` reaches its tick, so every input of the tick
+        must be out before it.
     n_steps : int
         K: the episode publishes steps 0..K.
     dt_ns : int
@@ -127,6 +139,7 @@ class PlantLockstep:
     """
 
     inputs_needed: tuple[str, ...] = ()
+    clock_gate: tuple[str, ...] = ()
     n_steps: int = 0
     dt_ns: int = 1
     k: int = 0
@@ -137,6 +150,8 @@ class PlantLockstep:
     error: str = ""
     publish_at: float | None = None
     refusal: str = ""
+    gate: dict[str, np.ndarray] = field(default_factory=dict)
+    clock_out: bool = True
     episode_wall0: float = 0.0
     step_wall0: float = 0.0
 
@@ -172,7 +187,7 @@ class PlantLockstep:
         mismatched input, and a stray message does not stop the run (a missing
         one does, at ``input_timeout``).
         """
-        if not self.running:
+        if not self.running and not (self.done and name in self.clock_gate):  # the last step's /clock still goes
             return Action.NONE
         if t_ns != self.t_ns:
             kind = "stale" if t_ns < self.t_ns else "ahead of the step"
@@ -182,15 +197,33 @@ class PlantLockstep:
         if not np.all(np.isfinite(value)):
             self.refusal = f"plant: {name} at t={t_ns * 1e-9:.6f} s is not finite: {np.ravel(value).tolist()}; refused"
             return Action.REFUSED
+        if name in self.clock_gate:
+            return self._open_gate(name, value)
         if name in self.inputs:
             if np.array_equal(self.inputs[name], value):
                 return Action.NONE  # a repeat (an episode restarted at its first step): the same input
             self.refusal = f"plant: a second {name} for step t={t_ns * 1e-9:.6f} s; refused (the first is kept)"
             return Action.REFUSED
         self.inputs[name] = value
-        if len(self.inputs) == len(self.inputs_needed) and self.k < self.n_steps:
+        return self._ready()
+
+    def _ready(self) -> Action:
+        """ADVANCE once step k has every input and its ``/clock`` is out."""
+        if self.clock_out and len(self.inputs) == len(self.inputs_needed) and self.k < self.n_steps:
             return Action.ADVANCE
         return Action.NONE
+
+    def _open_gate(self, name: str, value: np.ndarray) -> Action:
+        """A gate input of step k: CLOCK once the gate has them all (a repeat changes nothing)."""
+        self.gate.setdefault(name, value)
+        if not self.clock_out and len(self.gate) == len(self.clock_gate):
+            return Action.CLOCK
+        return Action.NONE
+
+    def clocked(self) -> Action:
+        """``/clock`` of step k went out; returns ADVANCE if the step's inputs are in already, else NONE."""
+        self.clock_out = True
+        return self._ready()
 
     def advanced(self, state_finite: bool, now: float, real_time_factor: float, hold_at: float) -> Action:
         """The body was integrated to step k+1; returns FAIL, PACE, PUBLISH or HOLD."""
@@ -218,8 +251,11 @@ class PlantLockstep:
         return Action.PUBLISH
 
     def published(self, now: float) -> bool:
-        """The state of step k went out; returns True when that was the last step."""
+        """The state of step k went out (its ``/clock`` too, unless a clock gate holds it); returns True when
+        that was the last step."""
         self.step_wall0 = now
+        self.gate = {}
+        self.clock_out = not self.clock_gate
         if self.n_steps > 0 and self.k >= self.n_steps:
             self.running = False
             self.done = True
@@ -242,6 +278,99 @@ class PlantLockstep:
             return Action.START
         if self.running and self.publish_at is None and not self.holding and now - self.step_wall0 > input_timeout:
             missing = [n for n in self.inputs_needed if n not in self.inputs]
+            if not self.clock_out:  # /clock waits for the gate: what it waits for comes first
+                missing = [n for n in self.clock_gate if n not in self.gate] + missing
             return self.fail(f"plant: no {', '.join(missing)} for step t={self.t_ns * 1e-9:.6f} s "
                              f"within {input_timeout:g} s; episode stopped")
         return Action.NONE
+
+
+#: how the wheels take the controller's command (the wheels' and the plant's ``command_timing``)
+COMMAND_TIMINGS = ("stamped", "sim_timer", "wall")
+
+
+class CommandHold:
+    """The command the wheels apply over each step, for a controller on a timer of its own.
+
+    ``stamped`` (the lockstep of the contract) needs none of this: each step's
+    command carries the step's stamp. The other two take flight software as
+    it is written, a node that caches its inputs and computes on
+    ``create_timer``, stamping with its clock's ``now()``:
+
+    * ``sim_timer`` - the node runs on sim time with period T (a multiple of
+      the step dt). Its tick j fires when ``/clock`` reaches t_j = j T
+      (j >= 1: an rcl timer first fires one period after it starts) and its
+      command, stamped t_j, is applied over [t_j + T, t_j + 2 T): logical
+      execution time (Kirsch and Sokolova, "The Logical Execution Time
+      Paradigm", 2012), a one-period computation delay whatever the node's
+      real computing time, so a run is deterministic. Before the first
+      tick's command takes effect the command is zero. The wheels wait, at
+      each step that is a tick, for that tick's command (:meth:`waits_at`):
+      nothing of the next step is published before the node has computed.
+    * ``wall`` - the node runs on the wall clock; the newest command received
+      is applied, whatever its stamp (sample and hold).
+
+    Parameters
+    ----------
+    timing : str
+        ``sim_timer`` or ``wall``.
+    period_ns : int
+        T, ns (``sim_timer``).
+    zero : (value, torque_mode)
+        The command before any takes effect: a (1, 3) zero and its kind.
+    """
+
+    def __init__(self, timing: str, period_ns: int, zero: tuple[np.ndarray, bool]) -> None:
+        self.timing = timing
+        self.period_ns = int(period_ns)
+        self.zero = zero
+        self.ticks: dict[int, tuple[np.ndarray, bool]] = {}  # sim_timer: tick stamp (ns) -> its command
+        self.newest = zero  # wall: the newest command received
+
+    def is_tick(self, t_ns: int) -> bool:
+        """``sim_timer``: the node's timer fires at sim time ``t_ns`` (ns)."""
+        return self.timing == "sim_timer" and t_ns > 0 and t_ns % self.period_ns == 0
+
+    def waits_at(self, t_ns: int) -> bool:
+        """The step at ``t_ns`` (ns) is a tick whose command has not come yet: the wheels wait for it."""
+        return self.is_tick(t_ns) and t_ns not in self.ticks
+
+    def offer(self, t_ns: int, value: np.ndarray, torque_mode: bool, step_ns: int | None) -> str:
+        """A command stamped ``t_ns`` (ns) came, with ``step_ns`` the step in hand (None: none yet); returns
+        '' if taken, else why it is refused."""
+        if self.timing == "wall":
+            self.newest = (value, torque_mode)
+            return ""
+        if not self.is_tick(t_ns):
+            return f"not a tick of the controller's period {self.period_ns * 1e-9:g} s"
+        if step_ns is not None and t_ns > step_ns:
+            return "ahead of the clock"
+        self.ticks.setdefault(t_ns, (value, torque_mode))  # a repeat of a tick answered changes nothing
+        return ""
+
+    def applied(self, t_ns: int) -> tuple[np.ndarray, bool]:
+        """The command (value, torque_mode) held over the step at ``t_ns`` (ns)."""
+        if self.timing == "wall":
+            return self.newest
+        tick = (t_ns // self.period_ns - 1) * self.period_ns  # the tick whose command takes effect at t_ns
+        for old in [s for s in self.ticks if s < tick]:
+            del self.ticks[old]
+        return self.ticks.get(tick, self.zero)
+
+
+def command_period_ns(rate_hz: float, dt_ns: int) -> int:
+    """The period (ns) of a controller's timer at ``rate_hz`` (0: one step ``dt_ns``), a whole number of steps.
+
+    Raises
+    ------
+    ValueError
+        A rate whose period is not a whole number of steps (to 1 ns).
+    """
+    if rate_hz == 0.0:
+        return int(dt_ns)
+    period = 1e9 / rate_hz
+    steps = round(period / dt_ns)
+    if steps < 1 or abs(period - steps * dt_ns) > 1.0:
+        raise ValueError(f"a controller rate of {rate_hz:g} Hz has a period of {period * 1e-9:g} s, not a whole "
+                         f"number of control periods ({dt_ns * 1e-9:g} s)")
+    return int(steps * dt_ns)

@@ -22,6 +22,7 @@ from attitude_sil.core.paramspec import double_array as _da
 from attitude_sil.core.paramspec import inertia_rule as _inertia_rule
 from attitude_sil.core.paramspec import nonzero as _nonzero
 from attitude_sil.core.plant.wheels import HST_MOTOR
+from attitude_sil.core.sim.lockstep import COMMAND_TIMINGS
 
 __all__ = ["ParamSpec", "NODE_PARAMS", "GLOBAL_NODE", "SCENARIO_NODE", "spec_for", "HST_MOTOR", "parameters_markdown"]
 
@@ -29,6 +30,14 @@ GLOBAL_NODE = "/**"
 SCENARIO_NODE = "scenario"
 
 _HST_INERTIA = [31.046, 77.217, 78.754]
+
+#: how the controller's command is taken (plant and wheels; docs/flight-software.md)
+_COMMAND_TIMING = ParamSpec(
+    "command_timing", "string", "stamped",
+    "stamped: one command per step, stamped t_k; sim_timer: a controller on a sim-time timer (the plant publishes "
+    "/clock once the step's setpoints are out; the wheels wait for each tick's command and apply it one period "
+    "later); wall: a controller on the wall clock (the wheels apply the newest command, whatever its stamp)",
+    choices=COMMAND_TIMINGS)
 
 
 NODE_PARAMS: dict[str, list[ParamSpec]] = {
@@ -74,6 +83,7 @@ NODE_PARAMS: dict[str, list[ParamSpec]] = {
                   "start the episode once every input and output topic is matched (default: wait for plant/reset)"),
         _d("hold_at", -1.0, "hold the lockstep before publishing the first step at or after this sim time, s "
            "(negative: never); setting it past the current time releases the hold", runtime=True),
+        _COMMAND_TIMING,
     ],
     "wheels": [
         _d("control_period", 0.01, "control step dt, s (shared by every node)", min=0.0, min_exclusive=True, max=1.0),
@@ -122,6 +132,9 @@ NODE_PARAMS: dict[str, list[ParamSpec]] = {
            min_exclusive=True),
         _d("speed_loop.rpm_per_volt", 1000.0, "speed reference per volt of the drive's analog input, rpm/V "
            "(assumed)", min=0.0, min_exclusive=True),
+        _COMMAND_TIMING,
+        _d("command_rate", 0.0, "sim_timer: the controller's timer rate, Hz (0: the control rate); its period "
+           "must be a whole number of control periods", min=0.0),
     ],
     "disturbance": [
         _d("control_period", 0.01, "control step dt, s (shared by every node)", min=0.0, min_exclusive=True, max=1.0),

@@ -181,12 +181,14 @@ class Scenario:
 #: what a node takes from another node's parameters unless the scenario sets it: node -> name -> (node, name)
 DERIVED = {"estimator": {"initial_attitude_rpy_deg": ("plant", "initial_attitude_rpy_deg"),
                          "star_tracker.rate_hz": ("sensors", "star_tracker.rate_hz"),
-                         "star_tracker.latency_s": ("sensors", "star_tracker.latency_s")}}
+                         "star_tracker.latency_s": ("sensors", "star_tracker.latency_s")},
+           "plant": {"command_timing": ("wheels", "command_timing")}}
 
 
 def derived_values(scn: Scenario, node: str) -> dict[str, Any]:
     """The values ``node`` takes from another node's unless the scenario sets them (:data:`DERIVED`): the
-    estimator starts from the plant's initial attitude and expects the sensors' star tracker schedule."""
+    estimator starts from the plant's initial attitude and expects the sensors' star tracker schedule; the
+    plant orders ``/clock`` for the controller timing the wheels hold commands for."""
     mine = scn.explicit.get(node, {})
     return {name: copy.deepcopy(scn.values[src][src_name]) for name, (src, src_name) in DERIVED.get(node, {}).items()
             if name not in mine}
@@ -202,6 +204,10 @@ def _check_consistency(scn: Scenario) -> None:
     if len(set(periods.values())) > 1:
         listing = ", ".join(f"{n}={p}" for n, p in periods.items())
         raise ScenarioError(f"{scn.source}: control_period differs between nodes ({listing}); set it under /**")
+    timing = effective_values(scn, "plant")["command_timing"]
+    if timing != scn.values["wheels"]["command_timing"]:
+        raise ScenarioError(f"{scn.source}: plant.command_timing {timing} differs from wheels.command_timing "
+                            f"{scn.values['wheels']['command_timing']}; set it under wheels (the plant follows)")
     dt = scn.dt
     k = scn.duration / dt
     if abs(k - round(k)) > 1e-6:

@@ -1,0 +1,94 @@
+"""Flight software as it is usually written: a node that caches its inputs and computes on a timer.
+
+It knows nothing of attitude_sil but its topics (rclpy and the message
+packages only, QoS ``10``), and it is the same code on either clock:
+
+* on sim time, in lockstep and deterministic (``use_sim_time`` true)::
+
+    attitude-sil run config/hst_roll_step.yaml --external controller --external-timing sim_timer &
+    python examples/external_controller/timer_controller.py --ros-args -p use_sim_time:=true
+
+* on the wall clock, the simulator paced at real time::
+
+    attitude-sil run config/hst_roll_step.yaml --external controller --external-timing wall --real-time &
+    python examples/external_controller/timer_controller.py
+
+What it does, as a cFS app, an F' rate group or a ros2_control update loop
+would:
+
+* it keeps the newest ``attitude`` and ``attitude_setpoint`` it has received;
+* every ``1/rate`` s of its clock (``create_timer``) it computes paper 000's
+  PID (:class:`pid_controller.Pid`, the arithmetic of attitude_sil's ``pid``
+  law, with the timer's period as its step) and publishes ``voltage_cmd``
+  stamped with its clock's ``now()``;
+* an ``attitude`` stamped earlier than the one before means the simulation
+  started a new episode: the law's state is reset.
+"""
+
+from __future__ import annotations
+
+import rclpy
+from geometry_msgs.msg import QuaternionStamped, Vector3Stamped
+from pid_controller import HST_GA_GAINS, Pid, stamp_ns
+from rclpy.executors import ExternalShutdownException
+from rclpy.node import Node
+
+
+class TimerController(Node):
+    """Per-axis PID on the quaternion error, computed on a timer from the newest inputs."""
+
+    def __init__(self) -> None:
+        super().__init__("controller")
+        for name, value in HST_GA_GAINS.items():
+            self.declare_parameter(name, [value] * 3)
+        self.declare_parameter("output_limit", 314.79)  # V, the HST preset's drive
+        self.declare_parameter("rate", 100.0)  # Hz, the timer's rate
+        self.pub = self.create_publisher(Vector3Stamped, "voltage_cmd", 10)
+        self.create_subscription(QuaternionStamped, "attitude", self.on_attitude, 10)
+        self.create_subscription(QuaternionStamped, "attitude_setpoint", self.on_setpoint, 10)
+        self.q_BN: tuple | None = None
+        self.q_RN: tuple | None = None
+        self.last_stamp = -1
+        self.law = Pid()
+        self.period = 1.0 / self.get_parameter("rate").value
+        self.create_timer(self.period, self.tick)
+
+    def on_attitude(self, msg: QuaternionStamped) -> None:
+        t = stamp_ns(msg.header.stamp)
+        if t < self.last_stamp:  # the simulation started again
+            self.law.reset()
+        self.last_stamp = t
+        q = msg.quaternion
+        self.q_BN = (q.x, q.y, q.z, q.w)
+
+    def on_setpoint(self, msg: QuaternionStamped) -> None:
+        q = msg.quaternion
+        self.q_RN = (q.x, q.y, q.z, q.w)
+
+    def tick(self) -> None:
+        if self.q_BN is None or self.q_RN is None:
+            return  # nothing to fly yet
+        gains = {name: self.get_parameter(name).value for name in HST_GA_GAINS}
+        u = self.law.step(self.q_BN, self.q_RN, gains, self.get_parameter("output_limit").value, self.period)
+        out = Vector3Stamped()
+        out.header.stamp = self.get_clock().now().to_msg()
+        out.header.frame_id = "body"
+        out.vector.x, out.vector.y, out.vector.z = u
+        self.pub.publish(out)
+
+
+def main() -> int:
+    rclpy.init()
+    node = TimerController()
+    try:
+        rclpy.spin(node)
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    finally:
+        node.destroy_node()
+        rclpy.try_shutdown()
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
