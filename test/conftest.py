@@ -99,3 +99,29 @@ def write_plugin(folder: Path, name: str) -> None:
     source = EXAMPLE.replace('name="quat_pd"', f'name="{name}"')
     assert old in source, (name, old)
     (folder / f"{name}.py").write_text(source.replace(old, new))
+
+
+def start_python(args: list[str], **kw):
+    """A Python process of the tests' (``args`` after the interpreter), in a session of its own, its stderr piped."""
+    import subprocess
+
+    return subprocess.Popen([sys.executable, *args], cwd=ROOT, stdin=subprocess.DEVNULL, start_new_session=True,
+                            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True, **kw)
+
+
+def stop_processes(procs: list) -> list[int]:
+    """SIGINT each process (a requested shutdown), then SIGKILL what is left after 10 s; the exit codes."""
+    import signal
+    import subprocess
+
+    for p in procs:
+        if p.poll() is None:
+            p.send_signal(signal.SIGINT)
+    codes = []
+    for p in procs:
+        try:
+            codes.append(p.wait(timeout=10))
+        except subprocess.TimeoutExpired:
+            os.killpg(p.pid, signal.SIGKILL)
+            codes.append(p.wait())
+    return codes

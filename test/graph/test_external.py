@@ -14,10 +14,6 @@ from __future__ import annotations
 
 import json
 import math
-import os
-import signal
-import subprocess
-import sys
 import time
 
 import pytest
@@ -29,30 +25,12 @@ from attitude_sil.errors import RunError
 from attitude_sil.graph.session import run_graph
 from attitude_sil.storage.reader import open_bag
 from conftest import CONFIG, ROOT
+from conftest import start_python as _start
+from conftest import stop_processes as _stop
 
 SCENARIO = CONFIG / "hst_roll_step.yaml"
 EXAMPLE = ROOT / "examples" / "external_controller" / "pid_controller.py"
 DURATION = 3.0
-
-
-def _start(args: list[str], **kw) -> subprocess.Popen:
-    return subprocess.Popen([sys.executable, *args], cwd=ROOT, stdin=subprocess.DEVNULL, start_new_session=True,
-                            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True, **kw)
-
-
-def _stop(procs: list[subprocess.Popen]) -> list[int]:
-    """SIGINT each process (a requested shutdown), then SIGKILL what is left after 10 s; the exit codes."""
-    for p in procs:
-        if p.poll() is None:
-            p.send_signal(signal.SIGINT)
-    codes = []
-    for p in procs:
-        try:
-            codes.append(p.wait(timeout=10))
-        except subprocess.TimeoutExpired:
-            os.killpg(p.pid, signal.SIGKILL)
-            codes.append(p.wait())
-    return codes
 
 
 def _same_metrics(a: dict, b: dict) -> None:

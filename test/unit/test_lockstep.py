@@ -5,8 +5,9 @@ is checked directly, with the wall clock passed in.
 """
 
 import numpy as np
+import pytest
 
-from attitude_sil.core.sim.lockstep import Action, PlantLockstep, StepSequencer
+from attitude_sil.core.sim.lockstep import Action, CommandHold, PlantLockstep, StepSequencer, command_period_ns
 
 DT = 10_000_000  # 10 ms in ns
 ZERO = np.zeros((1, 3))
@@ -156,3 +157,102 @@ def test_autostart_only_when_idle_and_wired():
     ls.published(0.0)
     assert ls.done
     assert ls.watchdog(1e6, 10.0, autostart=True, wired=True) is Action.NONE  # one episode, not a loop
+
+
+# -- a controller on a timer of its own (command_timing sim_timer / wall) -------------------------------------------
+
+SETPOINTS = ("attitude_setpoint", "rate_setpoint")
+Q = np.array([[0.0, 0.0, 0.0, 1.0]])
+
+
+def test_a_clock_gate_holds_clock_until_the_steps_setpoints_are_in():
+    ls = PlantLockstep(PLANT_INPUTS, SETPOINTS)
+    ls.start(2, DT, 0.0, -1.0)
+    ls.published(0.0)
+    assert not ls.clock_out
+    # the wheels' and disturbance's outputs may come first; the step still waits for its /clock
+    assert _feed_all(ls, 0) is Action.NONE
+    assert ls.offer("attitude_setpoint", 0, Q) is Action.NONE
+    assert ls.offer("rate_setpoint", DT, ZERO) is Action.REFUSED  # a setpoint of another step opens nothing
+    assert ls.offer("rate_setpoint", 0, ZERO) is Action.CLOCK
+    assert ls.offer("rate_setpoint", 0, ZERO) is Action.NONE  # a repeat: /clock went once
+    assert ls.clocked() is Action.ADVANCE  # the inputs were in: the step goes on at once
+    ls.advanced(True, 0.0, 0.0, -1.0)
+    ls.published(0.0)
+    assert not ls.clock_out and ls.gate == {}  # each step waits again
+
+
+def test_the_last_steps_clock_goes_out_after_the_episode_is_done():
+    ls = PlantLockstep(PLANT_INPUTS, SETPOINTS)
+    ls.start(1, DT, 0.0, -1.0)
+    ls.published(0.0)
+    ls.offer("attitude_setpoint", 0, Q)
+    ls.offer("rate_setpoint", 0, ZERO)
+    ls.clocked()
+    assert _feed_all(ls, 0) is Action.ADVANCE
+    ls.advanced(True, 0.0, 0.0, -1.0)
+    assert ls.published(0.0) is True and ls.done
+    # a timer of the controller may be due at the last step: its /clock still goes, nothing else is taken
+    ls.offer("attitude_setpoint", DT, Q)
+    assert ls.offer("rate_setpoint", DT, ZERO) is Action.CLOCK
+    assert ls.clocked() is Action.NONE
+    assert ls.offer("wheel_torque", DT, ZERO) is Action.NONE
+
+
+def test_a_late_gate_is_named_first_in_the_timeout_line():
+    ls = PlantLockstep(PLANT_INPUTS, SETPOINTS)
+    ls.start(3, DT, 0.0, -1.0)
+    ls.published(0.0)
+    ls.offer("attitude_setpoint", 0, Q)
+    assert ls.watchdog(11.0, 10.0, False, False) is Action.FAIL
+    assert ls.error.startswith("plant: no rate_setpoint, wheel_torque, wheel_momentum, disturbance_torque for step")
+
+
+def _hold(timing: str, period_steps: int = 1) -> CommandHold:
+    return CommandHold(timing, period_steps * DT, (np.zeros((1, 3)), False))
+
+
+def test_sim_timer_commands_take_effect_one_period_after_their_tick():
+    # logical execution time: tick j's command (stamped j T) acts over [(j + 1) T, (j + 2) T); zero before
+    hold = _hold("sim_timer", period_steps=10)
+    assert [hold.is_tick(k * DT) for k in (0, 5, 10, 20)] == [False, False, True, True]
+    for k in range(10):
+        assert not hold.waits_at(k * DT) and np.all(hold.applied(k * DT)[0] == 0.0)
+    assert hold.waits_at(10 * DT)  # a tick: the wheels wait for its command
+    assert hold.offer(10 * DT, np.full((1, 3), 1.0), False, 10 * DT) == ""
+    assert not hold.waits_at(10 * DT)
+    assert np.all(hold.applied(10 * DT)[0] == 0.0)  # not yet: one period of delay
+    assert np.all(hold.applied(19 * DT)[0] == 0.0)
+    assert hold.offer(20 * DT, np.full((1, 3), 2.0), True, 20 * DT) == ""
+    value, torque_mode = hold.applied(20 * DT)
+    assert np.all(value == 1.0) and torque_mode is False  # tick 1's command, held for a whole period
+    assert np.all(hold.applied(29 * DT)[0] == 1.0)
+    assert hold.offer(30 * DT, np.full((1, 3), 3.0), False, 30 * DT) == ""
+    value, torque_mode = hold.applied(30 * DT)
+    assert np.all(value == 2.0) and torque_mode is True
+
+
+def test_sim_timer_refuses_stamps_off_its_ticks_or_ahead_of_the_clock():
+    hold = _hold("sim_timer", period_steps=10)
+    assert "not a tick" in hold.offer(15 * DT, np.ones((1, 3)), False, 15 * DT)
+    assert "not a tick" in hold.offer(1_795_746_522_912_842_032, np.ones((1, 3)), False, 15 * DT)  # a wall stamp
+    assert "ahead of the clock" in hold.offer(20 * DT, np.ones((1, 3)), False, 15 * DT)
+    assert hold.ticks == {}
+
+
+def test_wall_applies_the_newest_command_whatever_its_stamp():
+    hold = _hold("wall")
+    assert not hold.is_tick(10 * DT) and not hold.waits_at(10 * DT)
+    assert np.all(hold.applied(0)[0] == 0.0)
+    assert hold.offer(1_795_746_522_912_842_032, np.full((1, 3), 4.0), False, None) == ""
+    assert hold.offer(7, np.full((1, 3), 5.0), False, None) == ""
+    assert np.all(hold.applied(DT)[0] == 5.0)
+
+
+def test_a_timer_period_is_a_whole_number_of_steps():
+    assert command_period_ns(0.0, DT) == DT
+    assert command_period_ns(10.0, DT) == 10 * DT
+    assert command_period_ns(100.0, DT) == DT
+    for bad in (30.0, 150.0, 1000.0):  # 33.3 ms, 6.7 ms, 1 ms against 10 ms steps
+        with pytest.raises(ValueError, match="not a whole number of control periods"):
+            command_period_ns(bad, DT)

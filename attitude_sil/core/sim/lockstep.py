@@ -215,7 +215,9 @@ class PlantLockstep:
 
     def _open_gate(self, name: str, value: np.ndarray) -> Action:
         """A gate input of step k: CLOCK once the gate has them all (a repeat changes nothing)."""
-        self.gate.setdefault(name, value)
+        if name in self.gate:
+            return Action.NONE
+        self.gate[name] = value
         if not self.clock_out and len(self.gate) == len(self.clock_gate):
             return Action.CLOCK
         return Action.NONE

@@ -159,7 +159,7 @@ class Scenario:
         extra = extra or {}
         out = {}
         for node in nodes:
-            values = dict(self.values[node])
+            values = effective_values(self, node)  # what the node runs with: its derived values too
             values.update({k: v for k, v in extra.items() if k in values})
             out[node_key(node)] = {"ros__parameters": values}
         return yaml.safe_dump(out, sort_keys=True)

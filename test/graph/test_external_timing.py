@@ -1,0 +1,173 @@
+"""Flight software on its own timer: ``run --external controller --external-timing sim_timer | wall``.
+
+The node is ``examples/external_controller/timer_controller.py``: it caches
+its newest ``attitude`` and ``attitude_setpoint`` and computes paper 000's PID
+on ``create_timer``, stamping with ``now()``, the same code on sim time and
+on the wall clock.
+
+On sim time the run is checked against a reference of its own kind: the same
+episode stepped here with the package's core models and the example's own
+``Pid``, under the rule the guide states (a tick at t_j reads the state and
+setpoint of t_j; its command acts over [t_j + T, t_j + 2 T), zero before).
+That the graph matches it to 1e-12 shows each tick read the inputs of its own
+time and its command went in one period later; two runs in a row match bit
+for bit.
+"""
+
+from __future__ import annotations
+
+import math
+import sys
+
+import numpy as np
+import pytest
+
+from attitude_sil.cli import main
+from attitude_sil.core.sim.build import build_disturbance, build_guidance, build_plant, build_wheels
+from attitude_sil.core.sim.scenario import load_scenario
+from attitude_sil.errors import RunError
+from attitude_sil.graph.session import run_graph
+from attitude_sil.storage.cdr import stamp_from_cdr, stamped_values
+from attitude_sil.storage.reader import open_bag
+from conftest import CONFIG, ROOT
+from conftest import start_python as _start
+from conftest import stop_processes as _stop
+
+SCENARIO = CONFIG / "hst_roll_step.yaml"
+EXAMPLES = ROOT / "examples" / "external_controller"
+TIMER = EXAMPLES / "timer_controller.py"
+sys.path.insert(0, str(EXAMPLES))
+from pid_controller import HST_GA_GAINS, Pid  # noqa: E402 - the example's own law, for the reference
+
+OUTPUT_LIMIT = 314.79  # V, the example's default
+
+
+def vectors(bag, topic: str) -> list[tuple[int, np.ndarray]]:
+    """(header stamp ns, (3,) values) of each message of a Vector3Stamped topic of ``bag``."""
+    return [(stamp_from_cdr(m.data), stamped_values(m.data, 3)) for m in bag.iter_raw(topic)]
+
+
+def let_reference(scn, duration: float, period_steps: int) -> tuple[np.ndarray, np.ndarray]:
+    """The episode under logical execution time, stepped with the core models: (q_BN (K+1, 4), command (K+1, 3))."""
+    dt_ns = int(round(scn.dt * 1e9))
+    period_ns = period_steps * dt_ns
+    plant, wheels = build_plant(scn, 1), build_wheels(scn, 1)
+    disturbance, guidance = build_disturbance(scn, 1), build_guidance(scn, 1)
+    law, ticks = Pid(), {}
+    gains = {name: [value] * 3 for name, value in HST_GA_GAINS.items()}
+    steps = int(round(duration / scn.dt))
+    q_out, u_out = [], []
+    for k in range(steps + 1):
+        t_ns = k * dt_ns
+        q_BN = plant.state.q_BN
+        q_RN, _ = guidance.setpoint(t_ns * 1e-9)
+        if t_ns > 0 and t_ns % period_ns == 0:  # a tick reads the inputs of its own time
+            ticks[t_ns] = law.step(tuple(q_BN[0]), tuple(q_RN[0]), gains, OUTPUT_LIMIT, period_ns * 1e-9)
+        u = np.array([ticks.get((t_ns // period_ns - 1) * period_ns, (0.0, 0.0, 0.0))])  # one period later
+        q_out.append(q_BN[0].copy())
+        u_out.append(u[0])
+        out = wheels.advance(u, False)
+        if k < steps:
+            plant.advance(out.tau_c_B, out.h_wheels_B, disturbance.torque(q_BN, t_ns))
+    return np.array(q_out), np.array(u_out)
+
+
+def test_a_sim_time_timer_node_flies_in_lockstep_deterministically(tmp_path):
+    scn = load_scenario(SCENARIO).with_values("wheels", command_timing="sim_timer")
+    node = _start([str(TIMER), "--ros-args", "-p", "use_sim_time:=true"])
+    try:
+        first = run_graph(scn, duration=2.0, external=("controller",), record_dir=tmp_path / "bag",
+                          keep_trajectory=True, progress=False)
+        second = run_graph(scn, duration=2.0, external=("controller",), keep_trajectory=True, progress=False)
+    finally:
+        assert _stop([node]) == [0], node.stderr.read()
+    q_ref, u_ref = let_reference(scn, 2.0, 1)
+    tr = first.trajectory
+    assert tr.q_BN.shape[1] == len(q_ref) == 201
+    assert np.max(np.abs(tr.u_cmd[0] - u_ref)) <= 1e-12
+    assert np.max(np.abs(tr.q_BN[0] - q_ref)) <= 1e-12
+    for key, value in first.metrics.items():  # bit for bit, run after run (wall-clock figures aside)
+        if key not in ("wall_time_s", "real_time_factor", "bag") and not key.startswith("controller_latency"):
+            assert value == second.metrics[key], key
+    m = first.metrics
+    assert m["command_timing"] == "sim_timer" and m["command_period_ms"] == pytest.approx(10.0)
+    assert m["command_delay_ms"] == pytest.approx(10.0)  # the one-period computation delay
+    assert 0.0 < m["controller_latency_mean_ms"] <= m["controller_latency_max_ms"]
+    bag = open_bag(tmp_path / "bag")
+    assert bag.topics["/voltage_cmd"].count == 200  # one per tick: t = 10 ms ... 2 s
+    assert bag.topics["/applied/voltage_cmd"].count == 201  # one per step, what the wheels held
+
+
+def test_a_10_hz_flight_computer_on_the_100_hz_plant(tmp_path, capfd):
+    scn = load_scenario(SCENARIO)
+    node = _start([str(TIMER), "--ros-args", "-p", "use_sim_time:=true", "-p", "rate:=10.0"])
+    try:
+        capfd.readouterr()
+        code = main(["run", str(SCENARIO), "--external", "controller", "--external-timing", "sim_timer",
+                     "--external-rate", "10", "--duration", "3", "--record", str(tmp_path / "bag"), "--quiet",
+                     "--json"])
+        out = capfd.readouterr().out
+    finally:
+        _stop([node])
+    assert code == 0
+    assert "controller period        100 ms" in out and "command delay (sim)      100 ms" in out
+    # each tick's command is held for a whole period, one period after its tick: the bag shows it exactly
+    bag = open_bag(tmp_path / "bag")
+    ticks = {t: v for t, v in vectors(bag, "/voltage_cmd")}
+    assert sorted(ticks) == [j * 100_000_000 for j in range(1, 31)]
+    for t, v in vectors(bag, "/applied/voltage_cmd"):
+        tick = (t // 100_000_000 - 1) * 100_000_000
+        assert np.array_equal(v, ticks.get(tick, np.zeros(3))), t
+    assert math.isfinite(scn.dt)
+
+
+def test_a_wall_clock_timer_node_flies_at_real_time(tmp_path):
+    scn = load_scenario(SCENARIO).with_values("wheels", command_timing="wall")
+    node = _start([str(TIMER)])
+    try:
+        result = run_graph(scn, duration=1.0, external=("controller",), real_time=True,
+                           record_dir=tmp_path / "bag", progress=False)
+    finally:
+        _stop([node])
+    m = result.metrics
+    assert m["command_timing"] == "wall" and m["command_count"] > 0
+    assert isinstance(m["command_stale_steps"], int) and isinstance(m["command_missed_periods"], int)
+    assert 0.0 < m["controller_latency_mean_ms"] <= m["controller_latency_max_ms"]
+    assert math.isfinite(m["iae"])
+    # what the wheels applied is a command the node sent (or zero before its first): sample and hold
+    bag = open_bag(tmp_path / "bag")
+    sent = {tuple(v) for _, v in vectors(bag, "/voltage_cmd")} | {(0.0, 0.0, 0.0)}
+    applied = [tuple(v) for _, v in vectors(bag, "/applied/voltage_cmd")]
+    assert len(applied) == 101 and set(applied) <= sent
+
+
+def test_a_timer_node_on_the_wrong_clock_is_named_at_the_stall():
+    # the node on the wall clock, run as sim_timer: its wall stamps are no ticks; the run ends at the plant's
+    # timeout with one line naming the controller, its topic, what came instead and what to check
+    scn = load_scenario(SCENARIO).with_values("wheels", command_timing="sim_timer").with_values(
+        "plant", input_timeout=2.0)
+    node = _start([str(TIMER)])
+    try:
+        with pytest.raises(RunError) as err:
+            run_graph(scn, duration=1.0, external=("controller",), progress=False)
+    finally:
+        _stop([node])
+    line = str(err.value)
+    assert "\n" not in line
+    assert "the controller sent no voltage_cmd or torque_cmd stamped 0.010000 s" in line, line
+    assert "use_sim_time" in line and "--external-rate" in line, line
+
+
+@pytest.mark.parametrize("args, words", [
+    (["--external-timing", "sim_timer"], "add --external controller"),
+    (["--external", "controller", "--external-timing", "wall"], "add --real-time"),
+    (["--external", "controller", "--external-timing", "sim_timer", "--external-rate", "30"],
+     "not a whole number of control periods"),
+    (["--external", "controller", "--external-rate", "10"], "goes with --external-timing sim_timer or wall"),
+    (["--external", "controller", "--external", "guidance", "--external-timing", "sim_timer"],
+     "leave out --external guidance"),
+])
+def test_timing_flags_that_cannot_fly_are_one_line_errors(args, words, capfd):
+    assert main(["run", str(SCENARIO), "--no-record", "--quiet", *args]) == 2
+    err = capfd.readouterr().err
+    assert err.count("\n") == 1 and words in err, err
