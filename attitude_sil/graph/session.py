@@ -35,7 +35,7 @@ from attitude_sil.core.control import registry
 from attitude_sil.core.plant.scene import body_scene
 from attitude_sil.core.sim.build import check_episode, schedule_from_scenario
 from attitude_sil.core.sim.engine import simulate
-from attitude_sil.core.sim.lockstep import command_period_ns
+from attitude_sil.core.sim.lockstep import command_period_ns, is_tick
 from attitude_sil.core.sim.params import spec_for
 from attitude_sil.core.sim.scenario import Scenario
 from attitude_sil.core.trajectory import Trajectory
@@ -54,6 +54,7 @@ from attitude_sil.nodes.recorder_node import Recorder
 from attitude_sil.ros.contract import (
     APPLIED_COMMAND_TOPIC,
     ATTITUDE,
+    CLOCK,
     COMMAND_TOPICS,
     EXTERNAL,
     PRODUCERS,
@@ -194,6 +195,9 @@ class GraphSession:
             spec_for("controller", "controller_type").validate(controller, "controller")
         self.external = check_external(external, controller, scn)
         self.timing = scn.param("wheels", "command_timing")
+        if self.timing == "sim_timer" and processes:
+            raise RunError("--external-timing sim_timer runs the graph's nodes in one process (there the setpoints "
+                           "of a tick are delivered before its /clock); leave out --processes")
         if self.timing == "wall" and not real_time:
             raise RunError("--external-timing wall: the plant must run at real time for a controller on the wall "
                            "clock; add --real-time")
@@ -243,6 +247,7 @@ class GraphSession:
                                      topics=recorded_topics(self.scn.has_sensors, applied=self.timing != "stamped"),
                                      live=self.live, context=self.context, volatile_topics=outside, **kw)
             self.recorder.latency = [] if "controller" in self.external and self.timing != "wall" else None
+            self.recorder.latency_from = CLOCK if self.timing == "sim_timer" else ATTITUDE  # a tick: from /clock
             self.recorder.set_scene(body_scene(self.scn.values))  # the 3D view's frames and body model
             self.executor = EventsExecutor(context=self.context)
             self.executor.add_node(self.recorder)
@@ -644,7 +649,7 @@ class CommandWatch:
         """The controller owes a command stamped ``step_ns`` (ns)."""
         if self.tick_ns is None:
             return True
-        return self.tick_ns > 0 and step_ns > 0 and step_ns % self.tick_ns == 0
+        return self.tick_ns > 0 and is_tick(step_ns, self.tick_ns)
 
 
 def episode_complete(newest_stamp: dict[str, int], step_topics: list[str], final_ns: int,

@@ -21,9 +21,10 @@ scheduled controller swaps this way); setting ``hold_at`` to a later time (or
 
 With ``command_timing: sim_timer`` (a controller on a sim-time timer,
 docs/flight-software.md) ``/clock`` of step k goes out after the state, once
-the step's ``attitude_setpoint`` and ``rate_setpoint`` are in and the state
-is acknowledged by every reader: a timer fires when ``/clock`` reaches its
-tick, and so finds every input of the tick already delivered.
+the step's ``attitude_setpoint`` and ``rate_setpoint`` are in and, at a tick
+of the controller's timer (``command_rate``), once every reader has
+acknowledged the state: a timer fires when ``/clock`` reaches its tick, and
+so finds every input of the tick delivered.
 
 The decisions (which input completes a step, hold, pacing, timeout,
 autostart) are :class:`attitude_sil.core.sim.lockstep.PlantLockstep`; this node
@@ -38,7 +39,7 @@ import numpy as np
 from std_srvs.srv import Trigger
 
 from attitude_sil.core.sim.build import build_plant
-from attitude_sil.core.sim.lockstep import Action, PlantLockstep
+from attitude_sil.core.sim.lockstep import Action, PlantLockstep, command_period_ns, is_tick
 from attitude_sil.errors import AttitudeSilError
 from attitude_sil.ros.contract import (
     ATTITUDE,
@@ -94,6 +95,7 @@ class PlantNode(SchemaNode):
         """Rebuild the body from the current parameters and publish step 0."""
         scn = self.scenario()
         self.core = build_plant(scn, 1)
+        self.tick_ns = command_period_ns(self.param("command_rate"), int(round(scn.dt * 1e9)))
         self._cancel_pacing()
         self._do(self.lockstep.start(scn.steps(), int(round(scn.dt * 1e9)), time.monotonic(),
                                      self.param("hold_at")))
@@ -149,8 +151,12 @@ class PlantNode(SchemaNode):
             self.pub_flex.publish(stamped_vector_cdr(self.core.alpha[0], t_ns, "body"))
 
     def _publish_clock(self) -> None:
-        """The clock gate opened: ``/clock`` of step k."""
-        self.pub_clock.publish(clock_cdr(self.lockstep.t_ns))
+        """The clock gate opened: ``/clock`` of step k; at a tick of the controller's timer, once every reader
+        has acknowledged the step's state (the tick then finds it delivered)."""
+        t_ns = self.lockstep.t_ns
+        if is_tick(t_ns, self.tick_ns):
+            self.await_readers([p for p in (self.pub_attitude, self.pub_rate, self.pub_flex) if p is not None], t_ns)
+        self.pub_clock.publish(clock_cdr(t_ns))
         self._do(self.lockstep.clocked())
 
     def fail(self, reason: str) -> None:

@@ -122,8 +122,10 @@ class Recorder(Node):
         self.bad_command: tuple[str, int, list[float], float] | None = None
         self.controller_type = ""
         self.qos_problems: list[str] = []  # publishers whose QoS this recorder cannot match
-        # a list to time the controller into: wall s from each step's attitude to its command, as they arrive
+        # a list to time the controller into: wall s from each step's attitude (or, for a controller on a sim-time
+        # timer, its /clock: the tick's release) to its command, as they arrive
         self.latency: list[float] | None = None
+        self.latency_from = ATTITUDE
         # a controller on the wall clock (command_timing: wall): its commands' arrivals against the steps. Its
         # commands carry its clock's stamps: they are logged at the sim time they come
         self.arrivals: CommandArrivals | None = None
@@ -132,7 +134,7 @@ class Recorder(Node):
         # the plant's input_timeout (s) as last set while the graph runs (None: as at start); the runner's stall
         # watchdog follows it
         self.plant_input_timeout: float | None = None
-        self._attitude_at: dict[int, float] = {}
+        self._released_at: dict[int, float] = {}  # wall s each step's latency_from message came
         self.counts: dict[str, int] = defaultdict(int)
         self.last_stamp: dict[str, int] = {}  # the latest stamp taken per topic, ns
         self.newest_stamp: dict[str, int] = {}  # the greatest stamp taken per topic, ns (a stray can be older)
@@ -245,8 +247,8 @@ class Recorder(Node):
         if t is not None and name != PARAMETER_EVENTS and t == self.last_stamp.get(name):
             # a repeat of the step taken last (an episode restarted at its first step): taken once, and the
             # controller timed from the repeat
-            if self.latency is not None and name == ATTITUDE:
-                self._attitude_at[t] = time.monotonic()
+            if self.latency is not None and name == self.latency_from:
+                self._released_at[t] = time.monotonic()
             return
         if name in COMMAND_TOPICS and self.arrivals is not None:
             t = self.sim_now  # a wall-clock controller's stamp is its own: logged at the sim time it came
@@ -347,10 +349,12 @@ class Recorder(Node):
         self.writer.write(self.view[name], data, t)
 
     def _time_controller(self, name: str, t: int) -> None:
-        if name == ATTITUDE:
-            self._attitude_at[t] = time.monotonic()
+        if name == self.latency_from:
+            self._released_at[t] = time.monotonic()
         elif name in COMMAND_TOPICS:
-            sent = self._attitude_at.pop(t, None)
+            sent = self._released_at.pop(t, None)
+            for older in [s for s in self._released_at if s < t]:  # steps with no command (between a timer's ticks)
+                del self._released_at[older]
             if sent is not None:
                 self.latency.append(time.monotonic() - sent)
 

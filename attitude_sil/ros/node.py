@@ -18,6 +18,7 @@ import rclpy
 import yaml
 from rcl_interfaces.msg import SetParametersResult
 from rclpy.clock import Clock, ClockType
+from rclpy.duration import Duration
 from rclpy.exceptions import ParameterException
 from rclpy.executors import ExternalShutdownException
 from rclpy.experimental import EventsExecutor
@@ -40,6 +41,11 @@ from attitude_sil.ros.qos import INPUT_QOS, LOCKSTEP_QOS, qos_event_callbacks
 from attitude_sil.ros.signals import StopSignals
 
 __all__ = ["SchemaNode", "LockstepNode", "params_file_warning", "run_node", "sim_time_given", "steady_clock"]
+
+
+#: how long a node waits for its readers' acknowledgement before a tick of a controller on a sim-time timer
+#: (:meth:`SchemaNode.await_readers`)
+ACK_TIMEOUT = Duration(seconds=1.0)
 
 
 def steady_clock() -> Clock:
@@ -141,6 +147,16 @@ class SchemaNode(Node):
                                                                             self.qos_problems))
 
     # -- helpers ---------------------------------------------------------------
+    def await_readers(self, publishers, t_ns: int) -> None:
+        """Wait until every reader of ``publishers`` has acknowledged what they published (the step of ``t_ns``,
+        ns), up to :data:`ACK_TIMEOUT`; a reader that does not (a stalled or dying one) gets a throttled warning
+        and the step goes on."""
+        for pub in publishers:
+            if not pub.wait_for_all_acked(ACK_TIMEOUT):
+                self.get_logger().warning(f"{pub.topic_name}: a reader did not acknowledge the step at "
+                                          f"t={t_ns * 1e-9:.6f} s within {ACK_TIMEOUT.nanoseconds * 1e-9:g} s; going "
+                                          "on", throttle_duration_sec=1.0)
+
     @staticmethod
     def finite(array: np.ndarray) -> bool:
         return bool(np.all(np.isfinite(array)))

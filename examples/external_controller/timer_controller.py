@@ -16,7 +16,12 @@ packages only, QoS ``10``), and it is the same code on either clock:
 What it does, as a cFS app, an F' rate group or a ros2_control update loop
 would:
 
-* it keeps the newest ``attitude`` and ``attitude_setpoint`` it has received;
+* it keeps the newest ``attitude`` and ``attitude_setpoint`` it has received,
+  subscribing with depth 1 (reliable): a latest-value buffer, as a flight
+  computer reads its sensor registers. With the tutorials' depth 10 a node
+  whose timer is slower than the simulator's steps can fall behind the
+  queue (an executor takes one message per subscription per round, timers
+  first) and compute from inputs a few steps old;
 * every ``1/rate`` s of its clock (``create_timer``) it computes paper 000's
   PID (:class:`pid_controller.Pid`, the arithmetic of attitude_sil's ``pid``
   law, with the timer's period as its step) and publishes ``voltage_cmd``
@@ -44,8 +49,8 @@ class TimerController(Node):
         self.declare_parameter("output_limit", 314.79)  # V, the HST preset's drive
         self.declare_parameter("rate", 100.0)  # Hz, the timer's rate
         self.pub = self.create_publisher(Vector3Stamped, "voltage_cmd", 10)
-        self.create_subscription(QuaternionStamped, "attitude", self.on_attitude, 10)
-        self.create_subscription(QuaternionStamped, "attitude_setpoint", self.on_setpoint, 10)
+        self.create_subscription(QuaternionStamped, "attitude", self.on_attitude, 1)
+        self.create_subscription(QuaternionStamped, "attitude_setpoint", self.on_setpoint, 1)
         self.q_BN: tuple | None = None
         self.q_RN: tuple | None = None
         self.last_stamp = -1

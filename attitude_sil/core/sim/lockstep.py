@@ -29,7 +29,7 @@ from enum import Enum
 import numpy as np
 
 __all__ = ["StepSequencer", "StepInputs", "PlantLockstep", "Action", "CommandHold", "COMMAND_TIMINGS",
-           "command_period_ns"]
+           "command_period_ns", "is_tick"]
 
 
 class StepSequencer:
@@ -331,7 +331,7 @@ class CommandHold:
 
     def is_tick(self, t_ns: int) -> bool:
         """``sim_timer``: the node's timer fires at sim time ``t_ns`` (ns)."""
-        return self.timing == "sim_timer" and t_ns > 0 and t_ns % self.period_ns == 0
+        return self.timing == "sim_timer" and is_tick(t_ns, self.period_ns)
 
     def waits_at(self, t_ns: int) -> bool:
         """The step at ``t_ns`` (ns) is a tick whose command has not come yet: the wheels wait for it."""
@@ -358,6 +358,12 @@ class CommandHold:
         for old in [s for s in self.ticks if s < tick]:
             del self.ticks[old]
         return self.ticks.get(tick, self.zero)
+
+
+def is_tick(t_ns: int, period_ns: int) -> bool:
+    """A timer of period ``period_ns`` started at sim time 0 fires at ``t_ns`` (ns): a whole number of periods after
+    0 (an rcl timer first fires one period after it starts)."""
+    return t_ns > 0 and t_ns % period_ns == 0
 
 
 def command_period_ns(rate_hz: float, dt_ns: int) -> int:

@@ -38,6 +38,8 @@ _COMMAND_TIMING = ParamSpec(
     "/clock once the step's setpoints are out; the wheels wait for each tick's command and apply it one period "
     "later); wall: a controller on the wall clock (the wheels apply the newest command, whatever its stamp)",
     choices=COMMAND_TIMINGS)
+_COMMAND_RATE = _d("command_rate", 0.0, "sim_timer: the controller's timer rate, Hz (0: the control rate); its "
+                   "period must be a whole number of control periods", min=0.0)
 
 
 NODE_PARAMS: dict[str, list[ParamSpec]] = {
@@ -84,6 +86,7 @@ NODE_PARAMS: dict[str, list[ParamSpec]] = {
         _d("hold_at", -1.0, "hold the lockstep before publishing the first step at or after this sim time, s "
            "(negative: never); setting it past the current time releases the hold", runtime=True),
         _COMMAND_TIMING,
+        _COMMAND_RATE,
     ],
     "wheels": [
         _d("control_period", 0.01, "control step dt, s (shared by every node)", min=0.0, min_exclusive=True, max=1.0),
@@ -133,8 +136,7 @@ NODE_PARAMS: dict[str, list[ParamSpec]] = {
         _d("speed_loop.rpm_per_volt", 1000.0, "speed reference per volt of the drive's analog input, rpm/V "
            "(assumed)", min=0.0, min_exclusive=True),
         _COMMAND_TIMING,
-        _d("command_rate", 0.0, "sim_timer: the controller's timer rate, Hz (0: the control rate); its period "
-           "must be a whole number of control periods", min=0.0),
+        _COMMAND_RATE,
     ],
     "disturbance": [
         _d("control_period", 0.01, "control step dt, s (shared by every node)", min=0.0, min_exclusive=True, max=1.0),
@@ -168,6 +170,8 @@ NODE_PARAMS: dict[str, list[ParamSpec]] = {
         ParamSpec("mode", "string", "step", "step (setpoints above) or lvlh (track the orbit frame, paper 001)",
                   choices=("step", "lvlh")),
         *ORBIT,
+        _COMMAND_TIMING,
+        _COMMAND_RATE,
     ],
     "controller": [
         _d("control_period", 0.01, "control step dt, s (shared by every node)", min=0.0, min_exclusive=True, max=1.0),

@@ -182,13 +182,18 @@ class Scenario:
 DERIVED = {"estimator": {"initial_attitude_rpy_deg": ("plant", "initial_attitude_rpy_deg"),
                          "star_tracker.rate_hz": ("sensors", "star_tracker.rate_hz"),
                          "star_tracker.latency_s": ("sensors", "star_tracker.latency_s")},
-           "plant": {"command_timing": ("wheels", "command_timing")}}
+           **{node: {"command_timing": ("wheels", "command_timing"), "command_rate": ("wheels", "command_rate")}
+              for node in ("plant", "guidance")}}
+
+
+#: derived values a node must not set otherwise than their source (the estimator's may differ: they are beliefs)
+SHARED_VALUES = ("command_timing", "command_rate")
 
 
 def derived_values(scn: Scenario, node: str) -> dict[str, Any]:
     """The values ``node`` takes from another node's unless the scenario sets them (:data:`DERIVED`): the
     estimator starts from the plant's initial attitude and expects the sensors' star tracker schedule; the
-    plant orders ``/clock`` for the controller timing the wheels hold commands for."""
+    plant and the guidance order ``/clock`` for the controller timing the wheels hold commands for."""
     mine = scn.explicit.get(node, {})
     return {name: copy.deepcopy(scn.values[src][src_name]) for name, (src, src_name) in DERIVED.get(node, {}).items()
             if name not in mine}
@@ -204,10 +209,12 @@ def _check_consistency(scn: Scenario) -> None:
     if len(set(periods.values())) > 1:
         listing = ", ".join(f"{n}={p}" for n, p in periods.items())
         raise ScenarioError(f"{scn.source}: control_period differs between nodes ({listing}); set it under /**")
-    timing = effective_values(scn, "plant")["command_timing"]
-    if timing != scn.values["wheels"]["command_timing"]:
-        raise ScenarioError(f"{scn.source}: plant.command_timing {timing} differs from wheels.command_timing "
-                            f"{scn.values['wheels']['command_timing']}; set it under wheels (the plant follows)")
+    for node, values in DERIVED.items():  # a value a node must share with another is set there, or set the same
+        for name, (src, src_name) in values.items():
+            mine, theirs = effective_values(scn, node)[name], scn.values[src][src_name]
+            if name in SHARED_VALUES and mine != theirs:
+                raise ScenarioError(f"{scn.source}: {node}.{name} {mine} differs from {src}.{src_name} {theirs}; "
+                                    f"set it under {src} (the {node} follows)")
     dt = scn.dt
     k = scn.duration / dt
     if abs(k - round(k)) > 1e-6:
