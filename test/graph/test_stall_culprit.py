@@ -80,7 +80,7 @@ def test_a_timer_driven_controller_under_the_stamped_lockstep_is_named(tmp_path,
     assert line.startswith("plant: no wheel_torque, wheel_momentum for step t=0.000000 s"), line
     assert " s into the episode); " + expected in line, line
     assert "message(s) refused, the last stamped 17" in line and "none taken" in line, line
-    assert line.endswith("a node that runs on a timer and stamps with its own clock? docs/flight-software.md")
+    assert line.endswith("a timer-driven node? see --external-timing, docs/flight-software.md"), line
     # the first restart said it already, with the time it had waited
     first = [x for x in err.splitlines() if x.startswith("attitude-sil: step 0 not complete after ")]
     assert len(first) == 1 and expected in first[0], err

@@ -372,7 +372,7 @@ def command_period_ns(rate_hz: float, dt_ns: int) -> int:
     Raises
     ------
     ValueError
-        A rate whose period is not a whole number of steps (to 1 ns).
+        A rate whose period is not a whole number of steps (to a nanosecond).
     """
     if rate_hz == 0.0:
         return int(dt_ns)
