@@ -34,7 +34,7 @@ def format_table(metrics: dict) -> str:
              ("controller latency max", "controller_latency_max_ms", "ms"),
              ("controller timing", "command_timing", ""), ("controller period", "command_period_ms", "ms"),
              ("command delay (sim)", "command_delay_ms", "ms"), ("commands received", "command_count", ""),
-             ("steps without new cmd", "command_stale_steps", ""),
+             ("steps with a stale cmd", "command_stale_steps", ""),
              ("missed periods", "command_missed_periods", "")]
     rows += [(label, metrics[key], unit) for label, key, unit in extra if key in metrics]
     lines = [f"scenario {metrics['scenario']}"]

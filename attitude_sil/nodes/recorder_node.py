@@ -364,7 +364,7 @@ class Recorder(Node):
         elif name in COMMAND_TOPICS:
             self.arrivals.command(time.monotonic())
         elif name == CLOCK:
-            self.arrivals.step()
+            self.arrivals.step(time.monotonic())
 
     def _on_parameter_event(self, data: bytes, t: int) -> None:
         # a live view's Parameters panel follows every change; a swap of our controller's law goes to the live

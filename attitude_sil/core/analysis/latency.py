@@ -8,15 +8,19 @@ engineer budgets: the controller's own computing plus its transport.
   maximum.
 * :class:`CommandArrivals` - a controller on the wall clock
   (``command_timing: wall``): its commands come when its timer fires, not
-  per step, so the summary adds how many steps found no new command and how
-  many of its periods passed without one.
+  per step, so the summary adds how many steps found only a stale command
+  and how many of its periods passed without one.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["latency_summary", "CommandArrivals"]
+__all__ = ["latency_summary", "CommandArrivals", "STALE_PERIODS"]
+
+#: a step whose newest command is older than this many of the controller's periods is stale: a period at least
+#: was missed (one and a half: a controller on time, at a phase of its own against the steps, is never late by it)
+STALE_PERIODS = 1.5
 
 
 def latency_summary(latency_s: list[float]) -> dict[str, float]:
@@ -45,7 +49,6 @@ class CommandArrivals:
         self.steps = 0
         self.stale_steps = 0
         self._attitude_at: float | None = None
-        self._fresh = False  # a command came since the last step
 
     def attitude(self, now: float) -> None:
         """The plant published a state."""
@@ -56,14 +59,13 @@ class CommandArrivals:
         if self._attitude_at is not None:
             self.latency.append(now - self._attitude_at)
         self.arrivals.append(now)
-        self._fresh = True
 
-    def step(self) -> None:
-        """A step began (its ``/clock``): it is stale when no command came since the step before."""
-        if self.steps > 0 and not self._fresh:
+    def step(self, now: float) -> None:
+        """A step began (its ``/clock``): it is stale when the newest command is older than :data:`STALE_PERIODS`
+        periods (the controller missed at least one), or none came yet."""
+        if not self.arrivals or now - self.arrivals[-1] > STALE_PERIODS * self.period_s:
             self.stale_steps += 1
         self.steps += 1
-        self._fresh = False
 
     def missed_periods(self) -> int:
         """Periods with no command: each gap between two commands counts its whole periods past the first."""
