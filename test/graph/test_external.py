@@ -170,15 +170,19 @@ def test_no_external_node_is_a_one_line_timeout():
                   progress=False)
 
 
-def test_the_example_imports_nothing_of_the_package():
+@pytest.mark.parametrize("name", ["pid_controller.py", "timer_controller.py"])
+def test_the_examples_import_nothing_of_the_package(name):
     import ast
 
-    tree = ast.parse(EXAMPLE.read_text())
+    example = EXAMPLE.parent / name
+    tree = ast.parse(example.read_text())
     modules = {a.name for n in ast.walk(tree) if isinstance(n, ast.Import) for a in n.names}
     modules |= {n.module for n in ast.walk(tree) if isinstance(n, ast.ImportFrom)}
     assert not any(m.split(".")[0] == "attitude_sil" for m in modules), modules
     assert "rclpy" in modules and "geometry_msgs.msg" in modules
-    assert "10)" in EXAMPLE.read_text()  # the tutorials' QoS: depth 10, reliable, volatile
+    assert modules <= {"__future__", "math", "time", "rclpy", "rclpy.executors", "rclpy.node", "geometry_msgs.msg",
+                       "pid_controller"}, modules  # the other example, beside it, at most
+    assert "10)" in example.read_text()  # its publisher: the tutorials' QoS, depth 10, reliable, volatile
 
 
 PERFECT_ESTIMATOR = '''

@@ -147,7 +147,7 @@ def test_a_wall_clock_timer_node_flies_at_real_time(tmp_path):
     assert len(applied) == 101 and set(applied) <= sent
 
 
-def test_a_timer_node_on_the_wrong_clock_is_named_at_the_stall():
+def test_a_timer_node_on_the_wrong_clock_is_named_at_the_stall(capfd):
     # the node on the wall clock, run as sim_timer: its wall stamps are no ticks; the run ends at the plant's
     # timeout with one line naming the controller, its topic, what came instead and what to check
     scn = load_scenario(SCENARIO).with_values("wheels", command_timing="sim_timer").with_values(
@@ -162,6 +162,9 @@ def test_a_timer_node_on_the_wrong_clock_is_named_at_the_stall():
     assert "\n" not in line
     assert "the controller sent no voltage_cmd or torque_cmd stamped 0.010000 s" in line, line
     assert "use_sim_time" in line and "--external-rate" in line, line
+    # and each refused stamp got the wheels' throttled line naming the tick expected
+    err = capfd.readouterr().err
+    assert "refused (not a tick of the controller's period 0.01 s); expected 0.010000 s" in err, err
 
 
 @pytest.mark.parametrize("args, words", [

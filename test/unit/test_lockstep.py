@@ -238,6 +238,7 @@ def test_sim_timer_refuses_stamps_off_its_ticks_or_ahead_of_the_clock():
     assert "not a tick" in hold.offer(1_795_746_522_912_842_032, np.ones((1, 3)), False, 15 * DT)  # a wall stamp
     assert "ahead of the clock" in hold.offer(20 * DT, np.ones((1, 3)), False, 15 * DT)
     assert hold.ticks == {}
+    assert [hold.next_tick(t * DT) for t in (0, 1, 10, 11, 20)] == [10 * DT, 10 * DT, 10 * DT, 20 * DT, 20 * DT]
 
 
 def test_wall_applies_the_newest_command_whatever_its_stamp():

@@ -333,6 +333,10 @@ class CommandHold:
         """``sim_timer``: the node's timer fires at sim time ``t_ns`` (ns)."""
         return self.timing == "sim_timer" and is_tick(t_ns, self.period_ns)
 
+    def next_tick(self, t_ns: int) -> int:
+        """The first tick at or after sim time ``t_ns`` (ns): the stamp a command is expected with."""
+        return max(-(-t_ns // self.period_ns), 1) * self.period_ns
+
     def waits_at(self, t_ns: int) -> bool:
         """The step at ``t_ns`` (ns) is a tick whose command has not come yet: the wheels wait for it."""
         return self.is_tick(t_ns) and t_ns not in self.ticks
