@@ -73,11 +73,12 @@ class WheelsNode(LockstepNode):
                                     throttle_duration_sec=1.0)
             return
         if self.hold is not None:
-            now = self.step_ns if self.step_ns is not None else self.seq.last_ns
-            why = self.hold.offer(t, v, torque_mode, now)
+            last = self.seq.last_ns  # the latest /clock taken: a tick's command may overtake the next one
+            latest = None if last is None else (last if self.step_ns is not None else last + self.dt_ns)
+            why = self.hold.offer(t, v, torque_mode, latest)
             if why:
                 self.get_logger().error(f"{TORQUE_CMD if torque_mode else VOLTAGE_CMD} stamped {t * 1e-9:.6f} s "
-                                        f"refused ({why}); expected {self.hold.next_tick(now or 0) * 1e-9:.6f} s",
+                                        f"refused ({why}); expected {self.hold.next_tick(last or 0) * 1e-9:.6f} s",
                                         throttle_duration_sec=1.0)
             self._step_held()
             return

@@ -238,6 +238,8 @@ def test_sim_timer_refuses_stamps_off_its_ticks_or_ahead_of_the_clock():
     assert "not a tick" in hold.offer(1_795_746_522_912_842_032, np.ones((1, 3)), False, 15 * DT)  # a wall stamp
     assert "ahead of the clock" in hold.offer(20 * DT, np.ones((1, 3)), False, 15 * DT)
     assert hold.ticks == {}
+    # the wheels took /clock of step 19: the tick of step 20 may overtake its /clock, nothing later
+    assert hold.offer(20 * DT, np.ones((1, 3)), False, 20 * DT) == "" and 20 * DT in hold.ticks
     assert [hold.next_tick(t * DT) for t in (0, 1, 10, 11, 20)] == [10 * DT, 10 * DT, 10 * DT, 20 * DT, 20 * DT]
 
 

@@ -341,15 +341,17 @@ class CommandHold:
         """The step at ``t_ns`` (ns) is a tick whose command has not come yet: the wheels wait for it."""
         return self.is_tick(t_ns) and t_ns not in self.ticks
 
-    def offer(self, t_ns: int, value: np.ndarray, torque_mode: bool, step_ns: int | None) -> str:
-        """A command stamped ``t_ns`` (ns) came, with ``step_ns`` the step in hand (None: none yet); returns
-        '' if taken, else why it is refused."""
+    def offer(self, t_ns: int, value: np.ndarray, torque_mode: bool, latest_ns: int | None) -> str:
+        """A command stamped ``t_ns`` (ns) came; ``latest_ns`` is the latest stamp one may carry (the step whose
+        ``/clock`` is out: a tick's command may overtake that ``/clock`` on its way to the wheels; None: no
+        episode yet). Returns '' if taken, else why it is refused (a later stamp: a stray of an earlier episode,
+        which must not take a tick's place)."""
         if self.timing == "wall":
             self.newest = (value, torque_mode)
             return ""
         if not self.is_tick(t_ns):
             return f"not a tick of the controller's period {self.period_ns * 1e-9:g} s"
-        if step_ns is not None and t_ns > step_ns:
+        if latest_ns is not None and t_ns > latest_ns:
             return "ahead of the clock"
         self.ticks.setdefault(t_ns, (value, torque_mode))  # a repeat of a tick answered changes nothing
         return ""
