@@ -28,7 +28,8 @@ setup(
     name=PACKAGE,
     version="0.1.0",
     packages=find_packages(exclude=["test", "bench"]),
-    package_data={PACKAGE: ["ros/fastdds_discovery.xml"]},  # the discovery profile (ros/environment.py)
+    # the Fast DDS profile (ros/environment.py) and the IGRF-14 coefficients (core/environment/geomagnetic.py)
+    package_data={PACKAGE: ["ros/fastdds_discovery.xml", "core/environment/data/igrf14.shc"]},
     data_files=[
         ("share/ament_index/resource_index/packages", [f"resource/{PACKAGE}"]),
         (f"share/{PACKAGE}", ["package.xml"]),
@@ -41,7 +42,8 @@ setup(
     # are installed by the Makefile; a ROS 2 install provides them instead.
     # a node-only install: pip install . ; everything (the attitude-sil command): pip install '.[tune]'
     install_requires=REQUIRES,
-    extras_require={"tune": TUNE, "test": [*TUNE, "pytest>=8.0", "pytest-xdist>=3.5", "ruff>=0.5", "rosbags>=0.10", "websockets>=12.0"],
+    extras_require={"tune": TUNE, "test": [*TUNE, "pytest>=8.0", "pytest-xdist>=3.5", "ruff>=0.5", "rosbags>=0.10", "websockets>=12.0",
+                                            "ppigrf>=2.1"],
                     "docs": ["mkdocs>=1.5"]},  # make docs: the site
     zip_safe=True,
     maintainer="attitude_sil developers",
