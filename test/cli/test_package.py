@@ -37,6 +37,7 @@ DEPENDENCIES = {
     "pymoo": (None, "pymoo"),
     "foxglove": (None, "foxglove-sdk"),
     "websockets": (None, "websockets"),
+    "ppigrf": (None, "ppigrf"),
     "dask": (None, "dask"),
     "distributed": (None, "distributed"),
     "pytest": ("python3-pytest", "pytest"),
