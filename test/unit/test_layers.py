@@ -33,7 +33,8 @@ CORE_ALLOWED = {
     "control": {"root", "plant", "control"},
     "analysis": {"root", "plant", "analysis"},
     "sensing": {"root", "plant", "sensing"},
-    "sim": {"root", "plant", "control", "analysis", "sensing", "sim"},
+    "environment": {"root", "plant", "environment"},
+    "sim": {"root", "plant", "control", "analysis", "sensing", "environment", "sim"},
 }
 ROS_PACKAGES = ("rclpy", "rcl_interfaces", "builtin_interfaces", "geometry_msgs", "sensor_msgs", "std_msgs",
                 "std_srvs", "rosgraph_msgs", "diagnostic_msgs", "rosidl_runtime_py")

@@ -5,6 +5,11 @@ Frames and constants:
 * positions and velocities are in the inertial frame N (m, m/s);
 * the Earth's gravity is the point mass plus its oblateness J2 (EGM96:
   mu = 3.986004418e14 m^3/s^2, J2 = 1.0826267e-3, R_e = 6378136.3 m);
+* the orbit frame LVLH (L) has x along the track, y the orbit normal
+  (r x v) and z the zenith (r): paper 001's frame. On a circular orbit it
+  turns about its y axis at the mean motion
+  (:func:`attitude_sil.core.plant.disturbance.lvlh_attitude`); on any
+  orbit :func:`lvlh_from_state` gives it from r and v;
 * elements are classical: semi-major axis a (m), eccentricity e, inclination
   i, right ascension of the ascending node Omega, argument of perigee omega
   and true anomaly nu (rad) (Vallado, *Fundamentals of Astrodynamics and
@@ -26,10 +31,11 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.integrate import solve_ivp
 
+from attitude_sil.core.plant.quaternion import quat_from_dcm
 from attitude_sil.errors import ScenarioError
 
 __all__ = ["MU_EARTH", "J2_EARTH", "R_EARTH", "Elements", "elements_to_state", "state_to_elements",
-           "gravity_acceleration", "OrbitPropagator", "nodal_regression_rate"]
+           "gravity_acceleration", "OrbitPropagator", "nodal_regression_rate", "lvlh_from_state"]
 
 #: Earth's gravitational parameter, m^3/s^2 (EGM96)
 MU_EARTH = 3.986004418e14
@@ -148,6 +154,14 @@ class OrbitPropagator:
         self.mu, self.j2, self.r_e = float(mu), float(j2), float(r_e)
         self.r0, self.v0 = elements_to_state(elements, mu)
 
+    @classmethod
+    def from_state(cls, r0: np.ndarray, v0: np.ndarray, mu: float = MU_EARTH, j2: float = J2_EARTH,
+                   r_e: float = R_EARTH) -> OrbitPropagator:
+        """The propagator from position ``r0`` (3,) m and velocity ``v0`` (3,) m/s in N at t = 0."""
+        prop = cls(state_to_elements(r0, v0, mu), mu, j2, r_e)
+        prop.r0, prop.v0 = np.array(r0, dtype=float), np.array(v0, dtype=float)  # the state itself, not re-made
+        return prop
+
     def _rhs(self, _t: float, y: np.ndarray) -> np.ndarray:
         return np.concatenate([y[3:], gravity_acceleration(y[:3], self.mu, self.j2, self.r_e)])
 
@@ -161,3 +175,20 @@ class OrbitPropagator:
         sol = solve_ivp(self._rhs, (0.0, float(t_s[-1])), np.concatenate([self.r0, self.v0]), method="DOP853",
                         t_eval=t_s, rtol=1e-12, atol=_ATOL)
         return sol.y[:3].T.copy(), sol.y[3:].T.copy()
+
+
+def lvlh_from_state(r: np.ndarray, v: np.ndarray, a: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The LVLH frame of position ``r``, velocity ``v`` and acceleration ``a`` (3,) in N: (q_LN (4,), omega_LN
+    in L (3,) rad/s).
+
+    omega_LN = (0, |h| / r^2, r a_h / |h|): the track's turn, and the orbit
+    plane's turn about the zenith under the acceleration's out-of-plane part
+    a_h (J2), as the frame of Hill turns (Schaub and Junkins, *Analytical
+    Mechanics of Space Systems*, section 14.3).
+    """
+    h = np.cross(r, v)
+    rn, hn = float(np.linalg.norm(r)), float(np.linalg.norm(h))
+    z, y = r / rn, h / hn
+    x = np.cross(y, z)
+    omega = np.array([0.0, hn / rn**2, rn * float(a @ y) / hn])
+    return quat_from_dcm(np.column_stack([x, y, z])), omega

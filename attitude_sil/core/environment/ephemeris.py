@@ -1,0 +1,122 @@
+"""The orbit of an episode, step by step, as the guidance, the disturbances and the plant read it.
+
+``orbit.model`` chooses it:
+
+* ``circular`` (the default, as before): radius ``orbit.radius``, mean motion
+  Omega_0 = sqrt(mu / r^3), LVLH at t = 0 from ``orbit.lvlh_initial_rpy_deg``
+  turning about its y axis
+  (:func:`~attitude_sil.core.plant.disturbance.lvlh_attitude`);
+* ``keplerian_j2``: the classical elements ``orbit.semi_major_axis`` ...
+  ``orbit.true_anomaly_deg`` at ``orbit.epoch``, propagated under two-body
+  gravity and J2 (``orbit.j2``) by :class:`~.orbit.OrbitPropagator` in blocks
+  of :data:`BLOCK_STEPS` steps, each from the end of the one before: every
+  reader of an episode (a node, the stepwise engine) gets the same numbers
+  whatever order it asks in. The LVLH frame and its rate come from r and v
+  (:func:`~.orbit.lvlh_from_state`), the gravity-gradient gain is 3 mu / r^3
+  and the speed |v|.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from attitude_sil.core.environment.earth_time import epoch_from_text
+from attitude_sil.core.environment.orbit import (
+    J2_EARTH,
+    R_EARTH,
+    Elements,
+    OrbitPropagator,
+    gravity_acceleration,
+    lvlh_from_state,
+)
+from attitude_sil.core.plant.disturbance import lvlh_attitude, orbit_rate
+from attitude_sil.core.plant.quaternion import quat_from_euler, quat_to_dcm
+
+__all__ = ["ORBIT_MODELS", "BLOCK_STEPS", "OrbitSample", "Ephemeris"]
+
+#: ``orbit.model`` values
+ORBIT_MODELS = ("circular", "keplerian_j2")
+#: steps propagated at once (keplerian_j2)
+BLOCK_STEPS = 1000
+
+
+@dataclass(frozen=True)
+class OrbitSample:
+    """The orbit at one step.
+
+    Attributes
+    ----------
+    q_LN : (4,) the LVLH frame (x y z w)
+    omega_LN_L : (3,) its rate in L, rad/s
+    gg_gain : float, 3 mu / r^3, 1/s^2
+    speed : float, |v|, m/s
+    r_N, v_N : (3,) position (m) and velocity (m/s) in N
+    """
+
+    q_LN: np.ndarray
+    omega_LN_L: np.ndarray
+    gg_gain: float
+    speed: float
+    r_N: np.ndarray
+    v_N: np.ndarray
+
+
+class Ephemeris:
+    """The orbit of ``values`` (a node's ``orbit.*`` parameters) at the steps of period ``dt`` s."""
+
+    def __init__(self, values: dict, dt: float) -> None:
+        self.model = values.get("orbit.model", "circular")
+        self.mu = float(values["orbit.mu"])
+        self.dt_ns = int(round(dt * 1e9))
+        self.epoch = epoch_from_text(values.get("orbit.epoch", "2026-01-01T00:00:00Z"), "orbit.epoch")
+        if self.model == "circular":
+            self.radius = float(values["orbit.radius"])
+            self.rate = orbit_rate(self.mu, self.radius)
+            self.q_LN0 = quat_from_euler(np.radians(values["orbit.lvlh_initial_rpy_deg"]))
+            self.propagator = None
+        else:
+            el = Elements(values["orbit.semi_major_axis"], values["orbit.eccentricity"],
+                          *(math.radians(values[f"orbit.{k}_deg"]) for k in ("inclination", "raan", "arg_perigee",
+                                                                             "true_anomaly")))
+            self.j2 = J2_EARTH if values["orbit.j2"] else 0.0
+            self.propagator = OrbitPropagator(el.check("orbit"), self.mu, self.j2)
+            self._starts = {0: (self.propagator.r0, self.propagator.v0)}  # block -> its first state
+            self._block = -1
+            self._states: tuple[np.ndarray, np.ndarray] = (np.zeros((0, 3)), np.zeros((0, 3)))
+
+    def at(self, t_ns: int) -> OrbitSample:
+        """The orbit at step time ``t_ns`` (ns, a whole number of steps)."""
+        t = t_ns * 1e-9
+        if self.propagator is None:
+            q = lvlh_attitude(t, self.q_LN0, self.rate)
+            r_L = np.array([0.0, 0.0, self.radius])
+            v_L = np.array([self.radius * self.rate, 0.0, 0.0])
+            r_nl = quat_to_dcm(q)
+            return OrbitSample(q, np.array([0.0, self.rate, 0.0]), 3.0 * self.rate**2,
+                               float(np.sqrt(self.mu / self.radius)), r_nl @ r_L, r_nl @ v_L)
+        r, v = self._state(t_ns // self.dt_ns)
+        a = gravity_acceleration(r, self.mu, self.j2, R_EARTH)
+        q, omega = lvlh_from_state(r, v, a)
+        rn = float(np.linalg.norm(r))
+        return OrbitSample(q, omega, 3.0 * self.mu / rn**3, float(np.linalg.norm(v)), r, v)
+
+    def _state(self, k: int) -> tuple[np.ndarray, np.ndarray]:
+        """Position and velocity at step ``k``, from its block (propagated from the block before's end)."""
+        block, i = divmod(k, BLOCK_STEPS)
+        if block != self._block:
+            for b in range(max(self._starts) + 1, block + 1):  # blocks not reached yet, in order
+                r, v = self._propagate(b - 1)
+                self._starts[b] = (r[-1], v[-1])
+            self._states = self._propagate(block)
+            self._block = block
+        return self._states[0][i], self._states[1][i]
+
+    def _propagate(self, block: int) -> tuple[np.ndarray, np.ndarray]:
+        """Block ``block``'s states at its BLOCK_STEPS + 1 steps, from its first state."""
+        r0, v0 = self._starts[block]
+        prop = OrbitPropagator.from_state(r0, v0, self.mu, self.j2)
+        return prop.states(np.arange(BLOCK_STEPS + 1) * (self.dt_ns * 1e-9))
+
