@@ -105,7 +105,11 @@ class ParamSpec:
                 raise ScenarioError(f"{where} must be true or false, got {value!r}")
             return value
         if self.kind == "string":
-            return self._check_string(value, where)
+            out = self._check_string(value, where)
+            broken = self.rule(out) if self.rule is not None else ""
+            if broken:
+                raise ScenarioError(f"{where} {broken}")
+            return out
         if self.kind in ("double", "integer"):
             return self._check_number(value, where)
         # arrays

@@ -26,9 +26,14 @@ delivers its mean over the step, so the impulse it gives the body is exact.
   centre of mass in B.
 
 The last two need the orbit frame (LVLH: x along the velocity, y the orbit
-normal, z zenith, paper 001). Orbits here are circular: LVLH turns about its
-y axis at ``Omega_0 = sqrt(mu / r^3)``, and ``q_LN(t) = q_LN(0) ⊗ R_y(Omega_0 t)``
-(:func:`lvlh_attitude`), the same frame the guidance node's ``lvlh`` mode tracks.
+normal, z zenith, paper 001). On the circular orbit (``orbit.model:
+circular``) LVLH turns about its y axis at ``Omega_0 = sqrt(mu / r^3)``, and
+``q_LN(t) = q_LN(0) ⊗ R_y(Omega_0 t)`` (:func:`lvlh_attitude`), the same frame
+the guidance node's ``lvlh`` mode tracks. On a propagated orbit
+(``keplerian_j2``, :mod:`attitude_sil.core.environment.ephemeris`) the frame,
+the gravity-gradient gain ``3 mu / r^3`` and the speed are that orbit's at
+each step; the velocity is taken along LVLH x (exact on a circular orbit, off
+by the flight-path angle, at most about e rad, on an eccentric one).
 """
 
 from __future__ import annotations
@@ -172,9 +177,13 @@ class DisturbanceModel:
         Body inertia for the gravity-gradient models, kg m^2.
     seeds : sequence of int, length P
         Noise seed of each episode.
+    orbit : optional
+        A propagated orbit (``core.environment.ephemeris.Ephemeris``): the
+        orbit models read its LVLH frame, 3 mu / r^3 and speed at each step;
+        None: the circular orbit of ``values``.
     """
 
-    def __init__(self, values: dict, inertia: np.ndarray, seeds) -> None:
+    def __init__(self, values: dict, inertia: np.ndarray, seeds, orbit=None) -> None:
         models = list(values["models"])
         unknown = [m for m in models if m not in DISTURBANCE_MODELS]
         if unknown:
@@ -199,6 +208,8 @@ class DisturbanceModel:
                              * self.speed**2), np.ascontiguousarray(values["aero.cp_offset"], dtype=float),
                        "gravity_gradient" in self.models, "aerodynamic" in self.models)
         self.q_LN0 = quat_from_euler(np.radians(values["orbit.lvlh_initial_rpy_deg"]))
+        self.orbit = orbit
+        self._aero_gain = 0.5 * values["aero.density"] * values["aero.drag_coefficient"] * values["aero.area"]
         ratio = self.dt / values["noise.sample_time"]
         self.samples_per_step = int(round(ratio))
         if "noise" in self.models and (self.samples_per_step < 1 or abs(ratio - self.samples_per_step) > 1e-9):
@@ -266,7 +277,12 @@ class DisturbanceModel:
         if "gravity_gradient_linear" in self.models:
             rpy = euler_from_quat(q_BN)
             tau[:, :2] += self.gg_gain * rpy[:, :2]
-        if "gravity_gradient" in self.models or "aerodynamic" in self.models:
+        if ("gravity_gradient" in self.models or "aerodynamic" in self.models) and self.orbit is not None:
+            now = self.orbit.at(t_ns)  # a propagated orbit: this step's frame, gravity-gradient gain and speed
+            inertia, _, _, cp, gg, aero = self._orbit
+            orbit_torques(np.ascontiguousarray(q_BN, dtype=float), now.q_LN, inertia, now.gg_gain,
+                          self._aero_gain * now.speed**2, cp, gg, aero, tau)
+        elif "gravity_gradient" in self.models or "aerodynamic" in self.models:
             q_LN = lvlh_attitude(t_ns * 1e-9, self.q_LN0, self.rate)
             orbit_torques(np.ascontiguousarray(q_BN, dtype=float), q_LN, *self._orbit, tau)
         return tau

@@ -18,6 +18,7 @@ import numpy as np
 from attitude_sil.core.analysis.metrics import flexible_split
 from attitude_sil.core.control import registry
 from attitude_sil.core.control.bank import ControllerBank
+from attitude_sil.core.environment.ephemeris import Ephemeris
 from attitude_sil.core.plant.actuators import RPM, SpeedLoopWheels, TorqueActuator
 from attitude_sil.core.plant.disturbance import DisturbanceModel, orbit_rate
 from attitude_sil.core.plant.linear import LinearizedPlant
@@ -214,7 +215,8 @@ def build_disturbance(scn: Scenario, n_episodes: int = 1, seeds=None, inertia=No
     m = inertia_matrix(d["inertia"] if inertia is None else inertia)
     if seeds is None:
         seeds = [d["noise.seed"] + p for p in range(n_episodes)]
-    return DisturbanceModel(d, np.broadcast_to(m, (n_episodes, 3, 3)), seeds)
+    orbit = Ephemeris(d, scn.dt) if d["orbit.model"] != "circular" else None
+    return DisturbanceModel(d, np.broadcast_to(m, (n_episodes, 3, 3)), seeds, orbit)
 
 
 def build_guidance(scn: Scenario, n_episodes: int = 1, setpoints_rpy_deg=None) -> Guidance:
@@ -223,7 +225,8 @@ def build_guidance(scn: Scenario, n_episodes: int = 1, setpoints_rpy_deg=None) -
     final = g["setpoint_rpy_deg"] if setpoints_rpy_deg is None else setpoints_rpy_deg
     return Guidance(g["initial_setpoint_rpy_deg"], final, g["step_time"], n_episodes,
                     mode=g["mode"], lvlh_rpy_deg=g["orbit.lvlh_initial_rpy_deg"],
-                    orbit_rate_rad_s=orbit_rate(g["orbit.mu"], g["orbit.radius"]))
+                    orbit_rate_rad_s=orbit_rate(g["orbit.mu"], g["orbit.radius"]),
+                    orbit=Ephemeris(g, scn.dt) if g["orbit.model"] != "circular" else None)
 
 
 def build_sensing(scn: Scenario, n_episodes: int = 1, seeds=None, gyro_bias_deg_h=None,

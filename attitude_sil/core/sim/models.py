@@ -138,12 +138,15 @@ class Guidance:
 
     * ``step``: ``initial`` attitude until ``step_time``, then ``final``; zero rate.
     * ``lvlh``: the orbit frame, ``q_RN(t) = q_LN(0) ⊗ R_y(Omega_0 t)`` with
-      ``omega_RN_R = [0, Omega_0, 0]`` (paper 001: the body tracks LVLH).
+      ``omega_RN_R = [0, Omega_0, 0]`` (paper 001: the body tracks LVLH); with
+      ``orbit`` (an :class:`~attitude_sil.core.environment.ephemeris.Ephemeris`
+      of a propagated orbit) that orbit's LVLH frame and rate.
     """
 
     def __init__(self, initial_rpy_deg, final_rpy_deg, step_time: float, n_episodes: int, mode: str = "step",
-                 lvlh_rpy_deg=(0.0, 0.0, 0.0), orbit_rate_rad_s: float = 0.0) -> None:
+                 lvlh_rpy_deg=(0.0, 0.0, 0.0), orbit_rate_rad_s: float = 0.0, orbit=None) -> None:
         self.mode = mode
+        self.orbit = orbit
         self.n = n_episodes
         self.q_initial = per_episode(quat_from_euler(np.radians(initial_rpy_deg)), n_episodes, 4)
         self.q_final = per_episode(quat_from_euler(np.radians(final_rpy_deg)), n_episodes, 4)
@@ -156,6 +159,9 @@ class Guidance:
 
     def setpoint(self, t: float) -> tuple[np.ndarray, np.ndarray]:
         """Reference (q_RN (P, 4), omega_RN_R (P, 3) rad/s) at sim time t."""
+        if self.mode == "lvlh" and self.orbit is not None:
+            now = self.orbit.at(int(round(t * 1e9)))
+            return per_episode(now.q_LN, self.n, 4), per_episode(now.omega_LN_L, self.n, 3)
         if self.mode == "lvlh":
             return per_episode(lvlh_attitude(t, self.q_LN0, self.rate), self.n, 4), self.omega
         # compare in integer-safe form: t is k*dt computed from integer ns

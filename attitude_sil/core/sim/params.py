@@ -16,6 +16,8 @@ from typing import Any
 
 from attitude_sil.core.control import registry
 from attitude_sil.core.control.shared import AERO, CONTROLLER_SHARED, ORBIT
+from attitude_sil.core.environment.earth_time import epoch_from_text
+from attitude_sil.core.environment.ephemeris import ORBIT_MODELS
 from attitude_sil.core.paramspec import ParamSpec
 from attitude_sil.core.paramspec import double as _d
 from attitude_sil.core.paramspec import double_array as _da
@@ -23,6 +25,7 @@ from attitude_sil.core.paramspec import inertia_rule as _inertia_rule
 from attitude_sil.core.paramspec import nonzero as _nonzero
 from attitude_sil.core.plant.wheels import HST_MOTOR
 from attitude_sil.core.sim.lockstep import COMMAND_TIMINGS
+from attitude_sil.errors import ScenarioError
 
 __all__ = ["ParamSpec", "NODE_PARAMS", "GLOBAL_NODE", "SCENARIO_NODE", "spec_for", "HST_MOTOR", "parameters_markdown"]
 
@@ -38,6 +41,33 @@ _COMMAND_TIMING = ParamSpec(
     "/clock once the step's setpoints are out; the wheels wait for each tick's command and apply it one period "
     "later); wall: a controller on the wall clock (the wheels apply the newest command, whatever its stamp)",
     choices=COMMAND_TIMINGS)
+def _epoch_rule(text: str) -> str:
+    """An ISO 8601 UTC time."""
+    try:
+        epoch_from_text(text)
+    except ScenarioError as exc:
+        return str(exc).partition(": ")[2]
+    return ""
+
+
+#: the orbit beyond the circular one: its model, epoch and elements (guidance, disturbance and the plant, which
+#: publishes it; core/environment/ephemeris.py)
+_ORBIT_MODEL = [
+    ParamSpec("orbit.model", "string", "circular",
+              "circular (orbit.radius; LVLH at t = 0 from orbit.lvlh_initial_rpy_deg) or keplerian_j2 (the "
+              "elements below at orbit.epoch, under two-body gravity and J2)", choices=ORBIT_MODELS),
+    ParamSpec("orbit.epoch", "string", "2026-01-01T00:00:00Z",
+              "UTC time of t = 0, ISO 8601: the Earth's rotation and the geomagnetic field's year", rule=_epoch_rule),
+    _d("orbit.semi_major_axis", 6.913e6, "keplerian_j2: semi-major axis, m (default: HST's, about 535 km)",
+       min=6.378e6),
+    _d("orbit.eccentricity", 0.0, "keplerian_j2: eccentricity", min=0.0, max=0.99),
+    _d("orbit.inclination_deg", 28.5, "keplerian_j2: inclination, deg (default: HST's)", min=0.0, max=180.0),
+    _d("orbit.raan_deg", 0.0, "keplerian_j2: right ascension of the ascending node, deg", min=-360.0, max=360.0),
+    _d("orbit.arg_perigee_deg", 0.0, "keplerian_j2: argument of perigee, deg", min=-360.0, max=360.0),
+    _d("orbit.true_anomaly_deg", 0.0, "keplerian_j2: true anomaly at the epoch, deg", min=-360.0, max=360.0),
+    ParamSpec("orbit.j2", "bool", True, "keplerian_j2: the Earth's oblateness J2 (false: the two-body orbit)"),
+]
+
 _COMMAND_RATE = _d("command_rate", 0.0, "sim_timer: the controller's timer rate, Hz (0: the control rate); its "
                    "period must be a whole number of control periods", min=0.0)
 
@@ -158,6 +188,7 @@ NODE_PARAMS: dict[str, list[ParamSpec]] = {
         _d("noise.sample_time", 0.001, "noise sample time T_s, s", min=0.0, min_exclusive=True),
         ParamSpec("noise.seed", "integer", 0, "noise seed (episode p of a batch uses seed + p)", min=0),
         *ORBIT,
+        *_ORBIT_MODEL,
         *AERO,
     ],
     "guidance": [
@@ -170,6 +201,7 @@ NODE_PARAMS: dict[str, list[ParamSpec]] = {
         ParamSpec("mode", "string", "step", "step (setpoints above) or lvlh (track the orbit frame, paper 001)",
                   choices=("step", "lvlh")),
         *ORBIT,
+        *_ORBIT_MODEL,
         _COMMAND_TIMING,
         _COMMAND_RATE,
     ],
