@@ -243,8 +243,9 @@ class GraphSession:
         try:
             kw = namespace_kwargs(self.namespace)
             outside = [t for t, producer in PRODUCERS.items() if producer in self.external]
-            self.recorder = Recorder(None, keep=KEPT_TOPICS,
-                                     topics=recorded_topics(self.scn.has_sensors, applied=self.timing != "stamped"),
+            field = self.scn.param("plant", "environment.magnetic_field.model") != "none"
+            topics = recorded_topics(self.scn.has_sensors, applied=self.timing != "stamped", field=field)
+            self.recorder = Recorder(None, keep=KEPT_TOPICS, topics=topics,
                                      live=self.live, context=self.context, volatile_topics=outside, **kw)
             self.recorder.latency = [] if "controller" in self.external and self.timing != "wall" else None
             self.recorder.latency_from = CLOCK if self.timing == "sim_timer" else ATTITUDE  # a tick: from /clock

@@ -23,6 +23,7 @@ from attitude_sil.ros.contract import (
     ESTIMATE_ATTITUDE_SIGMA,
     ESTIMATE_BODY_RATE,
     ESTIMATE_GYRO_BIAS,
+    MAGNETIC_FIELD,
     RATE_SETPOINT,
     STEP_TOPICS,
     WHEEL_MOMENTUM,
@@ -38,7 +39,7 @@ __all__ = ["KEPT_TOPICS", "StepAssembler", "command_topics", "trajectory_from_me
 #: the topics an episode keeps in memory to build its trajectory
 KEPT_TOPICS = (ATTITUDE, BODY_RATE, ATTITUDE_SETPOINT, RATE_SETPOINT, WHEEL_TORQUE, WHEEL_MOMENTUM,
                DISTURBANCE_TORQUE, WHEEL_STATE, *COMMAND_TOPIC.values(), *APPLIED_COMMAND_TOPIC.values(),
-               ESTIMATE_ATTITUDE, ESTIMATE_BODY_RATE, ESTIMATE_GYRO_BIAS, ESTIMATE_ATTITUDE_SIGMA)
+               ESTIMATE_ATTITUDE, ESTIMATE_BODY_RATE, ESTIMATE_GYRO_BIAS, ESTIMATE_ATTITUDE_SIGMA, MAGNETIC_FIELD)
 
 
 def command_topics(kept) -> dict[str, str]:
@@ -48,9 +49,10 @@ def command_topics(kept) -> dict[str, str]:
         return APPLIED_COMMAND_TOPIC
     return COMMAND_TOPIC
 
-#: Trajectory field <- topic of the sensing loop (absent without it)
-_ESTIMATE_FIELDS = {"q_BN_est": ESTIMATE_ATTITUDE, "omega_BN_B_est": ESTIMATE_BODY_RATE,
-                    "gyro_bias_est": ESTIMATE_GYRO_BIAS, "attitude_sigma": ESTIMATE_ATTITUDE_SIGMA}
+#: Trajectory field <- topic present only in some runs: the sensing loop's, the field at the spacecraft
+_OPTIONAL_FIELDS = {"q_BN_est": ESTIMATE_ATTITUDE, "omega_BN_B_est": ESTIMATE_BODY_RATE,
+                    "gyro_bias_est": ESTIMATE_GYRO_BIAS, "attitude_sigma": ESTIMATE_ATTITUDE_SIGMA,
+                    "magnetic_field_B": MAGNETIC_FIELD}
 
 #: Trajectory field <- topic
 _FIELDS = {"q_BN": ATTITUDE, "omega_BN_B": BODY_RATE, "q_RN": ATTITUDE_SETPOINT, "tau_c_B": WHEEL_TORQUE,
@@ -99,7 +101,7 @@ def trajectory_from_messages(kept: dict[str, list[tuple[int, bytes]]]) -> Trajec
         for t, v in zip(times, values, strict=True):
             commands.setdefault(int(t), (kind, v))
     wheel_t, (angle, speed, effort) = _wheel_states(kept.get(WHEEL_STATE, []))
-    estimates = {name: decode_step_messages(topic, kept[topic]) for name, topic in _ESTIMATE_FIELDS.items()
+    estimates = {name: decode_step_messages(topic, kept[topic]) for name, topic in _OPTIONAL_FIELDS.items()
                  if kept.get(topic)}
     n = min([len(t) for t, _ in (*arrays.values(), *estimates.values())] + [len(commands), len(wheel_t)])
     times = arrays["q_BN"][0][:n]

@@ -26,6 +26,11 @@ of the controller's timer (``command_rate``), once every reader has
 acknowledged the state: a timer fires when ``/clock`` reaches its tick, and
 so finds every input of the tick delivered.
 
+With each step's state it publishes the orbit on ``orbit`` (``nav_msgs/Odometry``,
+position and velocity in ``inertial``) and, where the scenario has a field
+model, the geomagnetic field at the spacecraft in B on ``magnetic_field``
+(:func:`attitude_sil.core.sim.build.build_environment`).
+
 The decisions (which input completes a step, hold, pacing, timeout,
 autostart) are :class:`attitude_sil.core.sim.lockstep.PlantLockstep`; this node
 carries them out with rclpy timers and publishers.
@@ -36,9 +41,11 @@ from __future__ import annotations
 import time
 
 import numpy as np
+from nav_msgs.msg import Odometry
+from sensor_msgs.msg import MagneticField
 from std_srvs.srv import Trigger
 
-from attitude_sil.core.sim.build import build_plant
+from attitude_sil.core.sim.build import build_environment, build_plant
 from attitude_sil.core.sim.lockstep import Action, PlantLockstep, command_period_ns, is_tick
 from attitude_sil.errors import AttitudeSilError
 from attitude_sil.ros.contract import (
@@ -47,10 +54,12 @@ from attitude_sil.ros.contract import (
     BODY_RATE,
     CLOCK,
     FLEXIBLE_MODE,
+    MAGNETIC_FIELD,
+    ORBIT_TOPIC,
     PLANT_INPUTS,
     RATE_SETPOINT,
 )
-from attitude_sil.ros.convert import message_to_array, stamp_to_ns
+from attitude_sil.ros.convert import message_to_array, ns_to_stamp, stamp_to_ns
 from attitude_sil.ros.node import SchemaNode, run_node, steady_clock
 from attitude_sil.storage.cdr import clock_cdr, stamped_vector_cdr
 
@@ -66,6 +75,9 @@ class PlantNode(SchemaNode):
         self.pub_attitude = self.step_publisher(ATTITUDE)
         self.pub_rate = self.step_publisher(BODY_RATE)
         self.pub_flex = self.step_publisher(FLEXIBLE_MODE) if self.param("model") == "flexible_axis" else None
+        self.pub_orbit = self.step_publisher(ORBIT_TOPIC)
+        self.pub_field = self.step_publisher(MAGNETIC_FIELD) \
+            if self.param("environment.magnetic_field.model") != "none" else None
         self.subs = [self.step_subscription(name, lambda m, n=name: self._on_input(n, m)) for name in PLANT_INPUTS]
         # a controller on a sim-time timer: /clock waits for the step's setpoints
         gate = (ATTITUDE_SETPOINT, RATE_SETPOINT) if self.param("command_timing") == "sim_timer" else ()
@@ -95,6 +107,7 @@ class PlantNode(SchemaNode):
         """Rebuild the body from the current parameters and publish step 0."""
         scn = self.scenario()
         self.core = build_plant(scn, 1)
+        self.orbit, self.field = build_environment(scn)
         self.tick_ns = command_period_ns(self.param("command_rate"), int(round(scn.dt * 1e9)))
         self._cancel_pacing()
         self._do(self.lockstep.start(scn.steps(), int(round(scn.dt * 1e9)), time.monotonic(),
@@ -149,6 +162,26 @@ class PlantNode(SchemaNode):
         self.pub_rate.publish(stamped_vector_cdr(s.omega_BN_B[0], t_ns, "body"))
         if self.pub_flex is not None and hasattr(self.core, "alpha"):
             self.pub_flex.publish(stamped_vector_cdr(self.core.alpha[0], t_ns, "body"))
+        self._publish_environment(t_ns, s.q_BN)
+
+    def _publish_environment(self, t_ns: int, q_BN: np.ndarray) -> None:
+        """The orbit at step ``t_ns`` and the field at the spacecraft, in B for the attitude ``q_BN`` (1, 4)."""
+        now = self.orbit.at(t_ns)
+        odom = Odometry()
+        odom.header.stamp = ns_to_stamp(t_ns)
+        odom.header.frame_id = odom.child_frame_id = "inertial"
+        p, v = odom.pose.pose.position, odom.twist.twist.linear
+        p.x, p.y, p.z = (float(x) for x in now.r_N)
+        v.x, v.y, v.z = (float(x) for x in now.v_N)
+        odom.pose.pose.orientation.w = 1.0
+        self.pub_orbit.publish(odom)
+        if self.pub_field is not None:
+            b = self.field.field_B(np.array([t_ns]), q_BN)[0]
+            field = MagneticField()
+            field.header.stamp = ns_to_stamp(t_ns)
+            field.header.frame_id = "body"
+            field.magnetic_field.x, field.magnetic_field.y, field.magnetic_field.z = (float(x) for x in b)
+            self.pub_field.publish(field)
 
     def _publish_clock(self) -> None:
         """The clock gate opened: ``/clock`` of step k; at a tick of the controller's timer, once every reader

@@ -23,7 +23,8 @@ __all__ = ["CLOCK", "ATTITUDE", "BODY_RATE", "ATTITUDE_SETPOINT", "RATE_SETPOINT
            "check_parameter_name", "ROLE_OUTPUTS", "OPTIONAL_TOPICS", "ROLE_INPUTS", "episode_topics", "EXTERNAL",
            "UNKNOWN_NODE", "IMU", "STAR_TRACKER", "WHEEL_SPEED", "ESTIMATE_ATTITUDE", "ESTIMATE_BODY_RATE",
            "ESTIMATE_GYRO_BIAS", "ESTIMATE_ATTITUDE_SIGMA", "SENSING_TOPICS", "SENSING_STEP_TOPICS", "FEEDBACK_REMAP",
-           "feedback_remap", "recorded_topics", "SENSING_ROLES", "TF", "BODY_MODEL", "VIEW_TOPICS"]
+           "feedback_remap", "recorded_topics", "SENSING_ROLES", "TF", "BODY_MODEL", "VIEW_TOPICS", "ORBIT_TOPIC",
+           "MAGNETIC_FIELD", "ENVIRONMENT_TOPICS"]
 
 # -- name rules (ROS 2: a token is a letter or _ then letters, digits, _) -----------------
 _TOKEN = re.compile(r"[A-Za-z_][A-Za-z0-9_]*")
@@ -82,6 +83,8 @@ ESTIMATE_ATTITUDE = "estimate/attitude"
 ESTIMATE_BODY_RATE = "estimate/body_rate"
 ESTIMATE_GYRO_BIAS = "estimate/gyro_bias"
 ESTIMATE_ATTITUDE_SIGMA = "estimate/attitude_sigma"
+ORBIT_TOPIC = "orbit"
+MAGNETIC_FIELD = "magnetic_field"
 
 #: topics of the lockstep (relative names, except /clock); one message per step each,
 #: except the command topics, of which exactly one carries each step
@@ -153,7 +156,7 @@ PRODUCERS = {
     WHEEL_STATE: "wheels", DISTURBANCE_TORQUE: "disturbance", ATTITUDE_ERROR: "controller",
     IMU: "sensors", STAR_TRACKER: "sensors", WHEEL_SPEED: "sensors", ESTIMATE_ATTITUDE: "estimator",
     ESTIMATE_BODY_RATE: "estimator", ESTIMATE_GYRO_BIAS: "estimator", ESTIMATE_ATTITUDE_SIGMA: "estimator",
-    **{t: "wheels" for t in APPLIED_TOPICS},
+    **{t: "wheels" for t in APPLIED_TOPICS}, ORBIT_TOPIC: "plant", MAGNETIC_FIELD: "plant",
 }
 
 #: the nodes that publish the sensing loop's topics (the sensors and the estimator)
@@ -214,6 +217,13 @@ def episode_topics(external=()) -> list[str]:
             and not (t in OPTIONAL_TOPICS and PRODUCERS[t] in external)]
 
 
+#: the plant's environment topics: the orbit (``nav_msgs/msg/Odometry``: the centre of mass in ``inertial``,
+#: position m and velocity m/s, frame and child frame ``inertial``, orientation the identity, covariances zero)
+#: and the true geomagnetic field at the spacecraft in B (``sensor_msgs/msg/MagneticField``, tesla, frame
+#: ``body``, covariance zero), the latter where ``environment.magnetic_field.model`` is not ``none``
+ENVIRONMENT_TOPICS: dict[str, str] = {ORBIT_TOPIC: "nav_msgs/msg/Odometry",
+                                      MAGNETIC_FIELD: "sensor_msgs/msg/MagneticField"}
+
 #: published only by some plant models (paper 002's flexible mode: x = alpha rad, y = d alpha/dt rad/s)
 MODEL_TOPICS: dict[str, str] = {FLEXIBLE_MODE: "geometry_msgs/msg/Vector3Stamped"}
 
@@ -228,15 +238,18 @@ VIEW_TOPICS: dict[str, str] = {TF: "tf2_msgs/msg/TFMessage", BODY_MODEL: "visual
 
 #: everything a run records
 RECORDED_TOPICS: dict[str, str] = {**STEP_TOPICS, **MODEL_TOPICS, **SENSING_TOPICS, **APPLIED_TOPICS,
+                                   **ENVIRONMENT_TOPICS,
                                    PARAMETER_EVENTS: "rcl_interfaces/msg/ParameterEvent"}
 
 
-def recorded_topics(sensing: bool, applied: bool = False) -> dict[str, str]:
+def recorded_topics(sensing: bool, applied: bool = False, field: bool = False) -> dict[str, str]:
     """What a run records: :data:`RECORDED_TOPICS`, the sensing loop's topics only where it runs (a run
-    without it has no empty ``imu``, ``estimate/*``, ... channels in its bag), and the wheels' applied
-    commands (:data:`APPLIED_TOPICS`) with ``applied`` (a controller on a timer of its own)."""
+    without it has no empty ``imu``, ``estimate/*``, ... channels in its bag), the wheels' applied
+    commands (:data:`APPLIED_TOPICS`) with ``applied`` (a controller on a timer of its own), and
+    ``magnetic_field`` with ``field`` (the scenario has a field model)."""
     return {k: v for k, v in RECORDED_TOPICS.items()
-            if (sensing or k not in SENSING_TOPICS) and (applied or k not in APPLIED_TOPICS)}
+            if (sensing or k not in SENSING_TOPICS) and (applied or k not in APPLIED_TOPICS)
+            and (field or k != MAGNETIC_FIELD)}
 
 
 def message_class(type_name: str):

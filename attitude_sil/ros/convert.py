@@ -69,7 +69,10 @@ def vector_to_array(msg) -> np.ndarray:
 
 
 def message_to_array(msg) -> np.ndarray:
-    """A stamped quaternion (4,) or vector (3,) message as an array."""
+    """A stamped quaternion (4,), vector (3,) or magnetic field (3,) message as an array."""
+    if hasattr(msg, "magnetic_field"):
+        b = msg.magnetic_field
+        return np.array([b.x, b.y, b.z], dtype=float)
     return quaternion_to_array(msg) if hasattr(msg, "quaternion") else vector_to_array(msg)
 
 

@@ -14,6 +14,10 @@
   whatever order it asks in. The LVLH frame and its rate come from r and v
   (:func:`~.orbit.lvlh_from_state`), the gravity-gradient gain is 3 mu / r^3
   and the speed |v|.
+
+:class:`FieldAlongOrbit` is the geomagnetic field where the spacecraft is
+(``environment.magnetic_field.model``): at the orbit's position, the Earth
+turned by the sidereal angle of the epoch plus t, at the epoch's year.
 """
 
 from __future__ import annotations
@@ -23,7 +27,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from attitude_sil.core.environment.earth_time import epoch_from_text
+from attitude_sil.core.environment.earth_time import decimal_year, epoch_from_text, gmst_rad, julian_date
+from attitude_sil.core.environment.geomagnetic import FIELD_MODELS, field_eci, igrf_coefficients
 from attitude_sil.core.environment.orbit import (
     J2_EARTH,
     R_EARTH,
@@ -35,7 +40,7 @@ from attitude_sil.core.environment.orbit import (
 from attitude_sil.core.plant.disturbance import lvlh_attitude, orbit_rate
 from attitude_sil.core.plant.quaternion import quat_from_euler, quat_to_dcm
 
-__all__ = ["ORBIT_MODELS", "BLOCK_STEPS", "OrbitSample", "Ephemeris"]
+__all__ = ["ORBIT_MODELS", "BLOCK_STEPS", "OrbitSample", "Ephemeris", "FieldAlongOrbit"]
 
 #: ``orbit.model`` values
 ORBIT_MODELS = ("circular", "keplerian_j2")
@@ -120,3 +125,34 @@ class Ephemeris:
         prop = OrbitPropagator.from_state(r0, v0, self.mu, self.j2)
         return prop.states(np.arange(BLOCK_STEPS + 1) * (self.dt_ns * 1e-9))
 
+
+
+class FieldAlongOrbit:
+    """The main geomagnetic field at the spacecraft of ``orbit``, by ``model`` (``none``, ``dipole``, ``igrf``).
+
+    Raises
+    ------
+    ScenarioError
+        ``igrf`` with an epoch outside the coefficients' years (one line).
+    """
+
+    def __init__(self, orbit: Ephemeris, model: str) -> None:
+        if model not in FIELD_MODELS:
+            raise ValueError(f"unknown field model {model!r}")  # the schema's choices refuse it first
+        self.orbit, self.model = orbit, model
+        self.year = decimal_year(orbit.epoch)
+        if model != "none":
+            igrf_coefficients(self.year)  # an epoch outside IGRF-14: one line now, not at the first step
+
+    def field_N(self, t_ns) -> np.ndarray:
+        """The field (n, 3) tesla in N at step times ``t_ns`` (n,) ns."""
+        t_ns = np.atleast_1d(np.asarray(t_ns, dtype=np.int64))
+        r_N = np.array([self.orbit.at(int(t)).r_N for t in t_ns])
+        theta = gmst_rad(julian_date(self.orbit.epoch, t_ns * 1e-9))
+        return field_eci(r_N, theta, self.year, self.model)
+
+    def field_B(self, t_ns, q_BN: np.ndarray) -> np.ndarray:
+        """The field in B (..., n, 3) tesla for attitudes ``q_BN`` (..., n, 4) at step times ``t_ns`` (n,) ns:
+        R_NB^T b_N, R_NB the rotation matrix of q_BN (``quaternion.quat_to_dcm``)."""
+        b_N = self.field_N(t_ns)
+        return np.einsum("...nji,nj->...ni", quat_to_dcm(np.asarray(q_BN, dtype=float)), b_N)

@@ -18,7 +18,7 @@ import numpy as np
 from attitude_sil.core.analysis.metrics import flexible_split
 from attitude_sil.core.control import registry
 from attitude_sil.core.control.bank import ControllerBank
-from attitude_sil.core.environment.ephemeris import Ephemeris
+from attitude_sil.core.environment.ephemeris import Ephemeris, FieldAlongOrbit
 from attitude_sil.core.plant.actuators import RPM, SpeedLoopWheels, TorqueActuator
 from attitude_sil.core.plant.disturbance import DisturbanceModel, orbit_rate
 from attitude_sil.core.plant.linear import LinearizedPlant
@@ -34,6 +34,7 @@ from attitude_sil.core.sim.scenario import Scenario, effective_values
 from attitude_sil.errors import ScenarioError
 
 __all__ = ["build_plant", "build_wheels", "build_disturbance", "build_guidance", "build_controller", "build_sensing",
+           "build_environment",
            "law_bank", "check_episode", "schedule_from_scenario", "flexible_states", "flexible_settling",
            "initial_attitude", "motor_params", "EPISODE_VALUES", "EPISODE_MOTOR", "EPISODE_FAILURE",
            "split_episode_values", "episode_laws", "check_episode_parameters",
@@ -219,6 +220,13 @@ def build_disturbance(scn: Scenario, n_episodes: int = 1, seeds=None, inertia=No
     return DisturbanceModel(d, np.broadcast_to(m, (n_episodes, 3, 3)), seeds, orbit)
 
 
+def build_environment(scn: Scenario) -> tuple[Ephemeris, FieldAlongOrbit]:
+    """The plant's orbit (what it publishes on ``orbit``) and the geomagnetic field along it."""
+    p = scn.values["plant"]
+    orbit = Ephemeris(p, scn.dt)
+    return orbit, FieldAlongOrbit(orbit, p["environment.magnetic_field.model"])
+
+
 def build_guidance(scn: Scenario, n_episodes: int = 1, setpoints_rpy_deg=None) -> Guidance:
     """Guidance of the scenario; ``setpoints_rpy_deg`` (P, 3) overrides the step target per episode."""
     g = scn.values["guidance"]
@@ -370,6 +378,7 @@ def check_episode(scn: Scenario, controller: str | None = None) -> None:
         actuator = build_wheels(scn)
         build_disturbance(scn)
         build_guidance(scn)
+        build_environment(scn)
         build_controller(scn)
     except ScenarioError as exc:
         raise ScenarioError(f"{scn.source}: {exc}") from None

@@ -28,6 +28,7 @@ from attitude_sil.core.sim.batch import COMPILED_DISTURBANCES, TRAJECTORY_FIELDS
 from attitude_sil.core.sim.build import (
     build_controller,
     build_disturbance,
+    build_environment,
     build_guidance,
     build_plant,
     build_sensing,
@@ -234,6 +235,8 @@ class _Run:
         if controller is not None:
             ctrl.active = controller
         self.models = (plant, wheels, dist, guide, ctrl)
+        field = build_environment(scn)[1]
+        self.field = field if field.model != "none" else None  # the field at the spacecraft, for the record
         self.sensing = build_sensing(scn, P, ev["sensors"].get("seed"), ev["sensors"].get("gyro.bias_deg_h"),
                                      ev["estimator"].get("initial_attitude_rpy_deg"))
         self.swaps = dict(schedule_from_scenario(scn) if opts.schedule is None else opts.schedule)
@@ -273,11 +276,13 @@ class _Run:
         if self.compiled:
             tr, _ = run_compiled(self.models, self.K, self.dt, stride=stride, threads=threads, keep=keep,
                                  swaps=self.swaps, laws=self.laws)
-            return tr
-        tr = _simulate_stepwise(*self.models, self.swaps, self.K, self.dt, self.sensing)
-        tr = tr if stride == 1 else tr.every(stride)
-        for name in set(KEEPABLE) - set(keep):
-            setattr(tr, name, None)
+        else:
+            tr = _simulate_stepwise(*self.models, self.swaps, self.K, self.dt, self.sensing)
+            tr = tr if stride == 1 else tr.every(stride)
+            for name in set(KEEPABLE) - set(keep):
+                setattr(tr, name, None)
+        if self.field is not None and tr.q_BN is not None:  # nothing acts on it yet: the record's, afterwards
+            tr.magnetic_field_B = self.field.field_B(np.rint(tr.t * 1e9).astype(np.int64), tr.q_BN)
         return tr
 
 

@@ -18,6 +18,7 @@ from attitude_sil.core.control import registry
 from attitude_sil.core.control.shared import AERO, CONTROLLER_SHARED, ORBIT
 from attitude_sil.core.environment.earth_time import epoch_from_text
 from attitude_sil.core.environment.ephemeris import ORBIT_MODELS
+from attitude_sil.core.environment.geomagnetic import FIELD_MODELS
 from attitude_sil.core.paramspec import ParamSpec
 from attitude_sil.core.paramspec import double as _d
 from attitude_sil.core.paramspec import double_array as _da
@@ -117,6 +118,11 @@ NODE_PARAMS: dict[str, list[ParamSpec]] = {
            "(negative: never); setting it past the current time releases the hold", runtime=True),
         _COMMAND_TIMING,
         _COMMAND_RATE,
+        *ORBIT,
+        *_ORBIT_MODEL,
+        ParamSpec("environment.magnetic_field.model", "string", "none",
+                  "the geomagnetic field at the spacecraft, published on magnetic_field: none, dipole (IGRF-14's "
+                  "degree 1 of the epoch) or igrf (IGRF-14 to degree 13)", choices=tuple(FIELD_MODELS)),
     ],
     "wheels": [
         _d("control_period", 0.01, "control step dt, s (shared by every node)", min=0.0, min_exclusive=True, max=1.0),

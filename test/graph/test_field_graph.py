@@ -1,0 +1,45 @@
+"""The geomagnetic field at the spacecraft on ``magnetic_field``, and the orbit on ``orbit``, in the graph.
+
+The plant publishes both with each step's state. With an IGRF field on a
+propagated orbit, the graph's field in B equals the engine's to 1e-9
+relative; the orbit topic carries the propagator's position and velocity.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from attitude_sil.core.sim.build import build_environment
+from attitude_sil.core.sim.engine import simulate
+from attitude_sil.core.sim.scenario import load_scenario
+from attitude_sil.graph.session import run_graph
+from attitude_sil.storage.reader import open_bag
+from conftest import CONFIG
+
+ORBIT = {"orbit.model": "keplerian_j2", "orbit.semi_major_axis": 6.91e6, "orbit.eccentricity": 0.001,
+         "orbit.inclination_deg": 51.6, "orbit.raan_deg": 120.0, "orbit.arg_perigee_deg": 0.0,
+         "orbit.true_anomaly_deg": 0.0, "orbit.epoch": "2026-03-20T12:00:00Z"}
+
+
+def test_the_graph_publishes_the_field_and_the_orbit_as_the_engine_computes_them(tmp_path):
+    scn = load_scenario(CONFIG / "hst_roll_step.yaml")
+    for node in ("plant", "disturbance", "guidance"):
+        scn = scn.with_values(node, **ORBIT)
+    scn = scn.with_values("plant", **{"environment.magnetic_field.model": "igrf"})
+    graph = run_graph(scn, duration=1.0, keep_trajectory=True, record_dir=tmp_path / "bag", progress=False)
+    engine = simulate(scn, 1, duration=1.0)
+    b_graph, b_engine = graph.trajectory.magnetic_field_B[0], engine.magnetic_field_B[0]
+    assert b_graph.shape == b_engine.shape == (101, 3)
+    assert np.max(np.linalg.norm(b_graph - b_engine, axis=1) / np.linalg.norm(b_engine, axis=1)) < 1e-9
+    assert 1e-5 < np.linalg.norm(b_engine[0]) < 7e-5  # tesla: tens of microtesla in low Earth orbit
+    # the orbit topic: the propagator's state, in the inertial frame
+    orbit = build_environment(scn)[0]
+    bag = open_bag(tmp_path / "bag")
+    msgs = [m for _, m in bag.iter_decoded("/orbit")]
+    assert len(msgs) == 101 and msgs[0].header.frame_id == "inertial"
+    last = msgs[-1]
+    r = np.array([last.pose.pose.position.x, last.pose.pose.position.y, last.pose.pose.position.z])
+    v = np.array([last.twist.twist.linear.x, last.twist.twist.linear.y, last.twist.twist.linear.z])
+    assert np.allclose(r, orbit.at(1_000_000_000).r_N, rtol=0, atol=1e-6)
+    assert np.allclose(v, orbit.at(1_000_000_000).v_N, rtol=0, atol=1e-9)
+    assert bag.topics["/magnetic_field"].count == 101
