@@ -44,7 +44,8 @@ DEPENDENCIES = {
     "rosbags": ("python3-rosbags-pip", "rosbags"),
     "setuptools": ("python3-setuptools", None),  # builds the package (test_package.py runs setup.py)
     **{name: (name, None) for name in (
-        "rclpy", "rcl_interfaces", "builtin_interfaces", "std_msgs", "geometry_msgs", "sensor_msgs", "nav_msgs", "std_srvs",
+        "rclpy", "rcl_interfaces", "builtin_interfaces", "std_msgs", "geometry_msgs", "sensor_msgs", "nav_msgs",
+        "std_srvs",
         "rosgraph_msgs", "diagnostic_msgs", "visualization_msgs", "ament_index_python", "launch", "launch_ros")},
 }
 TUNER_ONLY = ("pymoo", "control", "matplotlib")

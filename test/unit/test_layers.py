@@ -37,7 +37,7 @@ CORE_ALLOWED = {
     "sim": {"root", "plant", "control", "analysis", "sensing", "environment", "sim"},
 }
 ROS_PACKAGES = ("rclpy", "rcl_interfaces", "builtin_interfaces", "geometry_msgs", "sensor_msgs", "std_msgs",
-                "std_srvs", "rosgraph_msgs", "diagnostic_msgs", "rosidl_runtime_py")
+                "std_srvs", "rosgraph_msgs", "diagnostic_msgs", "rosidl_runtime_py", "nav_msgs")
 
 
 def _modules() -> dict[str, Path]:
