@@ -92,3 +92,13 @@ def test_an_orbit_inside_the_earth_is_one_line(tmp_path, capfd):
     assert main(["run", str(path), "--no-record", "--quiet"]) == 2
     err = capfd.readouterr().err
     assert err.count("\n") == 1 and "inside the Earth" in err, err
+
+
+def test_a_field_epoch_outside_igrf_is_one_line(tmp_path, capfd):
+    path = tmp_path / "s.yaml"
+    path.write_text((CONFIG / "hst_roll_step.yaml").read_text() + "/**:\n  ros__parameters:\n"
+                    "    orbit.epoch: '2031-06-01T00:00:00Z'\n/**/plant:\n  ros__parameters:\n"
+                    "    environment.magnetic_field.model: igrf\n")
+    assert main(["run", str(path), "--no-record", "--quiet"]) == 2
+    err = capfd.readouterr().err
+    assert err.count("\n") == 1 and "IGRF-14 covers 1900 to 2030; the epoch's year 2031.414 is outside it" in err, err

@@ -79,7 +79,7 @@ def igrf_coefficients(year: float) -> tuple[np.ndarray, np.ndarray]:
     epochs, g, h = _table()
     if not epochs[0] <= year <= epochs[-1]:
         raise ScenarioError(f"IGRF-14 covers {epochs[0]:.0f} to {epochs[-1]:.0f}; the epoch's year {year:.3f} is "
-                            "outside it (environment.magnetic_field.model: dipole or none fly any epoch)")
+                            "outside it (environment.magnetic_field.model none flies any epoch)")
     k = min(int(np.searchsorted(epochs, year, side="right")) - 1, epochs.size - 2)
     w = (year - epochs[k]) / (epochs[k + 1] - epochs[k])
     return ((1.0 - w) * g[k] + w * g[k + 1]) * 1e-9, ((1.0 - w) * h[k] + w * h[k + 1]) * 1e-9
