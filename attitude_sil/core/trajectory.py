@@ -87,6 +87,8 @@ class Trajectory:
     #: the geomagnetic field at the spacecraft in B (P, K+1, 3) tesla, where the scenario has one
     #: (``environment.magnetic_field.model``), else None
     magnetic_field_B: np.ndarray | None = None
+    #: the magnetometer's reading of it (P, K+1, 3) tesla, where the sensing loop runs too
+    magnetometer_B: np.ndarray | None = None
 
     def every(self, stride: int) -> Trajectory:
         """Every ``stride``-th step (k = 0, stride, 2 stride, ...), as views."""
@@ -102,7 +104,8 @@ class Trajectory:
                           omega_RN_R=cut(self.omega_RN_R), q_BN_est=cut(self.q_BN_est),
                           omega_BN_B_est=cut(self.omega_BN_B_est), gyro_bias_est=cut(self.gyro_bias_est),
                           attitude_sigma=cut(self.attitude_sigma), omega_BN_B_meas=cut(self.omega_BN_B_meas),
-                          gyro_bias_true=cut(self.gyro_bias_true), magnetic_field_B=cut(self.magnetic_field_B))
+                          gyro_bias_true=cut(self.gyro_bias_true), magnetic_field_B=cut(self.magnetic_field_B),
+                          magnetometer_B=cut(self.magnetometer_B))
 
 
 @dataclass

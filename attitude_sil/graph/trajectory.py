@@ -24,6 +24,7 @@ from attitude_sil.ros.contract import (
     ESTIMATE_BODY_RATE,
     ESTIMATE_GYRO_BIAS,
     MAGNETIC_FIELD,
+    MAGNETOMETER,
     RATE_SETPOINT,
     STEP_TOPICS,
     WHEEL_MOMENTUM,
@@ -39,7 +40,8 @@ __all__ = ["KEPT_TOPICS", "StepAssembler", "command_topics", "trajectory_from_me
 #: the topics an episode keeps in memory to build its trajectory
 KEPT_TOPICS = (ATTITUDE, BODY_RATE, ATTITUDE_SETPOINT, RATE_SETPOINT, WHEEL_TORQUE, WHEEL_MOMENTUM,
                DISTURBANCE_TORQUE, WHEEL_STATE, *COMMAND_TOPIC.values(), *APPLIED_COMMAND_TOPIC.values(),
-               ESTIMATE_ATTITUDE, ESTIMATE_BODY_RATE, ESTIMATE_GYRO_BIAS, ESTIMATE_ATTITUDE_SIGMA, MAGNETIC_FIELD)
+               ESTIMATE_ATTITUDE, ESTIMATE_BODY_RATE, ESTIMATE_GYRO_BIAS, ESTIMATE_ATTITUDE_SIGMA, MAGNETIC_FIELD,
+               MAGNETOMETER)
 
 
 def command_topics(kept) -> dict[str, str]:
@@ -52,7 +54,7 @@ def command_topics(kept) -> dict[str, str]:
 #: Trajectory field <- topic present only in some runs: the sensing loop's, the field at the spacecraft
 _OPTIONAL_FIELDS = {"q_BN_est": ESTIMATE_ATTITUDE, "omega_BN_B_est": ESTIMATE_BODY_RATE,
                     "gyro_bias_est": ESTIMATE_GYRO_BIAS, "attitude_sigma": ESTIMATE_ATTITUDE_SIGMA,
-                    "magnetic_field_B": MAGNETIC_FIELD}
+                    "magnetic_field_B": MAGNETIC_FIELD, "magnetometer_B": MAGNETOMETER}
 
 #: Trajectory field <- topic
 _FIELDS = {"q_BN": ATTITUDE, "omega_BN_B": BODY_RATE, "q_RN": ATTITUDE_SETPOINT, "tau_c_B": WHEEL_TORQUE,

@@ -42,7 +42,6 @@ import time
 
 import numpy as np
 from nav_msgs.msg import Odometry
-from sensor_msgs.msg import MagneticField
 from std_srvs.srv import Trigger
 
 from attitude_sil.core.sim.build import build_environment, build_plant
@@ -59,7 +58,7 @@ from attitude_sil.ros.contract import (
     PLANT_INPUTS,
     RATE_SETPOINT,
 )
-from attitude_sil.ros.convert import message_to_array, ns_to_stamp, stamp_to_ns
+from attitude_sil.ros.convert import magnetic_field_msg, message_to_array, ns_to_stamp, stamp_to_ns
 from attitude_sil.ros.node import SchemaNode, run_node, steady_clock
 from attitude_sil.storage.cdr import clock_cdr, stamped_vector_cdr
 
@@ -176,12 +175,8 @@ class PlantNode(SchemaNode):
         odom.pose.pose.orientation.w = 1.0
         self.pub_orbit.publish(odom)
         if self.pub_field is not None:
-            b = self.field.field_B(np.array([t_ns]), q_BN)[0]
-            field = MagneticField()
-            field.header.stamp = ns_to_stamp(t_ns)
-            field.header.frame_id = "body"
-            field.magnetic_field.x, field.magnetic_field.y, field.magnetic_field.z = (float(x) for x in b)
-            self.pub_field.publish(field)
+            self.pub_field.publish(magnetic_field_msg(self.field.field_B(np.array([t_ns]), q_BN)[0], np.zeros(3),
+                                                      t_ns))
 
     def _publish_clock(self) -> None:
         """The clock gate opened: ``/clock`` of step k; at a tick of the controller's timer, once every reader

@@ -8,7 +8,9 @@ acceleration absent, REP 145) and, on the star tracker's schedule,
 ``star_tracker`` (``sensor_msgs/Imu``: q_BN with its noise covariance, stamped
 with the exposure time; during an outage the orientation is absent). On
 ``wheel_state`` stamped t_k it publishes ``wheel_speed`` (``JointState``: the
-Hall-sensor tachometer readings). Every noise parameter is a ROS parameter
+Hall-sensor tachometer readings), and on ``magnetic_field`` (the plant's,
+where the scenario has a field) ``magnetometer`` (``sensor_msgs/MagneticField``,
+the reading in B with its noise variance). Every noise parameter is a ROS parameter
 (docs/parameters.md); a draw depends only on (``seed``, source, step, axis),
 so a run is repeatable and equals the batch engine's (docs/sensors.md).
 """
@@ -19,8 +21,24 @@ import numpy as np
 
 from attitude_sil.core.sensing.models import SensorSuite
 from attitude_sil.core.sim.lockstep import StepSequencer
-from attitude_sil.ros.contract import ATTITUDE, BODY_RATE, IMU, STAR_TRACKER, WHEEL_SPEED, WHEEL_STATE
-from attitude_sil.ros.convert import imu_msg, joint_state_msg, message_to_array, stamp_to_ns, star_tracker_msg
+from attitude_sil.ros.contract import (
+    ATTITUDE,
+    BODY_RATE,
+    IMU,
+    MAGNETIC_FIELD,
+    MAGNETOMETER,
+    STAR_TRACKER,
+    WHEEL_SPEED,
+    WHEEL_STATE,
+)
+from attitude_sil.ros.convert import (
+    imu_msg,
+    joint_state_msg,
+    magnetic_field_msg,
+    message_to_array,
+    stamp_to_ns,
+    star_tracker_msg,
+)
 from attitude_sil.ros.node import LockstepNode, run_node
 
 INPUTS = (ATTITUDE, BODY_RATE)
@@ -41,6 +59,9 @@ class SensorsNode(LockstepNode):
             self.step_subscription(name, lambda m, n=name: self._on_input(n, m))
         self.step_subscription(WHEEL_STATE, self._on_wheel_state)
         self.wheel_seq = StepSequencer()
+        self.pub_magnetometer = self.step_publisher(MAGNETOMETER)
+        self.step_subscription(MAGNETIC_FIELD, self._on_field)
+        self.field_seq = StepSequencer()
         self.new_episode()
 
     def rebuild(self) -> None:
@@ -83,6 +104,20 @@ class SensorsNode(LockstepNode):
             return
         reading = self.core.tachometer.sample(angle, speed)
         self.pub_speed.publish(joint_state_msg(list(msg.name), np.zeros(0), reading, np.zeros(0), t))
+
+
+    def _on_field(self, msg) -> None:
+        """The plant's field at t_k: the magnetometer's reading of it, stamped t_k."""
+        t = stamp_to_ns(msg.header.stamp)
+        b = message_to_array(msg)[None]
+        if not self.finite(b):
+            self.get_logger().error(f"magnetic_field at t={t * 1e-9:.6f} s is not finite; ignored",
+                                    throttle_duration_sec=1.0)
+            return
+        if self.field_seq.classify(t, self.dt_ns) not in (StepSequencer.NEW, StepSequencer.NEXT):
+            return
+        reading = self.core.magnetometer.sample(b, t // self.dt_ns)
+        self.pub_magnetometer.publish(magnetic_field_msg(reading[0], self.core.magnetometer.variance, t))
 
 
 def main(args: list[str] | None = None) -> int:

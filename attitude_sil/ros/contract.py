@@ -24,7 +24,7 @@ __all__ = ["CLOCK", "ATTITUDE", "BODY_RATE", "ATTITUDE_SETPOINT", "RATE_SETPOINT
            "UNKNOWN_NODE", "IMU", "STAR_TRACKER", "WHEEL_SPEED", "ESTIMATE_ATTITUDE", "ESTIMATE_BODY_RATE",
            "ESTIMATE_GYRO_BIAS", "ESTIMATE_ATTITUDE_SIGMA", "SENSING_TOPICS", "SENSING_STEP_TOPICS", "FEEDBACK_REMAP",
            "feedback_remap", "recorded_topics", "SENSING_ROLES", "TF", "BODY_MODEL", "VIEW_TOPICS", "ORBIT_TOPIC",
-           "MAGNETIC_FIELD", "ENVIRONMENT_TOPICS"]
+           "MAGNETIC_FIELD", "MAGNETOMETER", "ENVIRONMENT_TOPICS"]
 
 # -- name rules (ROS 2: a token is a letter or _ then letters, digits, _) -----------------
 _TOKEN = re.compile(r"[A-Za-z_][A-Za-z0-9_]*")
@@ -85,6 +85,7 @@ ESTIMATE_GYRO_BIAS = "estimate/gyro_bias"
 ESTIMATE_ATTITUDE_SIGMA = "estimate/attitude_sigma"
 ORBIT_TOPIC = "orbit"
 MAGNETIC_FIELD = "magnetic_field"
+MAGNETOMETER = "magnetometer"
 
 #: topics of the lockstep (relative names, except /clock); one message per step each,
 #: except the command topics, of which exactly one carries each step
@@ -123,7 +124,8 @@ CONTROLLER_INPUTS = (ATTITUDE, BODY_RATE, ATTITUDE_SETPOINT, RATE_SETPOINT)
 
 #: the sensing loop's topics, published when a scenario runs the sensors and the estimator: the gyro (every
 #: step, orientation absent), the star tracker (at its rate, stamped with its exposure, angular velocity absent;
-#: REP 145: an absent field has element 0 of its covariance -1), the wheel tachometers, and the estimate
+#: REP 145: an absent field has element 0 of its covariance -1), the wheel tachometers, the estimate, and the
+#: magnetometer (where the plant publishes a field: the field in B with its noise variance on the diagonal)
 SENSING_TOPICS: dict[str, str] = {
     IMU: "sensor_msgs/msg/Imu",
     STAR_TRACKER: "sensor_msgs/msg/Imu",
@@ -132,6 +134,7 @@ SENSING_TOPICS: dict[str, str] = {
     ESTIMATE_BODY_RATE: "geometry_msgs/msg/Vector3Stamped",
     ESTIMATE_GYRO_BIAS: "geometry_msgs/msg/Vector3Stamped",
     ESTIMATE_ATTITUDE_SIGMA: "geometry_msgs/msg/Vector3Stamped",
+    MAGNETOMETER: "sensor_msgs/msg/MagneticField",
 }
 
 #: the sensing topics with one message per step (the star tracker has its own rate)
@@ -156,6 +159,7 @@ PRODUCERS = {
     WHEEL_STATE: "wheels", DISTURBANCE_TORQUE: "disturbance", ATTITUDE_ERROR: "controller",
     IMU: "sensors", STAR_TRACKER: "sensors", WHEEL_SPEED: "sensors", ESTIMATE_ATTITUDE: "estimator",
     ESTIMATE_BODY_RATE: "estimator", ESTIMATE_GYRO_BIAS: "estimator", ESTIMATE_ATTITUDE_SIGMA: "estimator",
+    MAGNETOMETER: "sensors",
     **{t: "wheels" for t in APPLIED_TOPICS}, ORBIT_TOPIC: "plant", MAGNETIC_FIELD: "plant",
 }
 
@@ -246,10 +250,11 @@ def recorded_topics(sensing: bool, applied: bool = False, field: bool = False) -
     """What a run records: :data:`RECORDED_TOPICS`, the sensing loop's topics only where it runs (a run
     without it has no empty ``imu``, ``estimate/*``, ... channels in its bag), the wheels' applied
     commands (:data:`APPLIED_TOPICS`) with ``applied`` (a controller on a timer of its own), and
-    ``magnetic_field`` with ``field`` (the scenario has a field model)."""
+    ``magnetic_field`` (and, with the sensing loop, ``magnetometer``) with ``field`` (the scenario has a field
+    model)."""
     return {k: v for k, v in RECORDED_TOPICS.items()
             if (sensing or k not in SENSING_TOPICS) and (applied or k not in APPLIED_TOPICS)
-            and (field or k != MAGNETIC_FIELD)}
+            and (field or k not in (MAGNETIC_FIELD, MAGNETOMETER))}
 
 
 def message_class(type_name: str):

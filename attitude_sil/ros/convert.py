@@ -21,11 +21,12 @@ import numpy as np
 from builtin_interfaces.msg import Time
 from geometry_msgs.msg import QuaternionStamped, Vector3Stamped
 from rclpy.serialization import deserialize_message
-from sensor_msgs.msg import Imu, JointState
+from sensor_msgs.msg import Imu, JointState, MagneticField
 
 from attitude_sil.ros.contract import RECORDED_TOPICS, message_class
 
 __all__ = [
+    "magnetic_field_msg",
     "stamp_to_ns",
     "ns_to_stamp",
     "quaternion_to_array",
@@ -150,6 +151,18 @@ def imu_msg(omega_B: Iterable[float], variance: Iterable[float], t_ns: int, fram
     m.angular_velocity_covariance = _diag(variance)
     m.orientation_covariance = _absent()
     m.linear_acceleration_covariance = _absent()
+    return m
+
+
+def magnetic_field_msg(b_B: Iterable[float], variance: Iterable[float], t_ns: int,
+                       frame_id: str = "body") -> MagneticField:
+    """A field (3,) tesla as ``sensor_msgs/MagneticField`` with its per-axis variance (3,) tesla^2 on the
+    covariance's diagonal (all zero: the true field, no noise)."""
+    m = MagneticField()
+    m.header.stamp = ns_to_stamp(t_ns)
+    m.header.frame_id = frame_id
+    m.magnetic_field.x, m.magnetic_field.y, m.magnetic_field.z = (float(v) for v in b_B)
+    m.magnetic_field_covariance = _diag(variance)
     return m
 
 

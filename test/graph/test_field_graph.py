@@ -43,3 +43,22 @@ def test_the_graph_publishes_the_field_and_the_orbit_as_the_engine_computes_them
     assert np.allclose(r, orbit.at(1_000_000_000).r_N, rtol=0, atol=1e-6)
     assert np.allclose(v, orbit.at(1_000_000_000).v_N, rtol=0, atol=1e-9)
     assert bag.topics["/magnetic_field"].count == 101
+
+
+def test_the_magnetometer_reads_the_field_as_the_engine_does(tmp_path):
+    # the sensing loop with a field: the sensors node samples the plant's magnetic_field; its readings, their
+    # declared covariance and the engine's are the same numbers
+    scn = load_scenario(CONFIG / "hst_roll_step_sensors.yaml")
+    for node in ("plant", "disturbance", "guidance"):
+        scn = scn.with_values(node, **ORBIT)
+    scn = scn.with_values("plant", **{"environment.magnetic_field.model": "igrf"})
+    graph = run_graph(scn, duration=1.0, keep_trajectory=True, record_dir=tmp_path / "bag", progress=False)
+    engine = simulate(scn, 1, duration=1.0)
+    m_graph, m_engine = graph.trajectory.magnetometer_B[0], engine.magnetometer_B[0]
+    assert m_graph.shape == m_engine.shape == (101, 3)
+    assert np.max(np.abs(m_graph - m_engine)) < 1e-9 * np.max(np.abs(m_engine))
+    noise = m_engine - engine.magnetic_field_B[0]
+    assert 10e-9 < np.std(noise) < 100e-9  # the preset's default: 50 nT per axis
+    first = next(m for _, m in open_bag(tmp_path / "bag").iter_decoded("/magnetometer"))
+    assert first.header.frame_id == "body"
+    assert np.allclose(np.reshape(first.magnetic_field_covariance, (3, 3)), np.eye(3) * (50e-9) ** 2, rtol=1e-12)

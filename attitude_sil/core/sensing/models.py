@@ -1,4 +1,4 @@
-"""The sensor models: a rate gyro, a star tracker and the wheels' Hall-sensor tachometers.
+"""The sensor models: a rate gyro, a star tracker, the wheels' Hall-sensor tachometers and a magnetometer.
 
 Every model holds a leading episode axis P and is advanced once per control step k (t_k = k dt), in the
 order the lockstep runs it (docs/sensors.md): :meth:`SensorSuite.sample` takes the plant's truth at t_k
@@ -31,6 +31,10 @@ body frame with sigma_about on the boresight axis. An exposure every 1 / rate_hz
 reported latency_s later, stamped with its exposure time t_j; an exposure inside a scheduled outage reports
 no attitude (REP 145: orientation_covariance[0] = -1).
 
+Magnetometer: the gyro's static errors on the true field in B (scale factor, misalignment, bias), white
+noise, quantisation and saturation (:class:`Magnetometer`); it samples the field the plant publishes, where
+the scenario has one.
+
 Tachometer: a wheel's Hall sensors give counts_per_rev edges per revolution; the reading at t_k is the
 count change over [t_(k-1), t_k] times 2 pi / (counts_per_rev dt) (rad/s), so it is quantised to that step.
 """
@@ -53,7 +57,8 @@ from attitude_sil.core.sensing.noise import normals
 from attitude_sil.errors import ScenarioError
 
 __all__ = ["DEG", "ARCSEC", "GyroErrors", "Gyro", "StarTrackerErrors", "StarTracker", "StarTrackerReport",
-           "Tachometer", "SensorSuite", "SensorSample", "allan_variance_model", "TrackerSchedule"]
+           "Tachometer", "SensorSuite", "SensorSample", "allan_variance_model", "TrackerSchedule",
+           "MagnetometerErrors", "Magnetometer"]
 
 DEG = np.pi / 180.0
 ARCSEC = DEG / 3600.0
@@ -352,6 +357,72 @@ class Tachometer:
         return out
 
 
+@dataclass(frozen=True)
+class MagnetometerErrors:
+    """A three-axis magnetometer's errors in SI units.
+
+    Attributes
+    ----------
+    noise : float
+        1-sigma white noise per axis, tesla.
+    bias : (3,) tesla
+        Constant bias (hard iron and offset).
+    scale_factor : (3,)
+        Scale-factor errors (dimensionless; 1e-6 per ppm).
+    misalignment : (3,) rad
+        Small rotation of the sensor axes from the body axes.
+    resolution : float
+        Quantisation step, tesla (0: none).
+    range : float
+        Saturation, tesla.
+    """
+
+    noise: float = 0.0
+    bias: tuple = (0.0, 0.0, 0.0)
+    scale_factor: tuple = (0.0, 0.0, 0.0)
+    misalignment: tuple = (0.0, 0.0, 0.0)
+    resolution: float = 0.0
+    range: float = np.inf
+
+    @classmethod
+    def from_values(cls, v: dict) -> MagnetometerErrors:
+        """From the ``sensors`` node's parameters (``magnetometer.*``, datasheet units)."""
+        return cls(noise=v["magnetometer.noise_nt"] * 1e-9,
+                   bias=tuple(np.asarray(v["magnetometer.bias_nt"], dtype=float) * 1e-9),
+                   scale_factor=tuple(np.asarray(v["magnetometer.scale_factor_ppm"], dtype=float) * 1e-6),
+                   misalignment=tuple(np.asarray(v["magnetometer.misalignment_urad"], dtype=float) * 1e-6),
+                   resolution=v["magnetometer.resolution_nt"] * 1e-9, range=v["magnetometer.range_nt"] * 1e-9)
+
+
+class Magnetometer:
+    """A three-axis magnetometer on P episodes: ``b_meas = (I + diag(s)) (I - [m x]) b_true + b_0 + sigma n_k``,
+    quantised to the resolution and clipped at the range, the field's model of errors as the gyro's
+    (module docstring); its noise on a stream of its own (``magnetometer``), so a draw depends only on
+    (seed, step, axis)."""
+
+    def __init__(self, errors: MagnetometerErrors, seeds: np.ndarray) -> None:
+        self.errors = errors
+        self.seeds = np.asarray(seeds, dtype=np.int64)
+        e = errors
+        #: b_sensor = C b_true
+        self.C = (np.eye(3) + np.diag(e.scale_factor)) @ (np.eye(3) - cross_matrix(e.misalignment))
+
+    def sample(self, b_true_B: np.ndarray, k: int) -> np.ndarray:
+        """The reading (P, 3) tesla at step ``k`` of the true field in B (P, 3) tesla."""
+        e = self.errors
+        b = np.asarray(b_true_B, dtype=float) @ self.C.T + np.asarray(e.bias)
+        if e.noise > 0.0:
+            b = b + e.noise * normals(self.seeds, k, "magnetometer")
+        if e.resolution > 0.0:
+            b = np.round(b / e.resolution) * e.resolution
+        return np.clip(b, -e.range, e.range)
+
+    @property
+    def variance(self) -> np.ndarray:
+        """The declared per-axis variance (3,) tesla^2: the white noise's (REP 145's covariance diagonal)."""
+        return np.full(3, self.errors.noise**2)
+
+
 @dataclass
 class SensorSample:
     """What the sensors report at step k: the gyro reading (P, 3) and the star tracker's report, or None."""
@@ -382,6 +453,7 @@ class SensorSuite:
         self.gyro = Gyro(GyroErrors.from_values(values), dt, seeds)
         self.star_tracker = StarTracker(StarTrackerErrors.from_values(values), dt, seeds)
         self.tachometer = Tachometer(int(values["wheel_speed.counts_per_rev"]), dt)
+        self.magnetometer = Magnetometer(MagnetometerErrors.from_values(values), seeds)
 
     def sample(self, q_BN: np.ndarray, omega_BN_B: np.ndarray, k: int) -> SensorSample:
         """The readings at step ``k`` of the truth (P, 4), (P, 3)."""

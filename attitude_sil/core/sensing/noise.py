@@ -16,7 +16,8 @@ from attitude_sil.core.plant.kernels import normal_draw
 __all__ = ["normals", "STREAMS"]
 
 #: one stream per error source (a contract: changing a number changes every seeded run)
-STREAMS = {"gyro_white": 1, "gyro_markov": 2, "gyro_walk": 3, "gyro_markov_init": 4, "star_tracker": 5}
+STREAMS = {"gyro_white": 1, "gyro_markov": 2, "gyro_walk": 3, "gyro_markov_init": 4, "star_tracker": 5,
+           "magnetometer": 6}
 
 #: the stream's offset in the generator's seed space: seeds below 2**40 never meet another stream's
 _STREAM_SHIFT = 1 << 40

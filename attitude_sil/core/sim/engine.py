@@ -282,7 +282,13 @@ class _Run:
             for name in set(KEEPABLE) - set(keep):
                 setattr(tr, name, None)
         if self.field is not None and tr.q_BN is not None:  # nothing acts on it yet: the record's, afterwards
-            tr.magnetic_field_B = self.field.field_B(np.rint(tr.t * 1e9).astype(np.int64), tr.q_BN)
+            t_ns = np.rint(tr.t * 1e9).astype(np.int64)
+            tr.magnetic_field_B = self.field.field_B(t_ns, tr.q_BN)
+            if self.sensing is not None:  # and the magnetometer's reading of it, a step's draws by its number
+                mag = self.sensing.suite.magnetometer
+                steps = t_ns // int(round(self.dt * 1e9))
+                tr.magnetometer_B = np.stack([mag.sample(tr.magnetic_field_B[:, i], int(k))
+                                              for i, k in enumerate(steps)], axis=1)
         return tr
 
 

@@ -252,6 +252,15 @@ NODE_PARAMS: dict[str, list[ParamSpec]] = {
                   min=0, max=2),
         _da("star_tracker.outages_s", [], "scheduled outages: (start, end) pairs of exposure times, s; an "
             "exposure inside one reports no attitude", min=0.0),
+        _d("magnetometer.noise_nt", 50.0, "magnetometer 1-sigma white noise per axis, nT (assumed: a CubeSat-class "
+           "magnetoresistive sensor)", min=0.0),
+        _da("magnetometer.bias_nt", [0.0, 0.0, 0.0], "magnetometer constant bias per axis, nT", lengths=(3,)),
+        _da("magnetometer.scale_factor_ppm", [0.0, 0.0, 0.0], "magnetometer scale-factor error per axis, ppm",
+            lengths=(3,)),
+        _da("magnetometer.misalignment_urad", [0.0, 0.0, 0.0], "small rotation of the magnetometer axes from the "
+            "body axes, urad", lengths=(3,)),
+        _d("magnetometer.resolution_nt", 0.0, "magnetometer quantisation step, nT (0: none)", min=0.0),
+        _d("magnetometer.range_nt", 100000.0, "magnetometer saturation per axis, nT", min=0.0, min_exclusive=True),
         ParamSpec("wheel_speed.counts_per_rev", "integer", 24, "wheel tachometer Hall-sensor edges per "
                   "revolution (quantises wheel_speed)", min=1),
     ],
