@@ -24,7 +24,8 @@ from rclpy.parameter import Parameter
 from rclpy.serialization import serialize_message
 
 from attitude_sil.core.plant.quaternion import euler_from_quat, quat_conjugate, quat_error
-from attitude_sil.core.plant.scene import BODY, body_scene
+from attitude_sil.core.plant.scene import BODY
+from attitude_sil.core.sim.build import build_scene
 from attitude_sil.core.sim.scenario import Scenario
 from attitude_sil.core.trajectory import Trajectory
 from attitude_sil.errors import RunError
@@ -88,7 +89,7 @@ def _write_design(writer: BagWriter, params: dict[str, Any]) -> None:
 
 def _frames(scn: Scenario, stamps: np.ndarray, q_BN: np.ndarray) -> list[bytes]:
     """The recorder's ``/tf`` of every step: stamps (n,) ns, attitude (n, 4)."""
-    scene = body_scene(scn.values)
+    scene = build_scene(scn.values)
     return TfLayout(scene.frames).encode(stamps, scene.rotation_series(stamps * 1e-9, q_BN))
 
 
@@ -167,7 +168,7 @@ def record_episode(scn: Scenario, tr: Trajectory, run_dir: str | Path, *, episod
                            for k, t in enumerate(stamps.tolist())  # step by step, as the graph publishes
                            for name, data in series.items()])
         t0 = int(stamps[0])  # the body model goes with the first attitude, as the recorder writes it
-        writer.write(_absolute(BODY_MODEL), marker_array_cdr(t0, BODY, body_scene(scn.values).markers), t0)
+        writer.write(_absolute(BODY_MODEL), marker_array_cdr(t0, BODY, build_scene(scn.values).markers), t0)
     finally:
         writer.close()
     return writer.run_dir

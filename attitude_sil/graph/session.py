@@ -32,8 +32,7 @@ from attitude_sil.core.analysis.latency import CommandArrivals, latency_summary
 from attitude_sil.core.analysis.metrics import episode_report
 from attitude_sil.core.analysis.running_metrics import EpisodeAccumulator
 from attitude_sil.core.control import registry
-from attitude_sil.core.plant.scene import body_scene
-from attitude_sil.core.sim.build import check_episode, schedule_from_scenario
+from attitude_sil.core.sim.build import build_scene, check_episode, schedule_from_scenario
 from attitude_sil.core.sim.engine import simulate
 from attitude_sil.core.sim.lockstep import command_period_ns, is_tick
 from attitude_sil.core.sim.params import spec_for
@@ -249,7 +248,7 @@ class GraphSession:
                                      live=self.live, context=self.context, volatile_topics=outside, **kw)
             self.recorder.latency = [] if "controller" in self.external and self.timing != "wall" else None
             self.recorder.latency_from = CLOCK if self.timing == "sim_timer" else ATTITUDE  # a tick: from /clock
-            self.recorder.set_scene(body_scene(self.scn.values))  # the 3D view's frames and body model
+            self.recorder.set_scene(build_scene(self.scn.values))  # the 3D view's frames and body model
             self.executor = EventsExecutor(context=self.context)
             self.executor.add_node(self.recorder)
             self.plant = None

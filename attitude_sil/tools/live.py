@@ -37,7 +37,7 @@ from rclpy.signals import SignalHandlerOptions
 from attitude_sil.core import yaml12
 from attitude_sil.core.analysis.metrics import episode_report
 from attitude_sil.core.control import registry
-from attitude_sil.core.plant.scene import body_scene
+from attitude_sil.core.sim.build import build_scene
 from attitude_sil.core.sim.paramfile import node_key, section_node
 from attitude_sil.core.sim.params import NODE_PARAMS, SCENARIO_NODE
 from attitude_sil.core.sim.scenario import (
@@ -413,7 +413,7 @@ def record_graph(bag: str | Path, topics: list[str] | None = None, namespace: st
                         asked, ask_at = True, time.monotonic() + 1.0
                         continue
                     scn = graph_scenario(values, None, f"the graph{where}")
-                    rec.set_scene(body_scene(values))  # the 3D view: lvlh and the body model from here on
+                    rec.set_scene(build_scene(values))  # the 3D view: lvlh and the body model from here on
                     writer.set_custom_data(PARAMETERS_KEY, scn.parameters_yaml(nodes=list(values)))
                     result.snapshot = True
                     say(f"parameter snapshot of {', '.join(_target(ns, n) for n in values)}")

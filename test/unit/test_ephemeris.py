@@ -102,3 +102,17 @@ def test_a_field_epoch_outside_igrf_is_one_line(tmp_path, capfd):
     assert main(["run", str(path), "--no-record", "--quiet"]) == 2
     err = capfd.readouterr().err
     assert err.count("\n") == 1 and "IGRF-14 covers 1900 to 2030; the epoch's year 2031.414 is outside it" in err, err
+
+
+def test_the_3d_view_draws_the_propagated_orbits_lvlh():
+    from attitude_sil.core.sim.build import build_scene
+
+    eccentric = {**ON_N, "orbit.eccentricity": 0.05, "orbit.j2": True}
+    scn = _on(load_scenario(CONFIG / "hawaiisat_lvlh.yaml"), eccentric)
+    scene = build_scene(scn.values)
+    eph = Ephemeris(scn.values["guidance"], scn.dt)
+    q = np.array([0.0, 0.0, 0.0, 1.0])
+    for t in (0.0, 600.0, 2400.0):
+        assert np.array_equal(scene.rotations(t, q)[1], eph.at(int(round(t * 1e9))).q_LN)
+    circular = build_scene(load_scenario(CONFIG / "hawaiisat_lvlh.yaml").values)
+    assert circular.orbit is None and not np.allclose(circular.rotations(2400.0, q)[1], scene.rotations(2400.0, q)[1])

@@ -84,11 +84,15 @@ class BodyScene:
         The LVLH frame at t = 0 relative to N; None without an orbit.
     orbit_rate : float
         LVLH's rate about its y axis, rad/s (0 without an orbit).
+    orbit : object, optional
+        A propagated orbit (``at(t_ns).q_LN``, ``core.environment.ephemeris.Ephemeris``): LVLH is its frame,
+        not the circular one of ``q_LN0`` and ``orbit_rate``.
     """
 
     markers: tuple[SceneMarker, ...]
     q_LN0: np.ndarray | None = None
     orbit_rate: float = 0.0
+    orbit: Any = None
     frames: tuple[tuple[str, str], ...] = field(init=False)
 
     def __post_init__(self) -> None:
@@ -99,14 +103,20 @@ class BodyScene:
         """Each transform's rotation at sim time ``t`` (s) for attitude ``q_BN`` (4,): in :attr:`frames` order."""
         if self.q_LN0 is None:
             return [q_BN]
-        return [q_BN, lvlh_attitude(t, self.q_LN0, self.orbit_rate)]
+        return [q_BN, self._lvlh(t)]
+
+    def _lvlh(self, t: float) -> np.ndarray:
+        """LVLH at sim time ``t`` (s): the propagated orbit's, or the circular one's."""
+        if self.orbit is not None:
+            return self.orbit.at(int(round(t * 1e9))).q_LN
+        return lvlh_attitude(t, self.q_LN0, self.orbit_rate)
 
     def rotation_series(self, t: np.ndarray, q_BN: np.ndarray) -> list[np.ndarray]:
         """:meth:`rotations` over a series: ``t`` (n,) s, ``q_BN`` (n, 4); one (n, 4) array per transform."""
         q_BN = np.asarray(q_BN, dtype=float)
         if self.q_LN0 is None:
             return [q_BN]
-        return [q_BN, np.array([lvlh_attitude(float(tk), self.q_LN0, self.orbit_rate) for tk in t])]
+        return [q_BN, np.array([self._lvlh(float(tk)) for tk in t])]
 
 
 def box_from_inertia(inertia, longest: float = BODY_SIZE_M) -> np.ndarray:
@@ -162,7 +172,7 @@ def _wheel_markers(axes_B: np.ndarray, reach: float) -> list[SceneMarker]:
     return out
 
 
-def body_scene(values: Mapping[str, Mapping[str, Any]]) -> BodyScene:
+def body_scene(values: Mapping[str, Mapping[str, Any]], propagated=None) -> BodyScene:
     """The frames and body model of a scenario, from its nodes' parameter values (``node -> name -> value``).
 
     The scenario has an orbit, and the scene an ``lvlh`` frame, when the
@@ -177,6 +187,10 @@ def body_scene(values: Mapping[str, Mapping[str, Any]]) -> BodyScene:
         ``wheels.actuator``, ``guidance.mode``, ``disturbance.models`` and
         the ``orbit.*`` of the node that flies the orbit where present (a
         node missing: what it would add is left out).
+    propagated : callable, optional
+        Builds the propagated orbit of that node's values when its
+        ``orbit.model`` is not ``circular`` (``core.sim.build.build_scene``
+        passes the ephemeris); without it the scene draws the circular frame.
     """
     plant = values.get("plant", {})
     wheels = values.get("wheels", {})
@@ -196,5 +210,7 @@ def body_scene(values: Mapping[str, Mapping[str, Any]]) -> BodyScene:
     else:
         return BodyScene(tuple(markers))
     q_LN0 = quat_from_euler(np.radians(np.asarray(orbit["orbit.lvlh_initial_rpy_deg"], dtype=float)))
+    moving = propagated(orbit) if propagated is not None and orbit.get("orbit.model", "circular") != "circular" \
+        else None
     return BodyScene(tuple(markers), np.asarray(q_LN0, dtype=float),
-                     orbit_rate(float(orbit["orbit.mu"]), float(orbit["orbit.radius"])))
+                     orbit_rate(float(orbit["orbit.mu"]), float(orbit["orbit.radius"])), moving)

@@ -25,6 +25,7 @@ from attitude_sil.core.plant.linear import LinearizedPlant
 from attitude_sil.core.plant.plants import FLEXIBLE_CASES, FlexibleAxisPlant, PitchNormalizedPlant
 from attitude_sil.core.plant.quaternion import quat_from_euler, quat_multiply
 from attitude_sil.core.plant.rigid_body import inertia_matrix
+from attitude_sil.core.plant.scene import BodyScene, body_scene
 from attitude_sil.core.plant.wheels import GEOMETRIES, MotorParams, WheelAssembly
 from attitude_sil.core.sensing.mekf import Mekf, MekfSettings
 from attitude_sil.core.sensing.models import SensorSuite
@@ -34,7 +35,7 @@ from attitude_sil.core.sim.scenario import Scenario, effective_values
 from attitude_sil.errors import ScenarioError
 
 __all__ = ["build_plant", "build_wheels", "build_disturbance", "build_guidance", "build_controller", "build_sensing",
-           "build_environment",
+           "build_environment", "build_scene",
            "law_bank", "check_episode", "schedule_from_scenario", "flexible_states", "flexible_settling",
            "initial_attitude", "motor_params", "EPISODE_VALUES", "EPISODE_MOTOR", "EPISODE_FAILURE",
            "split_episode_values", "episode_laws", "check_episode_parameters",
@@ -225,6 +226,12 @@ def build_environment(scn: Scenario) -> tuple[Ephemeris, FieldAlongOrbit]:
     p = scn.values["plant"]
     orbit = Ephemeris(p, scn.dt)
     return orbit, FieldAlongOrbit(orbit, p["environment.magnetic_field.model"])
+
+
+def build_scene(values: dict) -> BodyScene:
+    """The 3D view's frames and body model of a scenario's values (``node -> name -> value``), LVLH from the
+    propagated orbit where the scenario has one (:func:`attitude_sil.core.plant.scene.body_scene`)."""
+    return body_scene(values, lambda v: Ephemeris(v, float(v["control_period"])))
 
 
 def build_guidance(scn: Scenario, n_episodes: int = 1, setpoints_rpy_deg=None) -> Guidance:
