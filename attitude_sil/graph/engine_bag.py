@@ -25,7 +25,7 @@ from rclpy.serialization import serialize_message
 
 from attitude_sil.core.plant.quaternion import euler_from_quat, quat_conjugate, quat_error
 from attitude_sil.core.plant.scene import BODY
-from attitude_sil.core.sim.build import build_scene
+from attitude_sil.core.sim.build import build_environment, build_scene
 from attitude_sil.core.sim.scenario import Scenario
 from attitude_sil.core.trajectory import Trajectory
 from attitude_sil.errors import RunError
@@ -39,6 +39,8 @@ from attitude_sil.ros.contract import (
     CLOCK,
     COMMAND_TOPIC,
     DISTURBANCE_TORQUE,
+    MAGNETIC_FIELD,
+    ORBIT_TOPIC,
     PARAMETER_EVENTS,
     RATE_SETPOINT,
     TF,
@@ -48,7 +50,7 @@ from attitude_sil.ros.contract import (
     WHEEL_TORQUE,
     recorded_topics,
 )
-from attitude_sil.ros.convert import ns_to_stamp
+from attitude_sil.ros.convert import magnetic_field_msg, ns_to_stamp, odometry_msg
 from attitude_sil.ros.qos import offered_qos_yaml
 from attitude_sil.storage.cdr import (
     TfLayout,
@@ -85,6 +87,12 @@ def _write_design(writer: BagWriter, params: dict[str, Any]) -> None:
         event = ParameterEvent(stamp=ns_to_stamp(0), node="/controller",
                                changed_parameters=[Parameter(k, value=v).to_parameter_msg() for k, v in params.items()])
         writer.write(PARAMETER_EVENTS, serialize_message(event), 0)
+
+
+def _orbit(scn: Scenario, stamps: np.ndarray) -> list[bytes]:
+    """The plant's ``orbit`` messages at ``stamps`` (ns), as it publishes them."""
+    orbit = build_environment(scn)[0]
+    return [serialize_message(odometry_msg((now := orbit.at(int(t))).r_N, now.v_N, int(t))) for t in stamps]
 
 
 def _frames(scn: Scenario, stamps: np.ndarray, q_BN: np.ndarray) -> list[bytes]:
@@ -143,7 +151,8 @@ def record_episode(scn: Scenario, tr: Trajectory, run_dir: str | Path, *, episod
     try:
         # every topic, as the recorder registers them (the sensing loop's not yet: an engine bag of a run with
         # sensors holds the lockstep's topics only; docs/sensors.md)
-        for topic, type_name in {**recorded_topics(False), **VIEW_TOPICS}.items():
+        field = tr.magnetic_field_B is not None
+        for topic, type_name in {**recorded_topics(False, field=field), **VIEW_TOPICS}.items():
             writer.add_topic(_absolute(topic), type_name, offered_qos_yaml(topic), wait=False)
         _write_design(writer, params)
         # each topic's whole series encoded at once (storage/cdr.py, equal to rclpy's messages, tested)
@@ -161,7 +170,11 @@ def record_episode(scn: Scenario, tr: Trajectory, run_dir: str | Path, *, episod
             WHEEL_STATE: encode_joint_states(stamps, "", names, tr.wheel_angle[p], tr.wheel_speed[p],
                                              tr.wheel_effort[p]),
             TF: _frames(scn, stamps, q),
+            ORBIT_TOPIC: _orbit(scn, stamps),
         }
+        if field:
+            series[MAGNETIC_FIELD] = [serialize_message(magnetic_field_msg(b, np.zeros(3), int(t)))
+                                      for b, t in zip(tr.magnetic_field_B[p], stamps, strict=True)]
         topics = {name: _absolute(name) for name in series if name != "command"}
         commands = [_absolute(COMMAND_TOPIC[kind]) for kind in tr.kind]
         writer.write_many([(commands[k] if name == "command" else topics[name], data[k], t)

@@ -41,7 +41,6 @@ from __future__ import annotations
 import time
 
 import numpy as np
-from nav_msgs.msg import Odometry
 from std_srvs.srv import Trigger
 
 from attitude_sil.core.sim.build import build_environment, build_plant
@@ -58,7 +57,7 @@ from attitude_sil.ros.contract import (
     PLANT_INPUTS,
     RATE_SETPOINT,
 )
-from attitude_sil.ros.convert import magnetic_field_msg, message_to_array, ns_to_stamp, stamp_to_ns
+from attitude_sil.ros.convert import magnetic_field_msg, message_to_array, odometry_msg, stamp_to_ns
 from attitude_sil.ros.node import SchemaNode, run_node, steady_clock
 from attitude_sil.storage.cdr import clock_cdr, stamped_vector_cdr
 
@@ -166,14 +165,7 @@ class PlantNode(SchemaNode):
     def _publish_environment(self, t_ns: int, q_BN: np.ndarray) -> None:
         """The orbit at step ``t_ns`` and the field at the spacecraft, in B for the attitude ``q_BN`` (1, 4)."""
         now = self.orbit.at(t_ns)
-        odom = Odometry()
-        odom.header.stamp = ns_to_stamp(t_ns)
-        odom.header.frame_id = odom.child_frame_id = "inertial"
-        p, v = odom.pose.pose.position, odom.twist.twist.linear
-        p.x, p.y, p.z = (float(x) for x in now.r_N)
-        v.x, v.y, v.z = (float(x) for x in now.v_N)
-        odom.pose.pose.orientation.w = 1.0
-        self.pub_orbit.publish(odom)
+        self.pub_orbit.publish(odometry_msg(now.r_N, now.v_N, t_ns))
         if self.pub_field is not None:
             self.pub_field.publish(magnetic_field_msg(self.field.field_B(np.array([t_ns]), q_BN)[0], np.zeros(3),
                                                       t_ns))

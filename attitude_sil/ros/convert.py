@@ -20,6 +20,7 @@ from collections.abc import Iterable
 import numpy as np
 from builtin_interfaces.msg import Time
 from geometry_msgs.msg import QuaternionStamped, Vector3Stamped
+from nav_msgs.msg import Odometry
 from rclpy.serialization import deserialize_message
 from sensor_msgs.msg import Imu, JointState, MagneticField
 
@@ -27,6 +28,7 @@ from attitude_sil.ros.contract import RECORDED_TOPICS, message_class
 
 __all__ = [
     "magnetic_field_msg",
+    "odometry_msg",
     "stamp_to_ns",
     "ns_to_stamp",
     "quaternion_to_array",
@@ -151,6 +153,20 @@ def imu_msg(omega_B: Iterable[float], variance: Iterable[float], t_ns: int, fram
     m.angular_velocity_covariance = _diag(variance)
     m.orientation_covariance = _absent()
     m.linear_acceleration_covariance = _absent()
+    return m
+
+
+def odometry_msg(r_N: Iterable[float], v_N: Iterable[float], t_ns: int, frame_id: str = "inertial") -> Odometry:
+    """The centre of mass on its orbit as ``nav_msgs/Odometry``: position (3,) m and velocity (3,) m/s in
+    ``frame_id``, the child frame the same (the velocity is expressed in it), orientation the identity,
+    covariances zero (the truth)."""
+    m = Odometry()
+    m.header.stamp = ns_to_stamp(t_ns)
+    m.header.frame_id = m.child_frame_id = frame_id
+    p, v = m.pose.pose.position, m.twist.twist.linear
+    p.x, p.y, p.z = (float(x) for x in r_N)
+    v.x, v.y, v.z = (float(x) for x in v_N)
+    m.pose.pose.orientation.w = 1.0
     return m
 
 
