@@ -89,6 +89,34 @@ def _write_design(writer: BagWriter, params: dict[str, Any]) -> None:
         writer.write(PARAMETER_EVENTS, serialize_message(event), 0)
 
 
+def _series(scn: Scenario, tr: Trajectory, p: int, stamps: np.ndarray) -> dict:
+    """Each step topic's whole series of episode ``p``, encoded at once (storage/cdr.py, equal to rclpy's
+    messages, tested); ``command`` the command of each step, whichever its topic."""
+    q, q_r = tr.q_BN[p], tr.q_RN[p]
+    err = euler_from_quat(quat_conjugate(quat_error(q, q_r)))
+    names = [f"wheel_{i + 1}" for i in range(tr.wheel_speed.shape[2])]
+    series = {
+        CLOCK: encode_clocks(stamps),
+        ATTITUDE: encode_stamped_vectors(stamps, "inertial", q),
+        BODY_RATE: encode_stamped_vectors(stamps, "body", tr.omega_BN_B[p]),
+        ATTITUDE_SETPOINT: encode_stamped_vectors(stamps, "inertial", q_r),
+        RATE_SETPOINT: encode_stamped_vectors(stamps, "reference", tr.omega_RN_R[p]),
+        DISTURBANCE_TORQUE: encode_stamped_vectors(stamps, "body", tr.tau_ext_B[p]),
+        "command": encode_stamped_vectors(stamps, "body", tr.u_cmd[p]),
+        ATTITUDE_ERROR: encode_stamped_vectors(stamps, "body", err),
+        WHEEL_TORQUE: encode_stamped_vectors(stamps, "body", tr.tau_c_B[p]),
+        WHEEL_MOMENTUM: encode_stamped_vectors(stamps, "body", tr.h_wheels_B[p]),
+        WHEEL_STATE: encode_joint_states(stamps, "", names, tr.wheel_angle[p], tr.wheel_speed[p],
+                                         tr.wheel_effort[p]),
+        TF: _frames(scn, stamps, q),
+        ORBIT_TOPIC: _orbit(scn, stamps),
+    }
+    if tr.magnetic_field_B is not None:
+        series[MAGNETIC_FIELD] = [serialize_message(magnetic_field_msg(b, np.zeros(3), int(t)))
+                                  for b, t in zip(tr.magnetic_field_B[p], stamps, strict=True)]
+    return series
+
+
 def _orbit(scn: Scenario, stamps: np.ndarray) -> list[bytes]:
     """The plant's ``orbit`` messages at ``stamps`` (ns), as it publishes them."""
     orbit = build_environment(scn)[0]
@@ -145,9 +173,6 @@ def record_episode(scn: Scenario, tr: Trajectory, run_dir: str | Path, *, episod
     except (FileExistsError, ValueError, OSError) as exc:
         raise RunError(str(exc)) from None
     p = int(episode)
-    names = [f"wheel_{i + 1}" for i in range(tr.wheel_speed.shape[2])]
-    q, q_r = tr.q_BN[p], tr.q_RN[p]
-    err = euler_from_quat(quat_conjugate(quat_error(q, q_r)))
     try:
         # every topic, as the recorder registers them (the sensing loop's not yet: an engine bag of a run with
         # sensors holds the lockstep's topics only; docs/sensors.md)
@@ -155,26 +180,7 @@ def record_episode(scn: Scenario, tr: Trajectory, run_dir: str | Path, *, episod
         for topic, type_name in {**recorded_topics(False, field=field), **VIEW_TOPICS}.items():
             writer.add_topic(_absolute(topic), type_name, offered_qos_yaml(topic), wait=False)
         _write_design(writer, params)
-        # each topic's whole series encoded at once (storage/cdr.py, equal to rclpy's messages, tested)
-        series = {
-            CLOCK: encode_clocks(stamps),
-            ATTITUDE: encode_stamped_vectors(stamps, "inertial", q),
-            BODY_RATE: encode_stamped_vectors(stamps, "body", tr.omega_BN_B[p]),
-            ATTITUDE_SETPOINT: encode_stamped_vectors(stamps, "inertial", q_r),
-            RATE_SETPOINT: encode_stamped_vectors(stamps, "reference", tr.omega_RN_R[p]),
-            DISTURBANCE_TORQUE: encode_stamped_vectors(stamps, "body", tr.tau_ext_B[p]),
-            "command": encode_stamped_vectors(stamps, "body", tr.u_cmd[p]),
-            ATTITUDE_ERROR: encode_stamped_vectors(stamps, "body", err),
-            WHEEL_TORQUE: encode_stamped_vectors(stamps, "body", tr.tau_c_B[p]),
-            WHEEL_MOMENTUM: encode_stamped_vectors(stamps, "body", tr.h_wheels_B[p]),
-            WHEEL_STATE: encode_joint_states(stamps, "", names, tr.wheel_angle[p], tr.wheel_speed[p],
-                                             tr.wheel_effort[p]),
-            TF: _frames(scn, stamps, q),
-            ORBIT_TOPIC: _orbit(scn, stamps),
-        }
-        if field:
-            series[MAGNETIC_FIELD] = [serialize_message(magnetic_field_msg(b, np.zeros(3), int(t)))
-                                      for b, t in zip(tr.magnetic_field_B[p], stamps, strict=True)]
+        series = _series(scn, tr, p, stamps)
         topics = {name: _absolute(name) for name in series if name != "command"}
         commands = [_absolute(COMMAND_TOPIC[kind]) for kind in tr.kind]
         writer.write_many([(commands[k] if name == "command" else topics[name], data[k], t)

@@ -215,6 +215,9 @@ class DaskCluster(Executor):
             if parts.scheme == "tcp" and not _is_loopback(parts.hostname):
                 print(f"attitude-sil: warning: {address} is unencrypted and unauthenticated; use tls:// with a Dask "
                       "security configuration off a trusted network", file=sys.stderr)
+            # a comm that closes under the client logs it at INFO with a traceback (distributed.batched), often
+            # before the loss is seen: the run says it in one line (SchedulerLostError) instead
+            logging.getLogger("distributed.batched").setLevel(logging.WARNING)
             try:
                 client = Client(address, timeout=timeout, set_as_default=False)
             except (OSError, TimeoutError) as exc:
