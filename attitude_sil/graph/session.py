@@ -248,6 +248,7 @@ class GraphSession:
                                      live=self.live, context=self.context, volatile_topics=outside, **kw)
             self.recorder.latency = [] if "controller" in self.external and self.timing != "wall" else None
             self.recorder.latency_from = CLOCK if self.timing == "sim_timer" else ATTITUDE  # a tick: from /clock
+            self._new_arrivals()  # wall: its commands carry the controller's clock, from the first
             self.recorder.set_scene(build_scene(self.scn.values))  # the 3D view's frames and body model
             self.executor = EventsExecutor(context=self.context)
             self.executor.add_node(self.recorder)
@@ -320,8 +321,7 @@ class GraphSession:
             prog.t0 = wall0
             if self.recorder.latency is not None:
                 self.recorder.latency.clear()
-            self.recorder.arrivals = CommandArrivals(command_period_of(self.scn) * 1e-9) \
-                if self.timing == "wall" else None
+            self._new_arrivals()
             spin_episode(self.recorder, self.spin, self.plant, self.children, self.scn.steps(self.duration),
                          self.scn, prog, schedule, self.foreign, self.episode_topics(),
                          lambda: call_reset(self.recorder, self.spin, self.connect_timeout))
@@ -350,6 +350,11 @@ class GraphSession:
         bag = None if writer is None else writer.run_dir
         metrics["bag"] = None if bag is None else str(bag)
         return RunResult(metrics=metrics, bag=bag, counts=dict(self.recorder.counts), trajectory=traj)
+
+    def _new_arrivals(self) -> None:
+        """A wall-clock controller's command arrivals counted afresh (None for the other styles)."""
+        self.recorder.arrivals = CommandArrivals(command_period_of(self.scn) * 1e-9) if self.timing == "wall" \
+            else None
 
     def _timing_summary(self) -> dict:
         """The outside controller's timing for the summary: its latency, and on a timer its style, its period
@@ -537,6 +542,10 @@ def check_command_timing(external: tuple[str, ...], scn: Scenario) -> None:
     if "controller" not in external:
         raise RunError(f"--external-timing {timing} (wheels.command_timing) is for a controller of yours on a timer: "
                        "add --external controller (attitude-sil's controller answers each step's stamp)")
+    if timing == "sim_timer" and scn.has_sensors:
+        raise RunError("--external-timing sim_timer does not order the sensing loop's topics (imu, star_tracker, "
+                       "estimate/*) before a tick's /clock yet: run it on the truth (feedback: truth, no sensors) "
+                       "or stamped")
     needs = ("plant", "wheels", "guidance") if timing == "sim_timer" else ("plant", "wheels")
     outside = [n for n in needs if n in external]
     if outside:
@@ -602,8 +611,12 @@ class ForeignPublishers:
 
 
 def command_period_of(scn: Scenario) -> int:
-    """An outside controller's timer period (``wheels.command_rate``; 0: the control period), ns."""
-    return command_period_ns(scn.param("wheels", "command_rate"), int(round(scn.dt * 1e9)))
+    """An outside controller's timer period (``wheels.command_rate``; 0: the control period), ns: on sim time a
+    whole number of steps (:func:`~attitude_sil.core.sim.lockstep.command_period_ns`), on the wall clock any."""
+    rate, dt_ns = scn.param("wheels", "command_rate"), int(round(scn.dt * 1e9))
+    if scn.param("wheels", "command_timing") == "sim_timer":
+        return command_period_ns(rate, dt_ns)
+    return int(round(1e9 / rate)) if rate else dt_ns
 
 
 #: what a stall line says of a controller that sent nothing the lockstep could take, per ``command_timing``

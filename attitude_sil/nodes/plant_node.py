@@ -106,7 +106,9 @@ class PlantNode(SchemaNode):
         scn = self.scenario()
         self.core = build_plant(scn, 1)
         self.orbit, self.field = build_environment(scn)
-        self.tick_ns = command_period_ns(self.param("command_rate"), int(round(scn.dt * 1e9)))
+        # a controller on a sim-time timer: its ticks (0: none to serve)
+        self.tick_ns = command_period_ns(self.param("command_rate"), int(round(scn.dt * 1e9))) \
+            if self.param("command_timing") == "sim_timer" else 0
         self._cancel_pacing()
         self._do(self.lockstep.start(scn.steps(), int(round(scn.dt * 1e9)), time.monotonic(),
                                      self.param("hold_at")))
@@ -174,7 +176,7 @@ class PlantNode(SchemaNode):
         """The clock gate opened: ``/clock`` of step k; at a tick of the controller's timer, once every reader
         has acknowledged the step's state (the tick then finds it delivered)."""
         t_ns = self.lockstep.t_ns
-        if is_tick(t_ns, self.tick_ns):
+        if self.tick_ns and is_tick(t_ns, self.tick_ns):
             self.await_readers([p for p in (self.pub_attitude, self.pub_rate, self.pub_flex) if p is not None], t_ns)
         self.pub_clock.publish(clock_cdr(t_ns))
         self._do(self.lockstep.clocked())

@@ -62,7 +62,8 @@ class WheelsNode(LockstepNode):
         timing = self.param("command_timing")
         if timing != "stamped":
             zero = (np.zeros((1, 3)), self.param("actuator") == "torque")
-            self.hold = CommandHold(timing, command_period_ns(self.param("command_rate"), self.dt_ns), zero)
+            period = command_period_ns(self.param("command_rate"), self.dt_ns) if timing == "sim_timer" else self.dt_ns
+            self.hold = CommandHold(timing, period, zero)  # (the period is a sim-time timer's ticks)
             self.step_ns = None
 
     def _on_command(self, msg, torque_mode: bool) -> None:

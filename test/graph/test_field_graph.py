@@ -23,8 +23,7 @@ ORBIT = {"orbit.model": "keplerian_j2", "orbit.semi_major_axis": 6.91e6, "orbit.
 
 def test_the_graph_publishes_the_field_and_the_orbit_as_the_engine_computes_them(tmp_path):
     scn = load_scenario(CONFIG / "hst_roll_step.yaml")
-    for node in ("plant", "disturbance", "guidance"):
-        scn = scn.with_values(node, **ORBIT)
+    scn = scn.with_values("/**", **ORBIT)
     scn = scn.with_values("plant", **{"environment.magnetic_field.model": "igrf"})
     graph = run_graph(scn, duration=1.0, keep_trajectory=True, record_dir=tmp_path / "bag", progress=False)
     engine = simulate(scn, 1, duration=1.0)
@@ -49,8 +48,7 @@ def test_the_magnetometer_reads_the_field_as_the_engine_does(tmp_path):
     # the sensing loop with a field: the sensors node samples the plant's magnetic_field; its readings, their
     # declared covariance and the engine's are the same numbers
     scn = load_scenario(CONFIG / "hst_roll_step_sensors.yaml")
-    for node in ("plant", "disturbance", "guidance"):
-        scn = scn.with_values(node, **ORBIT)
+    scn = scn.with_values("/**", **ORBIT)
     scn = scn.with_values("plant", **{"environment.magnetic_field.model": "igrf"})
     graph = run_graph(scn, duration=1.0, keep_trajectory=True, record_dir=tmp_path / "bag", progress=False)
     engine = simulate(scn, 1, duration=1.0)

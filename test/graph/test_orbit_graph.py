@@ -21,8 +21,7 @@ ECCENTRIC = {"orbit.model": "keplerian_j2", "orbit.semi_major_axis": 6.978137e6,
 
 def test_the_graph_flies_the_propagated_orbit_as_the_engine_does():
     scn = load_scenario(CONFIG / "hawaiisat_lvlh.yaml")
-    for node in ("disturbance", "guidance"):
-        scn = scn.with_values(node, **ECCENTRIC)
+    scn = scn.with_values("/**", **ECCENTRIC)
     graph = run_graph(scn, duration=4.0, keep_trajectory=True, progress=False).trajectory
     engine = simulate(scn, 1, duration=4.0, driver="stepwise")
     assert graph.q_BN.shape == engine.q_BN.shape

@@ -30,9 +30,7 @@ ON_N = {"orbit.model": "keplerian_j2", "orbit.semi_major_axis": RADIUS, "orbit.e
 
 
 def _on(scn, values: dict):
-    for node in ("disturbance", "guidance"):
-        scn = scn.with_values(node, **values)
-    return scn
+    return scn.with_values("/**", **values)  # every node that flies the orbit
 
 
 def test_a_circular_propagated_orbit_is_the_circular_model():
@@ -87,7 +85,7 @@ def test_a_malformed_orbit_is_one_line(key, value, words, tmp_path, capfd):
 
 def test_an_orbit_inside_the_earth_is_one_line(tmp_path, capfd):
     path = tmp_path / "s.yaml"
-    path.write_text((CONFIG / "hawaiisat_lvlh.yaml").read_text() + "/**/guidance:\n  ros__parameters:\n"
+    path.write_text((CONFIG / "hawaiisat_lvlh.yaml").read_text() + "/**:\n  ros__parameters:\n"
                     "    orbit.model: keplerian_j2\n    orbit.semi_major_axis: 6.5e6\n    orbit.eccentricity: 0.5\n")
     assert main(["run", str(path), "--no-record", "--quiet"]) == 2
     err = capfd.readouterr().err
@@ -116,3 +114,14 @@ def test_the_3d_view_draws_the_propagated_orbits_lvlh():
         assert np.array_equal(scene.rotations(t, q)[1], eph.at(int(round(t * 1e9))).q_LN)
     circular = build_scene(load_scenario(CONFIG / "hawaiisat_lvlh.yaml").values)
     assert circular.orbit is None and not np.allclose(circular.rotations(2400.0, q)[1], scene.rotations(2400.0, q)[1])
+
+
+def test_one_orbit_for_every_node_that_flies_it(tmp_path, capfd):
+    # the disturbances on a J2 orbit while the plant publishes the circular one: refused, naming the nodes
+    path = tmp_path / "s.yaml"
+    path.write_text((CONFIG / "hawaiisat_lvlh.yaml").read_text() + "/**/disturbance:\n  ros__parameters:\n"
+                    "    orbit.model: keplerian_j2\n")
+    assert main(["run", str(path), "--no-record", "--quiet"]) == 2
+    err = capfd.readouterr().err
+    assert err.count("\n") == 1 and "orbit.model differs between nodes (plant='circular', guidance='circular', " \
+        "disturbance='keplerian_j2'); set it under /**" in err, err

@@ -46,6 +46,8 @@ __all__ = ["ORBIT_MODELS", "BLOCK_STEPS", "OrbitSample", "Ephemeris", "FieldAlon
 ORBIT_MODELS = ("circular", "keplerian_j2")
 #: steps propagated at once (keplerian_j2)
 BLOCK_STEPS = 1000
+#: steps whose field is evaluated at once (:meth:`FieldAlongOrbit.field_N`)
+FIELD_CHUNK = 4096
 
 
 @dataclass(frozen=True)
@@ -145,11 +147,16 @@ class FieldAlongOrbit:
             igrf_coefficients(self.year)  # an epoch outside IGRF-14: one line now, not at the first step
 
     def field_N(self, t_ns) -> np.ndarray:
-        """The field (n, 3) tesla in N at step times ``t_ns`` (n,) ns."""
+        """The field (n, 3) tesla in N at step times ``t_ns`` (n,) ns, :data:`FIELD_CHUNK` steps at a time
+        (the expansion holds (N + 1)^2 Legendre values per point)."""
         t_ns = np.atleast_1d(np.asarray(t_ns, dtype=np.int64))
-        r_N = np.array([self.orbit.at(int(t)).r_N for t in t_ns])
-        theta = gmst_rad(julian_date(self.orbit.epoch, t_ns * 1e-9))
-        return field_eci(r_N, theta, self.year, self.model)
+        out = np.empty((t_ns.size, 3))
+        for lo in range(0, t_ns.size, FIELD_CHUNK):
+            part = t_ns[lo:lo + FIELD_CHUNK]
+            r_N = np.array([self.orbit.at(int(t)).r_N for t in part])
+            theta = gmst_rad(julian_date(self.orbit.epoch, part * 1e-9))
+            out[lo:lo + part.size] = field_eci(r_N, theta, self.year, self.model)
+        return out
 
     def field_B(self, t_ns, q_BN: np.ndarray) -> np.ndarray:
         """The field in B (..., n, 3) tesla for attitudes ``q_BN`` (..., n, 4) at step times ``t_ns`` (n,) ns:

@@ -373,18 +373,20 @@ def is_tick(t_ns: int, period_ns: int) -> bool:
 
 
 def command_period_ns(rate_hz: float, dt_ns: int) -> int:
-    """The period (ns) of a controller's timer at ``rate_hz`` (0: one step ``dt_ns``), a whole number of steps.
+    """The period (ns) of a controller's sim-time timer at ``rate_hz`` (0: one step ``dt_ns``), a whole number of
+    steps: the timer fires at its ticks only if they are steps of the plant.
 
     Raises
     ------
     ValueError
-        A rate whose period is not a whole number of steps (to a nanosecond).
+        A rate whose period is not a whole number of steps (to a thousandth of a nanosecond: a period a
+        nanosecond off would never meet a step).
     """
     if rate_hz == 0.0:
         return int(dt_ns)
     period = 1e9 / rate_hz
     steps = round(period / dt_ns)
-    if steps < 1 or abs(period - steps * dt_ns) > 1.0:
+    if steps < 1 or abs(period - steps * dt_ns) > 1e-3:
         raise ValueError(f"a controller rate of {rate_hz:g} Hz has a period of {period * 1e-9:g} s, not a whole "
                          f"number of control periods ({dt_ns * 1e-9:g} s)")
     return int(steps * dt_ns)

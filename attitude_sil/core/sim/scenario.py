@@ -204,6 +204,21 @@ def effective_values(scn: Scenario, node: str) -> dict[str, Any]:
     return {**scn.values[node], **derived_values(scn, node)}
 
 
+#: the nodes that fly the orbit (the plant publishes it, the guidance and the disturbances read it): one orbit
+ORBIT_NODES = ("plant", "guidance", "disturbance")
+
+
+def _check_one_orbit(scn: Scenario) -> None:
+    """Every ``orbit.*`` value the same in the nodes that fly the orbit."""
+    names = sorted({n for node in ORBIT_NODES for n in scn.values[node] if n.startswith("orbit.")})
+    for name in names:
+        values = {node: scn.values[node][name] for node in ORBIT_NODES if name in scn.values[node]}
+        if len({repr(v) for v in values.values()}) > 1:
+            listing = ", ".join(f"{node}={v!r}" for node, v in values.items())
+            raise ScenarioError(f"{scn.source}: {name} differs between nodes ({listing}); set it under /** (the "
+                                "plant, the guidance and the disturbances fly one orbit)")
+
+
 def _check_consistency(scn: Scenario) -> None:
     periods = {n: scn.values[n]["control_period"] for n in ALL_NODES}
     if len(set(periods.values())) > 1:
@@ -215,6 +230,7 @@ def _check_consistency(scn: Scenario) -> None:
             if name in SHARED_VALUES and mine != theirs:
                 raise ScenarioError(f"{scn.source}: {node}.{name} {mine} differs from {src}.{src_name} {theirs}; "
                                     f"set it under {src} (the {node} follows)")
+    _check_one_orbit(scn)
     dt = scn.dt
     k = scn.duration / dt
     if abs(k - round(k)) > 1e-6:
