@@ -34,7 +34,7 @@ from attitude_sil.core.analysis.running_metrics import EpisodeAccumulator
 from attitude_sil.core.control import registry
 from attitude_sil.core.sim.build import build_scene, check_episode, schedule_from_scenario
 from attitude_sil.core.sim.engine import simulate
-from attitude_sil.core.sim.lockstep import command_period_ns, is_tick
+from attitude_sil.core.sim.lockstep import command_period_ns, is_tick, tick_period_ns
 from attitude_sil.core.sim.params import spec_for
 from attitude_sil.core.sim.scenario import Scenario
 from attitude_sil.core.trajectory import Trajectory
@@ -655,14 +655,14 @@ class CommandWatch:
         timing = scn.param("wheels", "command_timing")
         if timing == "stamped":
             return cls()
-        return cls(tuple(APPLIED_COMMAND_TOPIC.values()), 0 if timing == "wall" else command_period_of(scn),
-                   _STYLE_HINT[timing])
+        tick = tick_period_ns(timing, scn.param("wheels", "command_rate"), int(round(scn.dt * 1e9)))
+        return cls(tuple(APPLIED_COMMAND_TOPIC.values()), tick, _STYLE_HINT[timing])
 
     def owes(self, step_ns: int) -> bool:
         """The controller owes a command stamped ``step_ns`` (ns)."""
         if self.tick_ns is None:
             return True
-        return self.tick_ns > 0 and is_tick(step_ns, self.tick_ns)
+        return is_tick(step_ns, self.tick_ns)
 
 
 def episode_complete(newest_stamp: dict[str, int], step_topics: list[str], final_ns: int,

@@ -16,7 +16,7 @@ delivered.
 from __future__ import annotations
 
 from attitude_sil.core.sim.build import build_guidance
-from attitude_sil.core.sim.lockstep import command_period_ns, is_tick
+from attitude_sil.core.sim.lockstep import is_tick, tick_period_ns
 from attitude_sil.ros.contract import ATTITUDE, ATTITUDE_SETPOINT, RATE_SETPOINT
 from attitude_sil.ros.convert import stamp_to_ns
 from attitude_sil.ros.node import SchemaNode, run_node
@@ -39,15 +39,15 @@ class GuidanceNode(SchemaNode):
         scn = self.scenario()
         self.core = build_guidance(scn, 1)
         # a controller on a sim-time timer: its ticks must find the setpoints delivered (0: no ticks to serve)
-        self.tick_ns = command_period_ns(self.param("command_rate"), int(round(scn.dt * 1e9))) \
-            if self.param("command_timing") == "sim_timer" else 0
+        self.tick_ns = tick_period_ns(self.param("command_timing"), self.param("command_rate"),
+                                      int(round(scn.dt * 1e9)))
 
     def _on_step(self, msg) -> None:
         t = stamp_to_ns(msg.header.stamp)
         q_RN, w_RN = self.core.setpoint(t * 1e-9)
         self.pub_q.publish(stamped_vector_cdr(q_RN[0], t, "inertial"))
         self.pub_w.publish(stamped_vector_cdr(w_RN[0], t, "reference"))
-        if self.tick_ns and is_tick(t, self.tick_ns):
+        if is_tick(t, self.tick_ns):
             self.await_readers((self.pub_q, self.pub_w), t)
 
 

@@ -44,7 +44,7 @@ import numpy as np
 from std_srvs.srv import Trigger
 
 from attitude_sil.core.sim.build import build_environment, build_plant
-from attitude_sil.core.sim.lockstep import Action, PlantLockstep, command_period_ns, is_tick
+from attitude_sil.core.sim.lockstep import Action, PlantLockstep, is_tick, tick_period_ns
 from attitude_sil.errors import AttitudeSilError
 from attitude_sil.ros.contract import (
     ATTITUDE,
@@ -107,8 +107,8 @@ class PlantNode(SchemaNode):
         self.core = build_plant(scn, 1)
         self.orbit, self.field = build_environment(scn)
         # a controller on a sim-time timer: its ticks (0: none to serve)
-        self.tick_ns = command_period_ns(self.param("command_rate"), int(round(scn.dt * 1e9))) \
-            if self.param("command_timing") == "sim_timer" else 0
+        self.tick_ns = tick_period_ns(self.param("command_timing"), self.param("command_rate"),
+                                      int(round(scn.dt * 1e9)))
         self._cancel_pacing()
         self._do(self.lockstep.start(scn.steps(), int(round(scn.dt * 1e9)), time.monotonic(),
                                      self.param("hold_at")))
@@ -176,7 +176,7 @@ class PlantNode(SchemaNode):
         """The clock gate opened: ``/clock`` of step k; at a tick of the controller's timer, once every reader
         has acknowledged the step's state (the tick then finds it delivered)."""
         t_ns = self.lockstep.t_ns
-        if self.tick_ns and is_tick(t_ns, self.tick_ns):
+        if is_tick(t_ns, self.tick_ns):
             self.await_readers([p for p in (self.pub_attitude, self.pub_rate, self.pub_flex) if p is not None], t_ns)
         self.pub_clock.publish(clock_cdr(t_ns))
         self._do(self.lockstep.clocked())

@@ -20,7 +20,7 @@ from __future__ import annotations
 import numpy as np
 
 from attitude_sil.core.sim.build import build_wheels
-from attitude_sil.core.sim.lockstep import CommandHold, StepSequencer, command_period_ns
+from attitude_sil.core.sim.lockstep import CommandHold, StepSequencer, tick_period_ns
 from attitude_sil.ros.contract import (
     APPLIED_COMMAND_TOPIC,
     CLOCK,
@@ -62,8 +62,7 @@ class WheelsNode(LockstepNode):
         timing = self.param("command_timing")
         if timing != "stamped":
             zero = (np.zeros((1, 3)), self.param("actuator") == "torque")
-            period = command_period_ns(self.param("command_rate"), self.dt_ns) if timing == "sim_timer" else self.dt_ns
-            self.hold = CommandHold(timing, period, zero)  # (the period is a sim-time timer's ticks)
+            self.hold = CommandHold(timing, tick_period_ns(timing, self.param("command_rate"), self.dt_ns), zero)
             self.step_ns = None
 
     def _on_command(self, msg, torque_mode: bool) -> None:

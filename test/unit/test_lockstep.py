@@ -7,7 +7,15 @@ is checked directly, with the wall clock passed in.
 import numpy as np
 import pytest
 
-from attitude_sil.core.sim.lockstep import Action, CommandHold, PlantLockstep, StepSequencer, command_period_ns
+from attitude_sil.core.sim.lockstep import (
+    Action,
+    CommandHold,
+    PlantLockstep,
+    StepSequencer,
+    command_period_ns,
+    is_tick,
+    tick_period_ns,
+)
 
 DT = 10_000_000  # 10 ms in ns
 ZERO = np.zeros((1, 3))
@@ -256,6 +264,10 @@ def test_a_timer_period_is_a_whole_number_of_steps():
     assert command_period_ns(0.0, DT) == DT
     assert command_period_ns(10.0, DT) == 10 * DT
     assert command_period_ns(100.0, DT) == DT
+    # the ticks a node serves: a sim-time timer's only; none (0) for the other styles, whose rate may be any
+    assert tick_period_ns("sim_timer", 10.0, DT) == 10 * DT
+    assert tick_period_ns("wall", 30.0, DT) == 0 and tick_period_ns("stamped", 0.0, DT) == 0
+    assert not is_tick(10 * DT, 0)
     for bad in (30.0, 150.0, 1000.0):  # 33.3 ms, 6.7 ms, 1 ms against 10 ms steps
         with pytest.raises(ValueError, match="not a whole number of control periods"):
             command_period_ns(bad, DT)

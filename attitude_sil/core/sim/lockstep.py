@@ -29,7 +29,7 @@ from enum import Enum
 import numpy as np
 
 __all__ = ["StepSequencer", "StepInputs", "PlantLockstep", "Action", "CommandHold", "COMMAND_TIMINGS",
-           "command_period_ns", "is_tick"]
+           "command_period_ns", "is_tick", "tick_period_ns"]
 
 
 class StepSequencer:
@@ -317,7 +317,7 @@ class CommandHold:
     timing : str
         ``sim_timer`` or ``wall``.
     period_ns : int
-        T, ns (``sim_timer``).
+        T, ns (``sim_timer``; a ``wall`` hold has no ticks, whatever it is).
     zero : (value, torque_mode)
         The command before any takes effect: a (1, 3) zero and its kind.
     """
@@ -368,8 +368,14 @@ class CommandHold:
 
 def is_tick(t_ns: int, period_ns: int) -> bool:
     """A timer of period ``period_ns`` started at sim time 0 fires at ``t_ns`` (ns): a whole number of periods after
-    0 (an rcl timer first fires one period after it starts)."""
-    return t_ns > 0 and t_ns % period_ns == 0
+    0 (an rcl timer first fires one period after it starts); ``period_ns`` 0: no timer, no tick."""
+    return period_ns > 0 and t_ns > 0 and t_ns % period_ns == 0
+
+
+def tick_period_ns(timing: str, rate_hz: float, dt_ns: int) -> int:
+    """The period (ns) of the ticks a node must serve for a controller of ``command_timing`` ``timing``: its
+    sim-time timer's (:func:`command_period_ns`) with ``sim_timer``, else 0 (no ticks)."""
+    return command_period_ns(rate_hz, dt_ns) if timing == "sim_timer" else 0
 
 
 def command_period_ns(rate_hz: float, dt_ns: int) -> int:
