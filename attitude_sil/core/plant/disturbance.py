@@ -201,15 +201,16 @@ class DisturbanceModel:
         self.gg_gain = np.stack((n2 * (diag[:, 2] - diag[:, 1]), n2 * (diag[:, 2] - diag[:, 0])), axis=-1)
         self.rate = orbit_rate(mu, radius)
         self.speed = float(np.sqrt(mu / radius))
+        # the drag's gain but the speed squared: 0.5 rho C_d A, the product in the numpy form's order
+        self._aero_gain = 0.5 * values["aero.density"] * values["aero.drag_coefficient"] * values["aero.area"]
         # orbit_torques's arguments but the attitude and the frame: the gains' products in the order of the
         # numpy forms (the same numbers), the models on
         self._orbit = (np.ascontiguousarray(self.inertia), float(3.0 * self.rate**2),
-                       float(0.5 * values["aero.density"] * values["aero.drag_coefficient"] * values["aero.area"]
-                             * self.speed**2), np.ascontiguousarray(values["aero.cp_offset"], dtype=float),
+                       float(self._aero_gain * self.speed**2), np.ascontiguousarray(values["aero.cp_offset"],
+                                                                                  dtype=float),
                        "gravity_gradient" in self.models, "aerodynamic" in self.models)
         self.q_LN0 = quat_from_euler(np.radians(values["orbit.lvlh_initial_rpy_deg"]))
         self.orbit = orbit
-        self._aero_gain = 0.5 * values["aero.density"] * values["aero.drag_coefficient"] * values["aero.area"]
         ratio = self.dt / values["noise.sample_time"]
         self.samples_per_step = int(round(ratio))
         if "noise" in self.models and (self.samples_per_step < 1 or abs(ratio - self.samples_per_step) > 1e-9):

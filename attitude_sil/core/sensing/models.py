@@ -129,6 +129,19 @@ def allan_variance_model(T: np.ndarray, arw: float, bias_instability: float, cor
     return arw**2 / T + rrw**2 * T / 3.0 + gm
 
 
+def sensor_axes(scale_factor, misalignment) -> np.ndarray:
+    """C (3, 3) of a three-axis sensor: ``(I + diag(s)) (I - [m x])``, scale-factor errors s and the small
+    misalignment angles m (rad) of its axes (x_sensor = C x_true)."""
+    return (np.eye(3) + np.diag(scale_factor)) @ (np.eye(3) - cross_matrix(misalignment))
+
+
+def quantise_and_clip(x: np.ndarray, resolution: float, limit: float) -> np.ndarray:
+    """A reading ``x`` rounded to steps of ``resolution`` (0: none) and clipped at +-``limit``."""
+    if resolution > 0.0:
+        x = np.round(x / resolution) * resolution
+    return np.clip(x, -limit, limit)
+
+
 class Gyro:
     """A three-axis rate gyro on P episodes (module docstring: the error model).
 
@@ -147,7 +160,7 @@ class Gyro:
         self.seeds = np.asarray(seeds, dtype=np.int64)
         e = errors
         #: omega_sensor = C omega_true
-        self.C = (np.eye(3) + np.diag(e.scale_factor)) @ (np.eye(3) - cross_matrix(e.misalignment))
+        self.C = sensor_axes(e.scale_factor, e.misalignment)
         self.phi = float(np.exp(-self.dt / e.correlation_time))
         self.reset()
 
@@ -187,9 +200,7 @@ class Gyro:
         w = self.true_rate(q_BN, omega_BN_B, k) @ self.C.T + self.drift
         if e.arw > 0.0:
             w = w + e.white_std(self.dt) * normals(self.seeds, k, "gyro_white")
-        if e.resolution > 0.0:
-            w = np.round(w / e.resolution) * e.resolution
-        w = np.clip(w, -e.range, e.range)
+        w = quantise_and_clip(w, e.resolution, e.range)
         if e.bias_instability > 0.0:
             self.b_gm = self.phi * self.b_gm + e.bias_instability * np.sqrt(1.0 - self.phi**2) * normals(
                 self.seeds, k, "gyro_markov")
@@ -403,9 +414,8 @@ class Magnetometer:
     def __init__(self, errors: MagnetometerErrors, seeds: np.ndarray) -> None:
         self.errors = errors
         self.seeds = np.asarray(seeds, dtype=np.int64)
-        e = errors
         #: b_sensor = C b_true
-        self.C = (np.eye(3) + np.diag(e.scale_factor)) @ (np.eye(3) - cross_matrix(e.misalignment))
+        self.C = sensor_axes(errors.scale_factor, errors.misalignment)
 
     def sample(self, b_true_B: np.ndarray, k: int) -> np.ndarray:
         """The reading (P, 3) tesla at step ``k`` of the true field in B (P, 3) tesla."""
@@ -413,9 +423,7 @@ class Magnetometer:
         b = np.asarray(b_true_B, dtype=float) @ self.C.T + np.asarray(e.bias)
         if e.noise > 0.0:
             b = b + e.noise * normals(self.seeds, k, "magnetometer")
-        if e.resolution > 0.0:
-            b = np.round(b / e.resolution) * e.resolution
-        return np.clip(b, -e.range, e.range)
+        return quantise_and_clip(b, e.resolution, e.range)
 
     @property
     def variance(self) -> np.ndarray:
