@@ -129,9 +129,8 @@ class PidController(Node):
         self.pub.publish(out)
 
 
-def main() -> int:
-    rclpy.init()
-    node = PidController()
+def spin(node: Node) -> int:
+    """Spin ``node`` until Ctrl-C or a shutdown, then destroy it and shut rclpy down: exit code 0."""
     try:
         rclpy.spin(node)
     except (KeyboardInterrupt, ExternalShutdownException):
@@ -140,6 +139,11 @@ def main() -> int:
         node.destroy_node()
         rclpy.try_shutdown()
     return 0
+
+
+def main() -> int:
+    rclpy.init()
+    return spin(PidController())
 
 
 if __name__ == "__main__":

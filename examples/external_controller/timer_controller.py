@@ -34,8 +34,7 @@ from __future__ import annotations
 
 import rclpy
 from geometry_msgs.msg import QuaternionStamped, Vector3Stamped
-from pid_controller import HST_GA_GAINS, Pid, stamp_ns
-from rclpy.executors import ExternalShutdownException
+from pid_controller import HST_GA_GAINS, Pid, spin, stamp_ns
 from rclpy.node import Node
 
 
@@ -84,15 +83,7 @@ class TimerController(Node):
 
 def main() -> int:
     rclpy.init()
-    node = TimerController()
-    try:
-        rclpy.spin(node)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    finally:
-        node.destroy_node()
-        rclpy.try_shutdown()
-    return 0
+    return spin(TimerController())
 
 
 if __name__ == "__main__":

@@ -21,10 +21,14 @@ ORBIT = {"orbit.model": "keplerian_j2", "orbit.semi_major_axis": 6.91e6, "orbit.
          "orbit.true_anomaly_deg": 0.0, "orbit.epoch": "2026-03-20T12:00:00Z"}
 
 
+def _with_field(preset: str):
+    """The preset on the orbit above, with the IGRF field."""
+    scn = load_scenario(CONFIG / preset).with_values("/**", **ORBIT)
+    return scn.with_values("plant", **{"environment.magnetic_field.model": "igrf"})
+
+
 def test_the_graph_publishes_the_field_and_the_orbit_as_the_engine_computes_them(tmp_path):
-    scn = load_scenario(CONFIG / "hst_roll_step.yaml")
-    scn = scn.with_values("/**", **ORBIT)
-    scn = scn.with_values("plant", **{"environment.magnetic_field.model": "igrf"})
+    scn = _with_field("hst_roll_step.yaml")
     graph = run_graph(scn, duration=1.0, keep_trajectory=True, record_dir=tmp_path / "bag", progress=False)
     engine = simulate(scn, 1, duration=1.0)
     b_graph, b_engine = graph.trajectory.magnetic_field_B[0], engine.magnetic_field_B[0]
@@ -47,9 +51,7 @@ def test_the_graph_publishes_the_field_and_the_orbit_as_the_engine_computes_them
 def test_the_magnetometer_reads_the_field_as_the_engine_does(tmp_path):
     # the sensing loop with a field: the sensors node samples the plant's magnetic_field; its readings, their
     # declared covariance and the engine's are the same numbers
-    scn = load_scenario(CONFIG / "hst_roll_step_sensors.yaml")
-    scn = scn.with_values("/**", **ORBIT)
-    scn = scn.with_values("plant", **{"environment.magnetic_field.model": "igrf"})
+    scn = _with_field("hst_roll_step_sensors.yaml")
     graph = run_graph(scn, duration=1.0, keep_trajectory=True, record_dir=tmp_path / "bag", progress=False)
     engine = simulate(scn, 1, duration=1.0)
     m_graph, m_engine = graph.trajectory.magnetometer_B[0], engine.magnetometer_B[0]

@@ -29,6 +29,16 @@ ON_N = {"orbit.model": "keplerian_j2", "orbit.semi_major_axis": RADIUS, "orbit.e
         "orbit.true_anomaly_deg": 90.0, "orbit.j2": False}
 
 
+def _refused(tmp_path, capfd, preset: str, extra: str) -> str:
+    """The one line ``run`` refuses ``preset`` with once ``extra`` (parameter-file YAML) is laid over it; exit 2."""
+    path = tmp_path / "s.yaml"
+    path.write_text((CONFIG / preset).read_text() + extra)
+    assert main(["run", str(path), "--no-record", "--quiet"]) == 2
+    err = capfd.readouterr().err
+    assert err.count("\n") == 1, err
+    return err
+
+
 def _on(scn, values: dict):
     return scn.with_values("/**", **values)  # every node that flies the orbit
 
@@ -75,31 +85,21 @@ def test_j2_and_eccentricity_move_the_run():
     ("orbit.model", "sgp4", "orbit.model"),
 ])
 def test_a_malformed_orbit_is_one_line(key, value, words, tmp_path, capfd):
-    path = tmp_path / "s.yaml"
-    path.write_text((CONFIG / "hawaiisat_lvlh.yaml").read_text() + f"/**/guidance:\n  ros__parameters:\n"
-                    f"    {key}: {value!r}\n")
-    assert main(["run", str(path), "--no-record", "--quiet"]) == 2
-    err = capfd.readouterr().err
-    assert err.count("\n") == 1 and words in err, err
+    err = _refused(tmp_path, capfd, "hawaiisat_lvlh.yaml", f"/**/guidance:\n  ros__parameters:\n    {key}: {value!r}\n")
+    assert words in err, err
 
 
 def test_an_orbit_inside_the_earth_is_one_line(tmp_path, capfd):
-    path = tmp_path / "s.yaml"
-    path.write_text((CONFIG / "hawaiisat_lvlh.yaml").read_text() + "/**:\n  ros__parameters:\n"
-                    "    orbit.model: keplerian_j2\n    orbit.semi_major_axis: 6.5e6\n    orbit.eccentricity: 0.5\n")
-    assert main(["run", str(path), "--no-record", "--quiet"]) == 2
-    err = capfd.readouterr().err
-    assert err.count("\n") == 1 and "inside the Earth" in err, err
+    err = _refused(tmp_path, capfd, "hawaiisat_lvlh.yaml", "/**:\n  ros__parameters:\n    orbit.model: keplerian_j2\n"
+                   "    orbit.semi_major_axis: 6.5e6\n    orbit.eccentricity: 0.5\n")
+    assert "inside the Earth" in err, err
 
 
 def test_a_field_epoch_outside_igrf_is_one_line(tmp_path, capfd):
-    path = tmp_path / "s.yaml"
-    path.write_text((CONFIG / "hst_roll_step.yaml").read_text() + "/**:\n  ros__parameters:\n"
-                    "    orbit.epoch: '2031-06-01T00:00:00Z'\n/**/plant:\n  ros__parameters:\n"
-                    "    environment.magnetic_field.model: igrf\n")
-    assert main(["run", str(path), "--no-record", "--quiet"]) == 2
-    err = capfd.readouterr().err
-    assert err.count("\n") == 1 and "IGRF-14 covers 1900 to 2030; the epoch's year 2031.414 is outside it" in err, err
+    err = _refused(tmp_path, capfd, "hst_roll_step.yaml", "/**:\n  ros__parameters:\n"
+                   "    orbit.epoch: '2031-06-01T00:00:00Z'\n/**/plant:\n  ros__parameters:\n"
+                   "    environment.magnetic_field.model: igrf\n")
+    assert "IGRF-14 covers 1900 to 2030; the epoch's year 2031.414 is outside it" in err, err
 
 
 def test_the_3d_view_draws_the_propagated_orbits_lvlh():
@@ -118,10 +118,7 @@ def test_the_3d_view_draws_the_propagated_orbits_lvlh():
 
 def test_one_orbit_for_every_node_that_flies_it(tmp_path, capfd):
     # the disturbances on a J2 orbit while the plant publishes the circular one: refused, naming the nodes
-    path = tmp_path / "s.yaml"
-    path.write_text((CONFIG / "hawaiisat_lvlh.yaml").read_text() + "/**/disturbance:\n  ros__parameters:\n"
-                    "    orbit.model: keplerian_j2\n")
-    assert main(["run", str(path), "--no-record", "--quiet"]) == 2
-    err = capfd.readouterr().err
-    assert err.count("\n") == 1 and "orbit.model differs between nodes (plant='circular', guidance='circular', " \
+    err = _refused(tmp_path, capfd, "hawaiisat_lvlh.yaml", "/**/disturbance:\n  ros__parameters:\n"
+                   "    orbit.model: keplerian_j2\n")
+    assert "orbit.model differs between nodes (plant='circular', guidance='circular', " \
         "disturbance='keplerian_j2'); set it under /**" in err, err
