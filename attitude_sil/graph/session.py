@@ -66,7 +66,7 @@ from attitude_sil.ros.contract import (
     recorded_topics,
 )
 from attitude_sil.ros.environment import isolated_domain, localhost_environment
-from attitude_sil.ros.services import call_reset, set_remote_parameters
+from attitude_sil.ros.services import PlantReset, set_remote_parameters
 from attitude_sil.ros.signals import STOP_SIGNALS, Interrupted, StopSignals
 from attitude_sil.storage.writer import PARAMETERS_KEY, SCENARIO_KEY, BagWriter, check_bag_dir
 
@@ -250,6 +250,7 @@ class GraphSession:
             self.recorder.latency_from = CLOCK if self.timing == "sim_timer" else ATTITUDE  # a tick: from /clock
             self._new_arrivals()  # wall: its commands carry the controller's clock, from the first
             self.recorder.set_scene(build_scene(self.scn.values))  # the 3D view's frames and body model
+            self.reset = PlantReset(self.recorder)  # before the nodes: matched by the first reset (PlantReset)
             self.executor = EventsExecutor(context=self.context)
             self.executor.add_node(self.recorder)
             self.plant = None
@@ -316,7 +317,7 @@ class GraphSession:
             if self.live is not None and self.wait_for_viewer is not None:
                 hold_for_viewer(self.live, self.spin, self.wait_for_viewer)
                 self.wait_for_viewer = None  # the first episode only
-            call_reset(self.recorder, self.spin, self.connect_timeout)
+            self.reset(self.spin, self.connect_timeout)
             wall0 = time.monotonic()
             prog.t0 = wall0
             if self.recorder.latency is not None:
@@ -324,7 +325,7 @@ class GraphSession:
             self._new_arrivals()
             spin_episode(self.recorder, self.spin, self.plant, self.children, self.scn.steps(self.duration),
                          self.scn, prog, schedule, self.foreign, self.episode_topics(),
-                         lambda: call_reset(self.recorder, self.spin, self.connect_timeout))
+                         lambda: self.reset(self.spin, self.connect_timeout))
             wall = time.monotonic() - wall0
             prog.update(self.duration, force=True)
         finally:

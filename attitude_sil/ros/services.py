@@ -18,7 +18,7 @@ from std_srvs.srv import Trigger
 
 from attitude_sil.errors import RunError
 
-__all__ = ["get_remote_parameters", "set_remote_parameters", "call_reset", "wait_future", "ask_again"]
+__all__ = ["get_remote_parameters", "set_remote_parameters", "PlantReset", "wait_future", "ask_again"]
 
 Spin = Callable[[float], None]
 
@@ -114,24 +114,44 @@ def set_remote_parameters(node: Node, spin: Spin, target: str, params: dict[str,
             raise RunError(f"{target} refused {name}: {r.reason}")
 
 
-def call_reset(node: Node, spin: Spin, timeout: float, service: str = "plant/reset") -> str:
-    """Call the plant's ``reset`` service (std_srvs/Trigger); returns its message.
+class PlantReset:
+    """The plant's ``reset`` service (std_srvs/Trigger): one client for every reset of a session.
 
-    Raises
-    ------
-    RunError
-        The service did not appear or answer, or the plant refused the reset.
+    Make it with the caller's node, before waiting for the graph. A client's
+    first request can be answered before DDS has matched the server's reply
+    writer with the client's new reader (rmw_fastrtps waits 100 ms for that
+    match, then drops the answer): a client made just before its call lost a
+    reset's answer on a loaded machine while the plant ran the episode. A
+    reset cannot be asked again as a get can (:func:`ask_again`); a client
+    made early has been matched long before its first call.
+
+    Parameters
+    ----------
+    node : Node
+        The node that calls.
+    service : str
+        The service's name (the plant's, under the graph's namespace).
     """
-    client = node.create_client(Trigger, service)
-    try:
+
+    def __init__(self, node: Node, service: str = "plant/reset") -> None:
+        self.service = service
+        self.client = node.create_client(Trigger, service)
+
+    def __call__(self, spin: Spin, timeout: float) -> str:
+        """Reset the plant (an episode starts); returns its message.
+
+        Raises
+        ------
+        RunError
+            The service did not appear or answer within ``timeout`` s, or the
+            plant refused the reset.
+        """
         deadline = time.monotonic() + timeout
-        while not client.service_is_ready():
+        while not self.client.service_is_ready():
             if time.monotonic() > deadline:
-                raise RunError(f"service {service} did not appear")
+                raise RunError(f"service {self.service} did not appear")
             spin(0.02)
-        response = wait_future(client.call_async(Trigger.Request()), spin, deadline, service)
+        response = wait_future(self.client.call_async(Trigger.Request()), spin, deadline, self.service)
         if not response.success:
             raise RunError(response.message)
         return response.message
-    finally:
-        node.destroy_client(client)

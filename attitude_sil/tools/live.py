@@ -50,7 +50,7 @@ from attitude_sil.core.sim.scenario import (
 )
 from attitude_sil.errors import AttitudeSilError, BagError, RunError, ScenarioError
 from attitude_sil.graph.launcher import namespace_kwargs
-from attitude_sil.graph.session import Progress, spin_episode
+from attitude_sil.graph.session import CommandWatch, Progress, spin_episode
 from attitude_sil.graph.trajectory import KEPT_TOPICS, trajectory_from_messages
 from attitude_sil.nodes.recorder_node import Recorder
 from attitude_sil.ros.contract import (
@@ -66,7 +66,7 @@ from attitude_sil.ros.contract import (
     episode_topics,
 )
 from attitude_sil.ros.environment import localhost_environment
-from attitude_sil.ros.services import call_reset, get_remote_parameters
+from attitude_sil.ros.services import PlantReset, get_remote_parameters
 from attitude_sil.ros.signals import StopSignals
 from attitude_sil.storage.reader import open_bag
 from attitude_sil.storage.writer import PARAMETERS_KEY, SCENARIO_KEY, BagWriter, check_bag_dir
@@ -276,6 +276,7 @@ def play_episode(namespace: str | None = None, scenario: str | Path | None = Non
                                      **kw, **namespace_kwargs(ns)))
     try:
         rec = ros.node
+        reset = PlantReset(rec, _target(ns, "plant") + "/reset")  # before the waits: matched by its first call
         deadline = time.monotonic() + timeout
         _wait_publishers(rec, ros.spin, deadline, where)
         values = _ask_graph(rec, ros.spin, ns, max(deadline - time.monotonic(), 0.1), say)
@@ -287,12 +288,12 @@ def play_episode(namespace: str | None = None, scenario: str | Path | None = Non
             raise RunError(f"plant.duration is 0 on the graph{where} (run until stopped): the episode would not end; "
                            f"set it, e.g. attitude-sil param set {_target(ns, 'plant')} duration 20.0")
         rec.start_episode(None)
-        call_reset(rec, ros.spin, max(deadline - time.monotonic(), 0.1), service=_target(ns, "plant") + "/reset")
+        reset(ros.spin, max(deadline - time.monotonic(), 0.1))
         wall0 = time.monotonic()
         prog = Progress(progress, scn.duration)
         prog.t0 = wall0
         spin_episode(rec, ros.spin, None, [], scn.steps(), scn, prog, [], topics=_live_topics(rec, external),
-                     restart=lambda: call_reset(rec, ros.spin, timeout, service=_target(ns, "plant") + "/reset"))
+                     restart=lambda: reset(ros.spin, timeout))
         wall = time.monotonic() - wall0
         prog.update(scn.duration, force=True)
         traj = trajectory_from_messages(rec.kept)
@@ -330,8 +331,9 @@ def _record_topics(bag: str | Path, topics: list[str] | None, episode: bool) -> 
 class _EpisodeEnds:
     """Watches ``record``'s per-step topics for the end of each episode and reports it once."""
 
-    def __init__(self, per_step: list[str]) -> None:
+    def __init__(self, per_step: list[str], selected: dict[str, str]) -> None:
         self.per_step = per_step
+        self.selected = selected
         self.reported_end = False
         self.counted = 0  # messages of per_step[0] in the episodes reported
 
@@ -342,6 +344,10 @@ class _EpisodeEnds:
         # an optional topic (OPTIONAL_TOPICS) counts once somebody publishes it
         ended = all(rec.last_stamp.get(n) == end_ns for n in self.per_step
                     if n not in OPTIONAL_TOPICS or n in rec.last_stamp)
+        # and the last step's command, which the controller sends after the state it answers: without it the bag's
+        # trajectory (and its metrics) would end a step short
+        commands = [n for n in CommandWatch.of(scn).topics if n in self.selected]
+        ended = ended and (not commands or any(rec.last_stamp.get(n) == end_ns for n in commands))
         new_end = ended and not self.reported_end
         if new_end:
             steps = rec.counts.get(self.per_step[0], 0) - self.counted
@@ -398,7 +404,7 @@ def record_graph(bag: str | Path, topics: list[str] | None = None, namespace: st
         clients = {n: AsyncParameterClient(rec, _target(ns, n)) for n in GRAPH_NODES}
         scn = None
         ask_at, asked = 0.0, False  # when to ask the graph for its parameters (again)
-        ends = _EpisodeEnds(per_step)
+        ends = _EpisodeEnds(per_step, selected)
         while True:
             try:  # a stop signal (Ctrl-C, SIGTERM, SIGHUP) ends the recording: the normal way to stop it
                 ros.spin(0.05)
