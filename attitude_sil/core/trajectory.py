@@ -8,7 +8,7 @@ the batch engine and the graph decoder to the cost functions.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 
 import numpy as np
 
@@ -89,6 +89,10 @@ class Trajectory:
     magnetic_field_B: np.ndarray | None = None
     #: the magnetometer's reading of it (P, K+1, 3) tesla, where the sensing loop runs too
     magnetometer_B: np.ndarray | None = None
+    #: where the magnetorquers fly (docs/orbit-and-field.md): the dipole commanded (P, K+1, 3) A m^2 in B and
+    #: the rods' torque on the body (P, K+1, 3) N m, held over [t_k, t_k+1]; else None
+    dipole_cmd_B: np.ndarray | None = None
+    magnetic_torque_B: np.ndarray | None = None
 
     def every(self, stride: int) -> Trajectory:
         """Every ``stride``-th step (k = 0, stride, 2 stride, ...), as views."""
@@ -97,15 +101,8 @@ class Trajectory:
         def cut(a):
             return None if a is None else a[:, keep]
 
-        return Trajectory(t=self.t[keep], q_BN=cut(self.q_BN), omega_BN_B=cut(self.omega_BN_B), q_RN=cut(self.q_RN),
-                          h_wheels_B=cut(self.h_wheels_B), u_cmd=cut(self.u_cmd), tau_c_B=cut(self.tau_c_B),
-                          tau_ext_B=cut(self.tau_ext_B), wheel_speed=cut(self.wheel_speed), kind=self.kind[keep],
-                          wheel_angle=cut(self.wheel_angle), wheel_effort=cut(self.wheel_effort),
-                          omega_RN_R=cut(self.omega_RN_R), q_BN_est=cut(self.q_BN_est),
-                          omega_BN_B_est=cut(self.omega_BN_B_est), gyro_bias_est=cut(self.gyro_bias_est),
-                          attitude_sigma=cut(self.attitude_sigma), omega_BN_B_meas=cut(self.omega_BN_B_meas),
-                          gyro_bias_true=cut(self.gyro_bias_true), magnetic_field_B=cut(self.magnetic_field_B),
-                          magnetometer_B=cut(self.magnetometer_B))
+        return Trajectory(**{f.name: self.t[keep] if f.name == "t" else self.kind[keep] if f.name == "kind"
+                             else cut(getattr(self, f.name)) for f in fields(self)})
 
 
 @dataclass

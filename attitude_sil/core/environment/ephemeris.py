@@ -143,20 +143,34 @@ class FieldAlongOrbit:
             raise ValueError(f"unknown field model {model!r}")  # the schema's choices refuse it first
         self.orbit, self.model = orbit, model
         self.year = decimal_year(orbit.epoch)
+        self._cached: tuple[int, np.ndarray] = (-1, np.zeros((0, 3)))  # (chunk, its field): _chunk
         if model != "none":
             igrf_coefficients(self.year)  # an epoch outside IGRF-14: one line now, not at the first step
 
     def field_N(self, t_ns) -> np.ndarray:
-        """The field (n, 3) tesla in N at step times ``t_ns`` (n,) ns, :data:`FIELD_CHUNK` steps at a time
-        (the expansion holds (N + 1)^2 Legendre values per point)."""
+        """The field (n, 3) tesla in N at step times ``t_ns`` (n,) ns (whole steps of the orbit's period).
+
+        Evaluated :data:`FIELD_CHUNK` steps at a time, chunks aligned at step 0
+        (the expansion holds (N + 1)^2 Legendre values per point), the last
+        chunk kept: every reader of an episode (the plant node a step at a
+        time, the stepwise driver, the record afterwards) gets the same bits.
+        """
         t_ns = np.atleast_1d(np.asarray(t_ns, dtype=np.int64))
+        chunks = t_ns // self.orbit.dt_ns // FIELD_CHUNK
         out = np.empty((t_ns.size, 3))
-        for lo in range(0, t_ns.size, FIELD_CHUNK):
-            part = t_ns[lo:lo + FIELD_CHUNK]
-            r_N = np.array([self.orbit.at(int(t)).r_N for t in part])
-            theta = gmst_rad(julian_date(self.orbit.epoch, part * 1e-9))
-            out[lo:lo + part.size] = field_eci(r_N, theta, self.year, self.model)
+        for c in np.unique(chunks):
+            sel = chunks == c
+            out[sel] = self._chunk(int(c))[t_ns[sel] // self.orbit.dt_ns - int(c) * FIELD_CHUNK]
         return out
+
+    def _chunk(self, c: int) -> np.ndarray:
+        """The field (FIELD_CHUNK, 3) in N at the steps of chunk ``c``."""
+        if self._cached[0] != c:
+            t_ns = (c * FIELD_CHUNK + np.arange(FIELD_CHUNK, dtype=np.int64)) * self.orbit.dt_ns
+            r_N = np.array([self.orbit.at(int(t)).r_N for t in t_ns])
+            theta = gmst_rad(julian_date(self.orbit.epoch, t_ns * 1e-9))
+            self._cached = (c, field_eci(r_N, theta, self.year, self.model))
+        return self._cached[1]
 
     def field_B(self, t_ns, q_BN: np.ndarray) -> np.ndarray:
         """The field in B (..., n, 3) tesla for attitudes ``q_BN`` (..., n, 4) at step times ``t_ns`` (n,) ns:

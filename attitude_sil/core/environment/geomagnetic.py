@@ -85,6 +85,10 @@ def igrf_coefficients(year: float) -> tuple[np.ndarray, np.ndarray]:
     return ((1.0 - w) * g[k] + w * g[k + 1]) * 1e-9, ((1.0 - w) * h[k] + w * h[k + 1]) * 1e-9
 
 
+#: colatitude, rad, kept from each pole (:func:`field_ecef`)
+POLE_GUARD = 1e-9
+
+
 def _legendre(theta: np.ndarray, nmax: int) -> tuple[np.ndarray, np.ndarray]:
     """Schmidt semi-normalised P_n^m(cos theta) and dP_n^m/dtheta, each (nmax + 1, nmax + 1, n_points)."""
     c, s = np.cos(theta), np.sin(theta)
@@ -136,7 +140,9 @@ def field_ecef(r_ecef: np.ndarray, year: float, model: str = "igrf") -> np.ndarr
     g, h = igrf_coefficients(year)
     x, y, z = r_ecef[:, 0], r_ecef[:, 1], r_ecef[:, 2]
     r = np.sqrt(x * x + y * y + z * z)
-    theta, phi = np.arccos(z / r), np.arctan2(y, x)
+    # on a pole B_phi's 1/sin(theta) is 0/0 (its limit is finite): evaluated POLE_GUARD rad away, a few mm at
+    # the surface, where the field differs by far less than a picotesla
+    theta, phi = np.clip(np.arccos(z / r), POLE_GUARD, np.pi - POLE_GUARD), np.arctan2(y, x)
     b_r, b_t, b_p = field_spherical(r, theta, phi, g, h, nmax)
     st, ct, sp, cp = np.sin(theta), np.cos(theta), np.sin(phi), np.cos(phi)
     return np.stack([b_r * st * cp + b_t * ct * cp - b_p * sp,

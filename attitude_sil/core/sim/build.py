@@ -18,10 +18,12 @@ import numpy as np
 from attitude_sil.core.analysis.metrics import flexible_split
 from attitude_sil.core.control import registry
 from attitude_sil.core.control.bank import ControllerBank
+from attitude_sil.core.control.momentum import CrossProductDumping
 from attitude_sil.core.environment.ephemeris import Ephemeris, FieldAlongOrbit
 from attitude_sil.core.plant.actuators import RPM, SpeedLoopWheels, TorqueActuator
 from attitude_sil.core.plant.disturbance import DisturbanceModel, orbit_rate
 from attitude_sil.core.plant.linear import LinearizedPlant
+from attitude_sil.core.plant.magnetorquers import Magnetorquers, rod_axes
 from attitude_sil.core.plant.plants import FLEXIBLE_CASES, FlexibleAxisPlant, PitchNormalizedPlant
 from attitude_sil.core.plant.quaternion import quat_from_euler, quat_multiply
 from attitude_sil.core.plant.rigid_body import inertia_matrix
@@ -29,13 +31,13 @@ from attitude_sil.core.plant.scene import BodyScene, body_scene
 from attitude_sil.core.plant.wheels import GEOMETRIES, MotorParams, WheelAssembly
 from attitude_sil.core.sensing.mekf import Mekf, MekfSettings
 from attitude_sil.core.sensing.models import SensorSuite
-from attitude_sil.core.sim.models import Guidance, Plant, Sensing, Wheels, per_episode
+from attitude_sil.core.sim.models import Guidance, MagneticLoop, Plant, Sensing, Wheels, per_episode
 from attitude_sil.core.sim.params import NODE_PARAMS, spec_for
 from attitude_sil.core.sim.scenario import Scenario, effective_values
 from attitude_sil.errors import ScenarioError
 
 __all__ = ["build_plant", "build_wheels", "build_disturbance", "build_guidance", "build_controller", "build_sensing",
-           "build_environment", "build_scene",
+           "build_environment", "build_scene", "build_momentum_law", "build_magnetorquers", "build_magnetic_loop",
            "law_bank", "check_episode", "schedule_from_scenario", "flexible_states", "flexible_settling",
            "initial_attitude", "motor_params", "EPISODE_VALUES", "EPISODE_MOTOR", "EPISODE_FAILURE",
            "split_episode_values", "episode_laws", "check_episode_parameters",
@@ -226,6 +228,27 @@ def build_environment(scn: Scenario) -> tuple[Ephemeris, FieldAlongOrbit]:
     p = scn.values["plant"]
     orbit = Ephemeris(p, scn.dt)
     return orbit, FieldAlongOrbit(orbit, p["environment.magnetic_field.model"])
+
+
+def build_momentum_law(scn: Scenario) -> CrossProductDumping | None:
+    """The controller's momentum-management law (``momentum.*``), or None with ``momentum.mode: none``."""
+    c = scn.values["controller"]
+    return None if c["momentum.mode"] == "none" else CrossProductDumping(c["momentum.gain"], c["momentum.target"])
+
+
+def build_magnetorquers(scn: Scenario) -> Magnetorquers:
+    """The ``magnetorquers`` node's rods."""
+    m = scn.values["magnetorquers"]
+    return Magnetorquers(rod_axes(m["rods.axes"]), m["rods.max_dipole"])
+
+
+def build_magnetic_loop(scn: Scenario) -> MagneticLoop | None:
+    """The magnetorquers' loop of the stepwise driver (:class:`~attitude_sil.core.sim.models.MagneticLoop`),
+    or None where the scenario flies no magnetorquers."""
+    law = build_momentum_law(scn)
+    if law is None:
+        return None
+    return MagneticLoop(build_environment(scn)[1], law, build_magnetorquers(scn))
 
 
 def build_scene(values: dict) -> BodyScene:

@@ -30,6 +30,7 @@ from attitude_sil.core.sim.build import (
     build_disturbance,
     build_environment,
     build_guidance,
+    build_magnetic_loop,
     build_plant,
     build_sensing,
     build_wheels,
@@ -37,7 +38,7 @@ from attitude_sil.core.sim.build import (
     schedule_from_scenario,
     split_episode_values,
 )
-from attitude_sil.core.sim.models import SENSING_FIELDS, Guidance, Plant, Sensing, Wheels
+from attitude_sil.core.sim.models import SENSING_FIELDS, Guidance, MagneticLoop, Plant, Sensing, Wheels
 from attitude_sil.core.sim.scenario import Scenario
 from attitude_sil.core.trajectory import EpisodeSummary, Trajectory, all_finite
 from attitude_sil.errors import NonFiniteWarning, ScenarioError
@@ -239,12 +240,15 @@ class _Run:
         self.field = field if field.model != "none" else None  # the field at the spacecraft, for the record
         self.sensing = build_sensing(scn, P, ev["sensors"].get("seed"), ev["sensors"].get("gyro.bias_deg_h"),
                                      ev["estimator"].get("initial_attitude_rpy_deg"))
+        self.magnetic = build_magnetic_loop(scn)
         self.swaps = dict(schedule_from_scenario(scn) if opts.schedule is None else opts.schedule)
         self.compiled = False
         if driver != "stepwise":
             why = compiled_plan(*self.models)
             if self.sensing:
                 why = "the sensors and estimator run in the stepwise driver"
+            if self.magnetic:
+                why = "the magnetorquers run in the stepwise driver"
             if driver == "compiled" and why:
                 raise ScenarioError(f"the compiled driver does not run this scenario ({why}); use driver='auto'")
             self.compiled = not why
@@ -277,11 +281,11 @@ class _Run:
             tr, _ = run_compiled(self.models, self.K, self.dt, stride=stride, threads=threads, keep=keep,
                                  swaps=self.swaps, laws=self.laws)
         else:
-            tr = _simulate_stepwise(*self.models, self.swaps, self.K, self.dt, self.sensing)
+            tr = _simulate_stepwise(*self.models, self.swaps, self.K, self.dt, self.sensing, self.magnetic)
             tr = tr if stride == 1 else tr.every(stride)
             for name in set(KEEPABLE) - set(keep):
                 setattr(tr, name, None)
-        if self.field is not None and tr.q_BN is not None:  # nothing acts on it yet: the record's, afterwards
+        if self.field is not None and tr.q_BN is not None and self.magnetic is None:  # the record's, afterwards
             t_ns = np.rint(tr.t * 1e9).astype(np.int64)
             tr.magnetic_field_B = self.field.field_B(t_ns, tr.q_BN)
             if self.sensing is not None:  # and the magnetometer's reading of it, a step's draws by its number
@@ -299,11 +303,12 @@ def _first(items: list[int], n: int = 10) -> str:
 
 
 def _simulate_stepwise(plant, wheels, dist, guide, ctrl, swaps: dict, K: int, dt: float,
-                       sensing: Sensing | None = None) -> Trajectory:
+                       sensing: Sensing | None = None, magnetic: MagneticLoop | None = None) -> Trajectory:
     """The stepwise driver: the step objects called from Python, step by step, as the nodes call them.
 
     With ``sensing`` the sensors sample the truth and the estimator runs on them each step; the controller
-    reads the estimate when ``sensing.feedback`` is ``estimate`` (the graph's remap), else the truth.
+    reads the estimate when ``sensing.feedback`` is ``estimate`` (the graph's remap), else the truth. With
+    ``magnetic`` the controller's dipole and the rods' torque follow the wheels' step (:class:`MagneticLoop`).
     """
     P = plant.n_episodes
     nw = len(wheels.names)
@@ -325,6 +330,10 @@ def _simulate_stepwise(plant, wheels, dist, guide, ctrl, swaps: dict, K: int, dt
     if sensing is not None:
         for name, width in zip(SENSING_FIELDS, (4, 3, 3, 3, 3, 3), strict=True):
             setattr(tr, name, np.empty((P, K + 1, width)))
+    if magnetic is not None:
+        for name in ("magnetic_field_B", "dipole_cmd_B", "magnetic_torque_B") + (("magnetometer_B",) if sensing
+                                                                                 else ()):
+            setattr(tr, name, np.empty((P, K + 1, 3)))
     estimate = sensing is not None and sensing.feedback == "estimate"
     dt_ns = int(round(dt * 1e9))
     for k in range(K + 1):
@@ -359,6 +368,23 @@ def _simulate_stepwise(plant, wheels, dist, guide, ctrl, swaps: dict, K: int, dt
         tr.wheel_angle[:, k] = ws.position
         tr.wheel_effort[:, k] = ws.effort
         tr.omega_RN_R[:, k] = w_RN
+        if magnetic is not None:
+            tau_ext = tau_ext + _magnetic_step(tr, k, k * dt_ns, s.q_BN, ws.h_wheels_B, magnetic, sensing)
         if k < K:
             plant.advance(ws.tau_c_B, ws.h_wheels_B, tau_ext)
     return tr
+
+
+def _magnetic_step(tr: Trajectory, k: int, t_ns: int, q_BN: np.ndarray, h_wheels_B: np.ndarray,
+                   magnetic: MagneticLoop, sensing: Sensing | None) -> np.ndarray:
+    """Step ``k`` of the magnetorquers' loop, kept in ``tr``; returns the rods' torque (P, 3) N m: the field at
+    t_k, its magnetometer reading (the controller's with ``feedback: estimate``), the dipole and the torque."""
+    b_B = magnetic.field_B(t_ns, q_BN)
+    b_read = b_B
+    if sensing is not None:
+        tr.magnetometer_B[:, k] = sensing.suite.magnetometer.sample(b_B, k)
+        if sensing.feedback == "estimate":
+            b_read = tr.magnetometer_B[:, k]
+    m_cmd, tau_mag = magnetic.step(h_wheels_B, b_B, b_read)
+    tr.magnetic_field_B[:, k], tr.dipole_cmd_B[:, k], tr.magnetic_torque_B[:, k] = b_B, m_cmd, tau_mag
+    return tau_mag

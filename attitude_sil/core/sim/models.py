@@ -21,9 +21,12 @@ from __future__ import annotations
 
 import numpy as np
 
+from attitude_sil.core.control.momentum import CrossProductDumping
+from attitude_sil.core.environment.ephemeris import FieldAlongOrbit
 from attitude_sil.core.plant.disturbance import lvlh_attitude
 from attitude_sil.core.plant.kernels import WheelFailure
 from attitude_sil.core.plant.lanes import ANGLE, SPEED
+from attitude_sil.core.plant.magnetorquers import Magnetorquers
 from attitude_sil.core.plant.quaternion import quat_from_euler
 from attitude_sil.core.plant.rigid_body import BodyState, rk4_step
 from attitude_sil.core.plant.wheels import WheelAssembly
@@ -31,7 +34,7 @@ from attitude_sil.core.sensing.mekf import Mekf
 from attitude_sil.core.sensing.models import SensorSuite
 from attitude_sil.core.trajectory import WheelStep
 
-__all__ = ["Plant", "Wheels", "Guidance", "Sensing", "SENSING_FIELDS", "per_episode"]
+__all__ = ["Plant", "Wheels", "Guidance", "Sensing", "MagneticLoop", "SENSING_FIELDS", "per_episode"]
 
 
 def per_episode(value, n: int, width: int) -> np.ndarray:
@@ -186,6 +189,34 @@ class Sensing:
         """The estimate at step ``k`` (a :class:`~attitude_sil.core.sensing.mekf.Estimate`) and the gyro reading."""
         sample = self.suite.sample(q_BN, omega_BN_B, k)
         return self.mekf.step(k, sample.omega_meas_B, sample.star_tracker), sample.omega_meas_B
+
+
+class MagneticLoop:
+    """The magnetorquers' loop of P episodes: the field, the controller's dipole command, the rods' torque.
+
+    One control step k, after the wheels' (the momentum at t_k is theirs):
+    the field at the spacecraft in B at t_k (what the plant publishes on
+    ``magnetic_field``), the dumping law's dipole from the wheel momentum and
+    the field the controller reads (the truth, or the magnetometer's reading
+    with ``feedback: estimate``; the controller node's ``dipole_cmd``), the
+    rods' torque m x B on the body held over the step (the ``magnetorquers``
+    node's ``magnetic_torque``), which the plant adds to the disturbance.
+    """
+
+    def __init__(self, field: FieldAlongOrbit, law: CrossProductDumping, rods: Magnetorquers) -> None:
+        self.field = field
+        self.law = law
+        self.rods = rods
+
+    def field_B(self, t_ns: int, q_BN: np.ndarray) -> np.ndarray:
+        """The true field (P, 3) tesla in B at step time ``t_ns`` for attitudes ``q_BN`` (P, 4)."""
+        return self.field.field_B(np.array([t_ns]), q_BN[:, None, :])[:, 0]
+
+    def step(self, h_wheels_B: np.ndarray, b_B: np.ndarray, b_read_B: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The dipole command (P, 3) A m^2 for the wheel momentum ``h_wheels_B`` (P, 3) N m s and the field
+        the controller reads ``b_read_B`` (P, 3) T, and the rods' torque (P, 3) N m in the true field ``b_B``."""
+        m_cmd = self.law.dipole(h_wheels_B, b_read_B)
+        return m_cmd, self.rods.torque(m_cmd, b_B)
 
 
 #: the arrays a run with the sensing loop adds to its trajectory (:class:`~attitude_sil.core.trajectory.Trajectory`)

@@ -15,6 +15,7 @@ from dataclasses import replace
 from typing import Any
 
 from attitude_sil.core.control import registry
+from attitude_sil.core.control.momentum import MOMENTUM_PARAMS
 from attitude_sil.core.control.shared import AERO, CONTROLLER_SHARED, ORBIT
 from attitude_sil.core.environment.earth_time import epoch_from_text
 from attitude_sil.core.environment.ephemeris import ORBIT_MODELS
@@ -24,6 +25,7 @@ from attitude_sil.core.paramspec import double as _d
 from attitude_sil.core.paramspec import double_array as _da
 from attitude_sil.core.paramspec import inertia_rule as _inertia_rule
 from attitude_sil.core.paramspec import nonzero as _nonzero
+from attitude_sil.core.plant.magnetorquers import rod_axes
 from attitude_sil.core.plant.wheels import HST_MOTOR
 from attitude_sil.core.sim.lockstep import COMMAND_TIMINGS
 from attitude_sil.errors import ScenarioError
@@ -68,6 +70,15 @@ _ORBIT_MODEL = [
     _d("orbit.true_anomaly_deg", 0.0, "keplerian_j2: true anomaly at the epoch, deg", min=-360.0, max=360.0),
     ParamSpec("orbit.j2", "bool", True, "keplerian_j2: the Earth's oblateness J2 (false: the two-body orbit)"),
 ]
+
+def _rods_rule(value: list) -> str:
+    """Whole 3-vectors, none zero, spanning the body axes."""
+    try:
+        rod_axes(value)
+    except ScenarioError as exc:
+        return str(exc).partition(": ")[2]
+    return ""
+
 
 _COMMAND_RATE = _d("command_rate", 0.0, "sim_timer: the controller's timer rate, Hz (0: the control rate); its "
                    "period must be a whole number of control periods", min=0.0)
@@ -220,6 +231,14 @@ NODE_PARAMS: dict[str, list[ParamSpec]] = {
         *registry.parameter_table(),
         *ORBIT,
         *AERO,
+        *MOMENTUM_PARAMS,
+    ],
+    "magnetorquers": [
+        _d("control_period", 0.01, "control step dt, s (shared by every node)", min=0.0, min_exclusive=True, max=1.0),
+        _da("rods.axes", [1, 0, 0, 0, 1, 0, 0, 0, 1], "the rods' axes in B, 3 values per rod, row by row "
+            "(default: three orthogonal rods, paper 001)", rule=_rods_rule),
+        _d("rods.max_dipole", 25.0, "saturation of each rod, A m^2 (default: paper 001, Hawai'iSat-1's 25 A m^2 "
+           "rods)", min=0.0, min_exclusive=True),
     ],
     "sensors": [
         # The defaults are a generic navigation-grade gyro and a mid-class star tracker (assumed); the presets

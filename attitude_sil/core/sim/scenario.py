@@ -35,7 +35,7 @@ from attitude_sil.core.sim.params import GLOBAL_NODE, NODE_PARAMS, SCENARIO_NODE
 from attitude_sil.errors import ScenarioError
 
 __all__ = ["ScenarioError", "Scenario", "load_scenario", "scenario_from_dict", "with_parameter_file", "yaml_problem",
-           "GRAPH_NODES", "SENSOR_NODES", "ALL_NODES", "PRESETS", "default_config_dir", "derived_values",
+           "GRAPH_NODES", "SENSOR_NODES", "MAGNETIC_NODES", "ALL_NODES", "PRESETS", "default_config_dir", "derived_values",
            "effective_values", "flatten_parameters"]
 
 #: the preset scenarios of the five papers (``config/<name>.yaml``)
@@ -57,8 +57,12 @@ GRAPH_NODES = ("plant", "wheels", "disturbance", "guidance", "controller")
 #: (:attr:`Scenario.has_sensors`)
 SENSOR_NODES = ("sensors", "estimator")
 
+#: the magnetorquers (docs/orbit-and-field.md), started after the others when a scenario flies them
+#: (:attr:`Scenario.has_magnetorquers`)
+MAGNETIC_NODES = ("magnetorquers",)
+
 #: every node a scenario configures
-ALL_NODES = GRAPH_NODES + SENSOR_NODES
+ALL_NODES = GRAPH_NODES + SENSOR_NODES + MAGNETIC_NODES
 
 
 def _suggest(name: str, options) -> str:
@@ -115,9 +119,15 @@ class Scenario:
                     or any(set(self.explicit.get(n, {})) - shared for n in SENSOR_NODES))
 
     @property
+    def has_magnetorquers(self) -> bool:
+        """Whether the magnetorquers fly: the controller commands a dipole (``momentum.mode``)."""
+        return self.values["controller"]["momentum.mode"] != "none"
+
+    @property
     def nodes(self) -> tuple[str, ...]:
         """The nodes this scenario's graph runs, in start order."""
-        return ALL_NODES if self.has_sensors else GRAPH_NODES
+        return (GRAPH_NODES + (SENSOR_NODES if self.has_sensors else ())
+                + (MAGNETIC_NODES if self.has_magnetorquers else ()))
 
     def steps(self, duration: float | None = None) -> int:
         """Number of control steps K in the episode (states at k = 0..K)."""
@@ -231,6 +241,10 @@ def _check_consistency(scn: Scenario) -> None:
                 raise ScenarioError(f"{scn.source}: {node}.{name} {mine} differs from {src}.{src_name} {theirs}; "
                                     f"set it under {src} (the {node} follows)")
     _check_one_orbit(scn)
+    if scn.has_magnetorquers and scn.values["plant"]["environment.magnetic_field.model"] == "none":
+        raise ScenarioError(f"{scn.source}: controller.momentum.mode {scn.values['controller']['momentum.mode']} "
+                            "drives the magnetorquers, which need a field: set plant "
+                            "environment.magnetic_field.model (dipole or igrf)")
     dt = scn.dt
     k = scn.duration / dt
     if abs(k - round(k)) > 1e-6:

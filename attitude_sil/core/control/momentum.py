@@ -1,0 +1,60 @@
+"""Momentum management: the cross-product law that dumps the wheels' momentum through the magnetorquers.
+
+Beside any attitude law (``momentum.mode: cross_product``), each step the
+controller commands the dipole
+
+    m = k (h_err x B) / |B|^2,   h_err = h_w - h_target,
+
+whose torque m x B = -k (I - b b^T) h_err (b = B / |B|) is the component of
+-k h_err normal to the field: the attitude law holds the body, so the wheels
+take that torque and h_err decays at rate k along the directions the field
+sweeps (Camillo and Markley's cross-product law; Basilisk's
+``mtbMomentumManagement`` and 42's H x B unloading are this law). Over an
+orbit the decay is exp(-k <I - b b^T> t), <.> the orbit average in B; a
+direction the field never leaves cannot be dumped.
+
+Its parameters are the controller's (``momentum.*``,
+:data:`MOMENTUM_PARAMS`), so no attitude law changes.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from attitude_sil.core.paramspec import ParamSpec
+from attitude_sil.core.paramspec import double as _d
+from attitude_sil.core.paramspec import double_array as _da
+from attitude_sil.core.plant.quaternion import cross
+
+__all__ = ["MOMENTUM_MODES", "MOMENTUM_PARAMS", "CrossProductDumping"]
+
+#: ``momentum.mode`` values
+MOMENTUM_MODES = ("none", "cross_product")
+
+#: the controller's momentum-management parameters
+MOMENTUM_PARAMS = [
+    ParamSpec("momentum.mode", "string", "none",
+              "momentum management beside the attitude law: none, or cross_product (the dipole k (h_w - "
+              "h_target) x B / |B|^2 on dipole_cmd, for the magnetorquers; needs a field model)",
+              choices=MOMENTUM_MODES),
+    _d("momentum.gain", 1.0e-3, "gain k of the cross-product law, 1/s (the decay rate of the wheel momentum "
+       "normal to the field; assumed: a time constant of a sixth of a low orbit)", min=0.0, runtime=True),
+    _da("momentum.target", [0.0, 0.0, 0.0], "wheel momentum the law dumps towards, N m s in B", lengths=(3,),
+        runtime=True),
+]
+
+
+class CrossProductDumping:
+    """The cross-product law of P episodes, gain ``gain`` 1/s towards ``target_B`` (3,) N m s."""
+
+    def __init__(self, gain: float, target_B) -> None:
+        self.gain = float(gain)
+        self.target_B = np.asarray(target_B, dtype=float)
+
+    def dipole(self, h_wheels_B: np.ndarray, b_B: np.ndarray) -> np.ndarray:
+        """The dipole command (P, 3) A m^2 for wheel momenta ``h_wheels_B`` (P, 3) N m s in the field ``b_B``
+        (P, 3) tesla, both in B (zero where the field is zero)."""
+        b = np.asarray(b_B, dtype=float)
+        b2 = np.sum(b * b, axis=-1, keepdims=True)
+        m = self.gain * cross(np.asarray(h_wheels_B, dtype=float) - self.target_B, b)
+        return np.divide(m, b2, out=np.zeros_like(m), where=b2 > 0.0)
