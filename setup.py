@@ -6,7 +6,7 @@ from setuptools import find_packages, setup
 
 PACKAGE = "attitude_sil"
 
-NODES = ("plant", "wheels", "disturbance", "guidance", "controller", "sensors", "estimator")
+NODES = ("plant", "wheels", "disturbance", "guidance", "controller", "sensors", "estimator", "magnetorquers")
 
 #: what the node executables import (package.xml declares the same; test/test_package.py checks both)
 REQUIRES = [

@@ -35,6 +35,7 @@ from attitude_sil.nodes.controller_node import ControllerNode
 from attitude_sil.nodes.disturbance_node import DisturbanceNode
 from attitude_sil.nodes.estimator_node import EstimatorNode
 from attitude_sil.nodes.guidance_node import GuidanceNode
+from attitude_sil.nodes.magnetorquers_node import MagnetorquersNode
 from attitude_sil.nodes.plant_node import PlantNode
 from attitude_sil.nodes.recorder_node import Recorder
 from attitude_sil.nodes.sensors_node import SensorsNode
@@ -55,7 +56,7 @@ __all__ = ["NODE_CLASSES", "namespace_kwargs", "node_overrides", "start_nodes", 
 #: the node class of each graph node name
 NODE_CLASSES = {"plant": PlantNode, "wheels": WheelsNode, "disturbance": DisturbanceNode,
                 "guidance": GuidanceNode, "controller": ControllerNode, "sensors": SensorsNode,
-                "estimator": EstimatorNode}
+                "estimator": EstimatorNode, "magnetorquers": MagnetorquersNode}
 
 
 def namespace_kwargs(namespace: str | None) -> dict:
@@ -157,12 +158,14 @@ def check_children(children: list[subprocess.Popen], when: str = "") -> None:
 
 
 def wait_connected(recorder: Recorder, spin: Callable[[float], None], nodes: list[Node],
-                   children: list[subprocess.Popen], timeout: float, external=(), feedback: str | None = None) -> None:
+                   children: list[subprocess.Popen], timeout: float, external=(), feedback: str | None = None,
+                   magnetic: bool = False) -> None:
     """Spin until every publisher has met every subscriber it should (matched, not merely seen).
 
     ``external``: the graph nodes not started here, whose topics and
     subscriptions are not waited for (:func:`wait_external` waits for them);
-    ``feedback``: ``truth`` or ``estimate`` when the sensing loop runs, else None.
+    ``feedback``: ``truth`` or ``estimate`` when the sensing loop runs, else None; ``magnetic`` where the
+    magnetorquers fly.
 
     Raises
     ------
@@ -193,7 +196,7 @@ def wait_connected(recorder: Recorder, spin: Callable[[float], None], nodes: lis
         for name, sub in recorder.subs.items():
             if name in STEP_TOPICS and PRODUCERS[name] not in external and sub.get_publisher_count() < 1:
                 return False
-        for name, n in graph_subscribers(external, feedback).items():
+        for name, n in graph_subscribers(external, feedback, magnetic).items():
             if recorder.count_subscribers(recorder.resolved[name]) < n + 1:
                 return False
         return True

@@ -56,6 +56,8 @@ from attitude_sil.ros.contract import (
     CLOCK,
     COMMAND_TOPICS,
     EXTERNAL,
+    MAGNETIC_FIELD,
+    MAGNETIC_TOPICS,
     PRODUCERS,
     ROLE_OUTPUTS,
     SENSING_STEP_TOPICS,
@@ -243,7 +245,8 @@ class GraphSession:
             kw = namespace_kwargs(self.namespace)
             outside = [t for t, producer in PRODUCERS.items() if producer in self.external]
             field = self.scn.param("plant", "environment.magnetic_field.model") != "none"
-            topics = recorded_topics(self.scn.has_sensors, applied=self.timing != "stamped", field=field)
+            topics = recorded_topics(self.scn.has_sensors, applied=self.timing != "stamped", field=field,
+                                     magnetic=self.scn.has_magnetorquers)
             self.recorder = Recorder(None, keep=KEPT_TOPICS, topics=topics,
                                      live=self.live, context=self.context, volatile_topics=outside, **kw)
             self.recorder.latency = [] if "controller" in self.external and self.timing != "wall" else None
@@ -262,7 +265,8 @@ class GraphSession:
                 self.plant = start_nodes(self.scn, self.extra, self.context, self.executor, self.nodes, kw,
                                          skip=self.external, quiet=self.quiet)
             wait_connected(self.recorder, self.spin, self.nodes, self.children, self.connect_timeout,
-                           external=self.external, feedback=self.scn.feedback if self.scn.has_sensors else None)
+                           external=self.external, feedback=self.scn.feedback if self.scn.has_sensors else None,
+                           magnetic=self.scn.has_magnetorquers)
             if self.external:
                 wait_external(self.recorder, self.spin, self.nodes, self.children, self.external,
                               self.external_timeout)
@@ -375,11 +379,13 @@ class GraphSession:
         return out
 
     def episode_topics(self) -> list[str]:
-        """The topics an episode fills, one message per step each: the lockstep's, and the sensing loop's
-        where it runs (its nodes not external)."""
+        """The topics an episode fills, one message per step each: the lockstep's, and the sensing loop's and
+        the magnetorquers' where they run (their nodes not external)."""
         topics = episode_topics(self.external)
         if self.scn.has_sensors:
             topics += [t for t in SENSING_STEP_TOPICS if PRODUCERS[t] not in self.external]
+        if self.scn.has_magnetorquers:
+            topics += [t for t in (MAGNETIC_FIELD, *MAGNETIC_TOPICS) if PRODUCERS[t] not in self.external]
         return topics
 
     def _bag_writer(self, record_dir: str | Path, controller_params: dict | None) -> BagWriter:

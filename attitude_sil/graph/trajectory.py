@@ -18,12 +18,14 @@ from attitude_sil.ros.contract import (
     ATTITUDE_SETPOINT,
     BODY_RATE,
     COMMAND_TOPIC,
+    DIPOLE_CMD,
     DISTURBANCE_TORQUE,
     ESTIMATE_ATTITUDE,
     ESTIMATE_ATTITUDE_SIGMA,
     ESTIMATE_BODY_RATE,
     ESTIMATE_GYRO_BIAS,
     MAGNETIC_FIELD,
+    MAGNETIC_TORQUE,
     MAGNETOMETER,
     RATE_SETPOINT,
     STEP_TOPICS,
@@ -41,7 +43,7 @@ __all__ = ["KEPT_TOPICS", "StepAssembler", "command_topics", "trajectory_from_me
 KEPT_TOPICS = (ATTITUDE, BODY_RATE, ATTITUDE_SETPOINT, RATE_SETPOINT, WHEEL_TORQUE, WHEEL_MOMENTUM,
                DISTURBANCE_TORQUE, WHEEL_STATE, *COMMAND_TOPIC.values(), *APPLIED_COMMAND_TOPIC.values(),
                ESTIMATE_ATTITUDE, ESTIMATE_BODY_RATE, ESTIMATE_GYRO_BIAS, ESTIMATE_ATTITUDE_SIGMA, MAGNETIC_FIELD,
-               MAGNETOMETER)
+               MAGNETOMETER, DIPOLE_CMD, MAGNETIC_TORQUE)
 
 
 def command_topics(kept) -> dict[str, str]:
@@ -54,7 +56,8 @@ def command_topics(kept) -> dict[str, str]:
 #: Trajectory field <- topic present only in some runs: the sensing loop's, the field at the spacecraft
 _OPTIONAL_FIELDS = {"q_BN_est": ESTIMATE_ATTITUDE, "omega_BN_B_est": ESTIMATE_BODY_RATE,
                     "gyro_bias_est": ESTIMATE_GYRO_BIAS, "attitude_sigma": ESTIMATE_ATTITUDE_SIGMA,
-                    "magnetic_field_B": MAGNETIC_FIELD, "magnetometer_B": MAGNETOMETER}
+                    "magnetic_field_B": MAGNETIC_FIELD, "magnetometer_B": MAGNETOMETER, "dipole_cmd_B": DIPOLE_CMD,
+                    "magnetic_torque_B": MAGNETIC_TORQUE}
 
 #: Trajectory field <- topic
 _FIELDS = {"q_BN": ATTITUDE, "omega_BN_B": BODY_RATE, "q_RN": ATTITUDE_SETPOINT, "tau_c_B": WHEEL_TORQUE,

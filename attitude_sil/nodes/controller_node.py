@@ -20,8 +20,19 @@ from __future__ import annotations
 import numpy as np
 
 from attitude_sil.core.plant.quaternion import euler_from_quat, quat_conjugate, quat_error
-from attitude_sil.core.sim.build import build_controller
-from attitude_sil.ros.contract import ATTITUDE, ATTITUDE_ERROR, ATTITUDE_SETPOINT, COMMAND_TOPIC, CONTROLLER_INPUTS
+from attitude_sil.core.sim.build import build_controller, build_momentum_law
+from attitude_sil.core.sim.lockstep import StepInputs, StepSequencer
+from attitude_sil.ros.contract import (
+    ATTITUDE,
+    ATTITUDE_ERROR,
+    ATTITUDE_SETPOINT,
+    COMMAND_TOPIC,
+    CONTROLLER_INPUTS,
+    DIPOLE_CMD,
+    DUMPING_INPUTS,
+    MAGNETIC_FIELD,
+    WHEEL_MOMENTUM,
+)
 from attitude_sil.ros.convert import message_to_array, stamp_to_ns
 from attitude_sil.ros.node import LockstepNode, run_node
 from attitude_sil.storage.cdr import stamped_vector_cdr
@@ -41,15 +52,24 @@ class ControllerNode(LockstepNode):
         self.pub_err = self.step_publisher(ATTITUDE_ERROR)
         for name in INPUTS:
             self.step_subscription(name, lambda m, n=name: self._on_input(n, message_to_array(m)[None], m))
+        if self.param("momentum.mode") != "none":
+            self.pub_dipole = self.step_publisher(DIPOLE_CMD)
+            # its own stream of steps: the step's field comes with its state, the momentum after its command
+            self.dumping, self.dumping_seq = StepInputs(DUMPING_INPUTS), StepSequencer()
+            for name in DUMPING_INPUTS:
+                self.step_subscription(name, lambda m, n=name: self._on_dumping(n, message_to_array(m)[None], m))
         self.new_episode()
 
     def rebuild(self) -> None:
         scn = self.scenario()
         self.core = build_controller(scn, 1)
+        self.momentum = build_momentum_law(scn)
 
     def on_parameters_set(self, names: list[str]) -> None:
         v = self.values()
         self.core.configure(v)
+        if any(n.startswith("momentum.") for n in names):
+            self.momentum = build_momentum_law(self.scenario())
         if "controller_type" in names:
             self.core.request(v["controller_type"])
             self.get_logger().info(f"controller_type -> {v['controller_type']} at the next step")
@@ -67,6 +87,23 @@ class ControllerNode(LockstepNode):
         err = euler_from_quat(quat_conjugate(quat_error(slot[ATTITUDE], slot[ATTITUDE_SETPOINT])))
         self.pub_cmd[self.core.kind].publish(stamped_vector_cdr(u[0], t, "body"))
         self.pub_err.publish(stamped_vector_cdr(err[0], t, "body"))
+
+    def _on_dumping(self, name: str, value: np.ndarray, msg) -> None:
+        t = stamp_to_ns(msg.header.stamp)
+        if not self.finite(value):
+            self.get_logger().error(f"{name} at t={t * 1e-9:.6f} s is not finite: {value[0].tolist()}; ignored",
+                                    throttle_duration_sec=1.0)
+            return
+        slot = self.dumping.add(name, t, value)
+        if slot is None:
+            return
+        kind = self.dumping_seq.classify(t, self.dt_ns)
+        if kind not in (StepSequencer.NEW, StepSequencer.NEXT):
+            self.refuse_stamp(f"{name} (with the step's other momentum inputs)", t, kind)
+            return
+        self.dumping.taken(t)
+        m = self.momentum.dipole(slot[WHEEL_MOMENTUM], slot[MAGNETIC_FIELD])
+        self.pub_dipole.publish(stamped_vector_cdr(m[0], t, "body"))
 
 
 def main(args: list[str] | None = None) -> int:

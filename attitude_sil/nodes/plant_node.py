@@ -3,7 +3,8 @@
 Publishes ``/clock``, ``attitude`` and ``body_rate`` for step k (stamp t_k)
 (and ``flexible_mode``, alpha and its rate, for paper 002's flexible model),
 waits for ``wheel_torque``, ``wheel_momentum`` and ``disturbance_torque``
-stamped t_k, integrates to t_k+1 with :class:`attitude_sil.core.sim.models.Plant`
+(and ``magnetic_torque`` where the magnetorquers fly, added to the
+disturbance) stamped t_k, integrates to t_k+1 with :class:`attitude_sil.core.sim.models.Plant`
 and publishes the next step (docs/architecture.md, "Lockstep"). An input that
 does not arrive within ``input_timeout`` (wall time) stops the episode with an
 error; one stamped for another step, non-finite, or a second one for a step is
@@ -51,11 +52,15 @@ from attitude_sil.ros.contract import (
     ATTITUDE_SETPOINT,
     BODY_RATE,
     CLOCK,
+    DISTURBANCE_TORQUE,
     FLEXIBLE_MODE,
     MAGNETIC_FIELD,
+    MAGNETIC_TORQUE,
     ORBIT_TOPIC,
-    PLANT_INPUTS,
     RATE_SETPOINT,
+    WHEEL_MOMENTUM,
+    WHEEL_TORQUE,
+    plant_inputs,
 )
 from attitude_sil.ros.convert import magnetic_field_msg, message_to_array, odometry_msg, stamp_to_ns
 from attitude_sil.ros.node import SchemaNode, run_node, steady_clock
@@ -76,14 +81,16 @@ class PlantNode(SchemaNode):
         self.pub_orbit = self.step_publisher(ORBIT_TOPIC)
         self.pub_field = self.step_publisher(MAGNETIC_FIELD) \
             if self.param("environment.magnetic_field.model") != "none" else None
-        self.subs = [self.step_subscription(name, lambda m, n=name: self._on_input(n, m)) for name in PLANT_INPUTS]
+        # where the magnetorquers fly, their torque too (added to the disturbance's)
+        self.input_names = plant_inputs(self.param("momentum.mode") != "none")
+        self.subs = [self.step_subscription(name, lambda m, n=name: self._on_input(n, m)) for name in self.input_names]
         # a controller on a sim-time timer: /clock waits for the step's setpoints
         gate = (ATTITUDE_SETPOINT, RATE_SETPOINT) if self.param("command_timing") == "sim_timer" else ()
         for name in gate:
             self.step_subscription(name, lambda m, n=name: self._on_input(n, m))
         self.create_service(Trigger, "~/reset", self._on_reset)
         self._wall = steady_clock()
-        self.lockstep = PlantLockstep(PLANT_INPUTS, gate)
+        self.lockstep = PlantLockstep(self.input_names, gate)
         self._pace_timer = None
         self._watchdog = self.create_timer(0.05, self._on_watchdog, clock=self._wall)
 
@@ -135,7 +142,10 @@ class PlantNode(SchemaNode):
                 self.get_logger().info(f"episode complete: {ls.t_ns * 1e-9:g} s of sim time in {wall:.2f} s wall")
         elif action is Action.ADVANCE:
             inp = ls.inputs
-            self.core.advance(*(inp[name] for name in PLANT_INPUTS))
+            tau_ext = inp[DISTURBANCE_TORQUE]
+            if MAGNETIC_TORQUE in inp:  # as the stepwise driver adds them
+                tau_ext = tau_ext + inp[MAGNETIC_TORQUE]
+            self.core.advance(inp[WHEEL_TORQUE], inp[WHEEL_MOMENTUM], tau_ext)
             finite = bool(np.all(np.isfinite(self.core.state.omega_BN_B)))
             self._do(ls.advanced(finite, time.monotonic(), self.param("real_time_factor"), self.param("hold_at")))
         elif action is Action.CLOCK:

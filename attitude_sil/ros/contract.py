@@ -24,7 +24,8 @@ __all__ = ["CLOCK", "ATTITUDE", "BODY_RATE", "ATTITUDE_SETPOINT", "RATE_SETPOINT
            "UNKNOWN_NODE", "IMU", "STAR_TRACKER", "WHEEL_SPEED", "ESTIMATE_ATTITUDE", "ESTIMATE_BODY_RATE",
            "ESTIMATE_GYRO_BIAS", "ESTIMATE_ATTITUDE_SIGMA", "SENSING_TOPICS", "SENSING_STEP_TOPICS", "FEEDBACK_REMAP",
            "feedback_remap", "recorded_topics", "SENSING_ROLES", "TF", "BODY_MODEL", "VIEW_TOPICS", "ORBIT_TOPIC",
-           "MAGNETIC_FIELD", "MAGNETOMETER", "ENVIRONMENT_TOPICS"]
+           "MAGNETIC_FIELD", "MAGNETOMETER", "ENVIRONMENT_TOPICS", "DIPOLE_CMD", "MAGNETIC_TORQUE", "MAGNETIC_TOPICS",
+           "DUMPING_INPUTS", "plant_inputs"]
 
 # -- name rules (ROS 2: a token is a letter or _ then letters, digits, _) -----------------
 _TOKEN = re.compile(r"[A-Za-z_][A-Za-z0-9_]*")
@@ -86,6 +87,9 @@ ESTIMATE_ATTITUDE_SIGMA = "estimate/attitude_sigma"
 ORBIT_TOPIC = "orbit"
 MAGNETIC_FIELD = "magnetic_field"
 MAGNETOMETER = "magnetometer"
+# the magnetorquers (docs/orbit-and-field.md): the controller's dipole command and the rods' torque
+DIPOLE_CMD = "dipole_cmd"
+MAGNETIC_TORQUE = "magnetic_torque"
 
 #: topics of the lockstep (relative names, except /clock); one message per step each,
 #: except the command topics, of which exactly one carries each step
@@ -119,6 +123,16 @@ APPLIED_TOPICS: dict[str, str] = {t: "geometry_msgs/msg/Vector3Stamped" for t in
 #: what the plant needs, all stamped t_k, before it integrates to t_k+1
 PLANT_INPUTS = (WHEEL_TORQUE, WHEEL_MOMENTUM, DISTURBANCE_TORQUE)
 
+def plant_inputs(magnetorquers: bool) -> tuple[str, ...]:
+    """What the plant waits for each step: :data:`PLANT_INPUTS`, and ``magnetic_torque`` where the
+    magnetorquers fly (``momentum.mode``)."""
+    return PLANT_INPUTS + ((MAGNETIC_TORQUE,) if magnetorquers else ())
+
+
+#: what the controller's momentum management reads, stamped t_k, before it commands step k's dipole: the
+#: wheels' momentum (after the step's command) and the field (the magnetometer's with feedback estimate)
+DUMPING_INPUTS = (WHEEL_MOMENTUM, MAGNETIC_FIELD)
+
 #: what the controller needs, all stamped t_k, before it computes step k's command
 CONTROLLER_INPUTS = (ATTITUDE, BODY_RATE, ATTITUDE_SETPOINT, RATE_SETPOINT)
 
@@ -142,7 +156,7 @@ SENSING_STEP_TOPICS = (IMU, WHEEL_SPEED, ESTIMATE_ATTITUDE, ESTIMATE_BODY_RATE, 
                        ESTIMATE_ATTITUDE_SIGMA)
 
 #: ``feedback: estimate``: the controller's state inputs remapped to the estimator's outputs
-FEEDBACK_REMAP = {ATTITUDE: ESTIMATE_ATTITUDE, BODY_RATE: ESTIMATE_BODY_RATE}
+FEEDBACK_REMAP = {ATTITUDE: ESTIMATE_ATTITUDE, BODY_RATE: ESTIMATE_BODY_RATE, MAGNETIC_FIELD: MAGNETOMETER}
 
 
 def feedback_remap(feedback: str) -> list[str]:
@@ -161,6 +175,7 @@ PRODUCERS = {
     ESTIMATE_BODY_RATE: "estimator", ESTIMATE_GYRO_BIAS: "estimator", ESTIMATE_ATTITUDE_SIGMA: "estimator",
     MAGNETOMETER: "sensors",
     **{t: "wheels" for t in APPLIED_TOPICS}, ORBIT_TOPIC: "plant", MAGNETIC_FIELD: "plant",
+    DIPOLE_CMD: "controller", MAGNETIC_TORQUE: "magnetorquers",
 }
 
 #: the nodes that publish the sensing loop's topics (the sensors and the estimator)
@@ -185,18 +200,23 @@ ROLE_INPUTS: dict[str, tuple[str, ...]] = {
     "controller": CONTROLLER_INPUTS,
     "sensors": (ATTITUDE, BODY_RATE, WHEEL_STATE),
     "estimator": (IMU, STAR_TRACKER),
+    "magnetorquers": (DIPOLE_CMD, MAGNETIC_FIELD),
 }
 
+#: what each node reads besides :data:`ROLE_INPUTS` where the magnetorquers fly (``momentum.mode``)
+MAGNETIC_INPUTS: dict[str, tuple[str, ...]] = {"plant": (MAGNETIC_TORQUE,), "controller": DUMPING_INPUTS}
 
-def graph_subscribers(external=(), feedback: str | None = None) -> dict[str, int]:
+
+def graph_subscribers(external=(), feedback: str | None = None, magnetic: bool = False) -> dict[str, int]:
     """How many of the package's graph nodes subscribe to each topic (the recorder comes on top), the nodes
     named in ``external`` (played from outside) left out; ``feedback`` (``truth`` or ``estimate``) when the
-    sensing loop runs, else None."""
+    sensing loop runs, else None; ``magnetic`` where the magnetorquers fly."""
     out: dict[str, int] = {}
     for role, inputs in ROLE_INPUTS.items():
-        if role in external or (feedback is None and role in SENSING_ROLES):
+        if role in external or (feedback is None and role in SENSING_ROLES) \
+                or (not magnetic and role == "magnetorquers"):
             continue
-        for topic in inputs:
+        for topic in inputs + (MAGNETIC_INPUTS.get(role, ()) if magnetic else ()):
             if role == "controller" and feedback == "estimate":
                 topic = FEEDBACK_REMAP.get(topic, topic)
             out[topic] = out.get(topic, 0) + 1
@@ -228,6 +248,11 @@ def episode_topics(external=()) -> list[str]:
 ENVIRONMENT_TOPICS: dict[str, str] = {ORBIT_TOPIC: "nav_msgs/msg/Odometry",
                                       MAGNETIC_FIELD: "sensor_msgs/msg/MagneticField"}
 
+#: the magnetorquers' topics (``momentum.mode``): the dipole the controller commands (A m^2 in B) and the rods'
+#: torque on the body (N m in B, m x B), both stamped t_k and held over the step
+MAGNETIC_TOPICS: dict[str, str] = {DIPOLE_CMD: "geometry_msgs/msg/Vector3Stamped",
+                                   MAGNETIC_TORQUE: "geometry_msgs/msg/Vector3Stamped"}
+
 #: published only by some plant models (paper 002's flexible mode: x = alpha rad, y = d alpha/dt rad/s)
 MODEL_TOPICS: dict[str, str] = {FLEXIBLE_MODE: "geometry_msgs/msg/Vector3Stamped"}
 
@@ -242,19 +267,20 @@ VIEW_TOPICS: dict[str, str] = {TF: "tf2_msgs/msg/TFMessage", BODY_MODEL: "visual
 
 #: everything a run records
 RECORDED_TOPICS: dict[str, str] = {**STEP_TOPICS, **MODEL_TOPICS, **SENSING_TOPICS, **APPLIED_TOPICS,
-                                   **ENVIRONMENT_TOPICS,
+                                   **ENVIRONMENT_TOPICS, **MAGNETIC_TOPICS,
                                    PARAMETER_EVENTS: "rcl_interfaces/msg/ParameterEvent"}
 
 
-def recorded_topics(sensing: bool, applied: bool = False, field: bool = False) -> dict[str, str]:
+def recorded_topics(sensing: bool, applied: bool = False, field: bool = False,
+                    magnetic: bool = False) -> dict[str, str]:
     """What a run records: :data:`RECORDED_TOPICS`, the sensing loop's topics only where it runs (a run
     without it has no empty ``imu``, ``estimate/*``, ... channels in its bag), the wheels' applied
     commands (:data:`APPLIED_TOPICS`) with ``applied`` (a controller on a timer of its own), and
     ``magnetic_field`` (and, with the sensing loop, ``magnetometer``) with ``field`` (the scenario has a field
-    model)."""
+    model), and the magnetorquers' topics (:data:`MAGNETIC_TOPICS`) with ``magnetic``."""
     return {k: v for k, v in RECORDED_TOPICS.items()
             if (sensing or k not in SENSING_TOPICS) and (applied or k not in APPLIED_TOPICS)
-            and (field or k not in (MAGNETIC_FIELD, MAGNETOMETER))}
+            and (field or k not in (MAGNETIC_FIELD, MAGNETOMETER)) and (magnetic or k not in MAGNETIC_TOPICS)}
 
 
 def message_class(type_name: str):

@@ -131,6 +131,8 @@ NODE_PARAMS: dict[str, list[ParamSpec]] = {
         _COMMAND_RATE,
         *ORBIT,
         *_ORBIT_MODEL,
+        replace(MOMENTUM_PARAMS[0], description="the controller's momentum.mode (followed unless set): other than "
+                "none, the plant takes the magnetorquers' magnetic_torque each step"),
         ParamSpec("environment.magnetic_field.model", "string", "none",
                   "the geomagnetic field at the spacecraft, published on magnetic_field: none, dipole (IGRF-14's "
                   "degree 1 of the epoch) or igrf (IGRF-14 to degree 13)", choices=tuple(FIELD_MODELS)),

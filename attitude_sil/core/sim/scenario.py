@@ -35,8 +35,8 @@ from attitude_sil.core.sim.params import GLOBAL_NODE, NODE_PARAMS, SCENARIO_NODE
 from attitude_sil.errors import ScenarioError
 
 __all__ = ["ScenarioError", "Scenario", "load_scenario", "scenario_from_dict", "with_parameter_file", "yaml_problem",
-           "GRAPH_NODES", "SENSOR_NODES", "MAGNETIC_NODES", "ALL_NODES", "PRESETS", "default_config_dir", "derived_values",
-           "effective_values", "flatten_parameters"]
+           "GRAPH_NODES", "SENSOR_NODES", "MAGNETIC_NODES", "ALL_NODES", "PRESETS", "default_config_dir",
+           "derived_values", "effective_values", "flatten_parameters"]
 
 #: the preset scenarios of the five papers (``config/<name>.yaml``)
 PRESETS = ("hst_roll_step", "hawaiisat_lvlh", "flexible_axis", "cubesat_1u", "pitch_axis")
@@ -194,10 +194,11 @@ DERIVED = {"estimator": {"initial_attitude_rpy_deg": ("plant", "initial_attitude
                          "star_tracker.latency_s": ("sensors", "star_tracker.latency_s")},
            **{node: {"command_timing": ("wheels", "command_timing"), "command_rate": ("wheels", "command_rate")}
               for node in ("plant", "guidance")}}
+DERIVED["plant"]["momentum.mode"] = ("controller", "momentum.mode")  # the plant takes the rods' torque
 
 
 #: derived values a node must not set otherwise than their source (the estimator's may differ: they are beliefs)
-SHARED_VALUES = ("command_timing", "command_rate")
+SHARED_VALUES = ("command_timing", "command_rate", "momentum.mode")
 
 
 def derived_values(scn: Scenario, node: str) -> dict[str, Any]:
