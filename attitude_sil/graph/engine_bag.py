@@ -38,8 +38,10 @@ from attitude_sil.ros.contract import (
     BODY_RATE,
     CLOCK,
     COMMAND_TOPIC,
+    DIPOLE_CMD,
     DISTURBANCE_TORQUE,
     MAGNETIC_FIELD,
+    MAGNETIC_TORQUE,
     ORBIT_TOPIC,
     PARAMETER_EVENTS,
     RATE_SETPOINT,
@@ -114,6 +116,9 @@ def _series(scn: Scenario, tr: Trajectory, p: int, stamps: np.ndarray) -> dict:
     if tr.magnetic_field_B is not None:
         series[MAGNETIC_FIELD] = [serialize_message(magnetic_field_msg(b, np.zeros(3), int(t)))
                                   for b, t in zip(tr.magnetic_field_B[p], stamps, strict=True)]
+    if tr.dipole_cmd_B is not None:  # the magnetorquers flew
+        series[DIPOLE_CMD] = encode_stamped_vectors(stamps, "body", tr.dipole_cmd_B[p])
+        series[MAGNETIC_TORQUE] = encode_stamped_vectors(stamps, "body", tr.magnetic_torque_B[p])
     return series
 
 
@@ -177,7 +182,8 @@ def record_episode(scn: Scenario, tr: Trajectory, run_dir: str | Path, *, episod
         # every topic, as the recorder registers them (the sensing loop's not yet: an engine bag of a run with
         # sensors holds the lockstep's topics only; docs/sensors.md)
         field = tr.magnetic_field_B is not None
-        for topic, type_name in {**recorded_topics(False, field=field), **VIEW_TOPICS}.items():
+        magnetic = tr.dipole_cmd_B is not None
+        for topic, type_name in {**recorded_topics(False, field=field, magnetic=magnetic), **VIEW_TOPICS}.items():
             writer.add_topic(_absolute(topic), type_name, offered_qos_yaml(topic), wait=False)
         _write_design(writer, params)
         series = _series(scn, tr, p, stamps)
