@@ -194,6 +194,8 @@ class GraphSession:
                  quiet: bool = False, wait_for_viewer: float | None = None) -> None:
         if controller is not None:
             spec_for("controller", "controller_type").validate(controller, "controller")
+            # the law flown first is the scenario's from here: what it starts (bdot: the magnetorquers) follows
+            scn = scn.with_values("controller", controller_type=controller)
         self.external = check_external(external, controller, scn)
         self.timing = scn.param("wheels", "command_timing")
         if self.timing == "sim_timer" and processes:
@@ -307,7 +309,7 @@ class GraphSession:
         prog = Progress(progress, self.duration)
         schedule = _schedule(self.scn, self.duration)
         accumulator = EpisodeAccumulator(self.scn.values["scenario"], self.scn.param("guidance", "step_time"),
-                                         self.controller, schedule or None)
+                                         self.controller, schedule or None, self.scn.has_magnetorquers)
         assembler = StepAssembler(accumulator, estimate=self.scn.has_sensors, applied=self.timing != "stamped")
         self.recorder.on_controller = _live_swaps(accumulator, schedule, int(round(self.scn.dt * 1e9)))
         self.recorder.start_episode(writer, keeping=keep_trajectory,

@@ -135,7 +135,9 @@ class StepAssembler:
     A step needs ``attitude``, ``attitude_setpoint``, ``wheel_torque`` and its
     command (``voltage_cmd`` or ``torque_cmd``; with ``applied`` the wheels'
     ``applied/*`` of it), and ``estimate/attitude`` with
-    ``estimate=True`` (the sensing loop runs); steps go to the accumulator in
+    ``estimate=True`` (the sensing loop runs), and ``body_rate``,
+    ``wheel_momentum`` (and ``dipole_cmd``) where the accumulator's
+    detumbling and momentum figures report; steps go to the accumulator in
     stamp order, the first copy of a message counting (as
     :func:`trajectory_from_messages` takes them). Only the steps not yet
     complete are held: a few in a lockstep run.
@@ -149,6 +151,9 @@ class StepAssembler:
         self.commands = tuple((APPLIED_COMMAND_TOPIC if applied else COMMAND_TOPIC).values())
         # the stamped parts of a step and their widths (with the sensing loop, a step waits for its estimate too)
         self.width = {**self._WIDTH, ESTIMATE_ATTITUDE: 4} if estimate else dict(self._WIDTH)
+        figures = accumulator.figures  # detumbling and momentum figures: the rate, the momentum, the dipole
+        if figures.enabled:
+            self.width.update({BODY_RATE: 3, WHEEL_MOMENTUM: 3, **({DIPOLE_CMD: 3} if figures.magnetorquers else {})})
         self.pending: dict[int, dict[str, np.ndarray]] = {}
         self.done = -1  # stamp of the last step handed on, ns
         self.steps = 0
@@ -174,7 +179,8 @@ class StepAssembler:
             if len(parts) < len(self.width) + 1:  # and the command
                 return
             del self.pending[first]
+            magnetic = (parts[BODY_RATE], parts[WHEEL_MOMENTUM], parts.get(DIPOLE_CMD)) if BODY_RATE in parts else None
             self.accumulator.add(first * 1e-9, parts[ATTITUDE], parts[ATTITUDE_SETPOINT], parts[WHEEL_TORQUE],
-                                 parts["command"], parts.get(ESTIMATE_ATTITUDE))
+                                 parts["command"], parts.get(ESTIMATE_ATTITUDE), magnetic)
             self.done = first
             self.steps += 1

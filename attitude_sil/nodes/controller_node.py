@@ -20,7 +20,7 @@ from __future__ import annotations
 import numpy as np
 
 from attitude_sil.core.plant.quaternion import euler_from_quat, quat_conjugate, quat_error
-from attitude_sil.core.sim.build import build_controller, build_momentum_law
+from attitude_sil.core.sim.build import build_controller, build_dipole_command
 from attitude_sil.core.sim.lockstep import StepInputs, StepSequencer
 from attitude_sil.ros.contract import (
     ATTITUDE,
@@ -52,7 +52,7 @@ class ControllerNode(LockstepNode):
         self.pub_err = self.step_publisher(ATTITUDE_ERROR)
         for name in INPUTS:
             self.step_subscription(name, lambda m, n=name: self._on_input(n, message_to_array(m)[None], m))
-        if self.param("momentum.mode") != "none":
+        if self.param("magnetorquers"):
             self.pub_dipole = self.step_publisher(DIPOLE_CMD)
             # its own stream of steps: the step's field comes with its state, the momentum after its command
             self.dumping, self.dumping_seq = StepInputs(DUMPING_INPUTS), StepSequencer()
@@ -63,13 +63,13 @@ class ControllerNode(LockstepNode):
     def rebuild(self) -> None:
         scn = self.scenario()
         self.core = build_controller(scn, 1)
-        self.momentum = build_momentum_law(scn)
+        self.magnetic = build_dipole_command(scn)
 
     def on_parameters_set(self, names: list[str]) -> None:
         v = self.values()
         self.core.configure(v)
-        if any(n.startswith("momentum.") for n in names):
-            self.momentum = build_momentum_law(self.scenario())
+        if any(n.startswith("momentum.") for n in names):  # B-dot's difference goes on where it was
+            self.magnetic.dumping = build_dipole_command(self.scenario()).dumping
         if "controller_type" in names:
             self.core.request(v["controller_type"])
             self.get_logger().info(f"controller_type -> {v['controller_type']} at the next step")
@@ -102,7 +102,7 @@ class ControllerNode(LockstepNode):
             self.refuse_stamp(f"{name} (with the step's other momentum inputs)", t, kind)
             return
         self.dumping.taken(t)
-        m = self.momentum.dipole(slot[WHEEL_MOMENTUM], slot[MAGNETIC_FIELD])
+        m = self.magnetic.dipole(self.core.active, slot[WHEEL_MOMENTUM], slot[MAGNETIC_FIELD])
         self.pub_dipole.publish(stamped_vector_cdr(m[0], t, "body"))
 
 

@@ -6,7 +6,8 @@ the dipole among its rods (``rods.axes``), saturates each at
 ``rods.max_dipole`` and publishes ``magnetic_torque`` = m x B (N m in B)
 stamped t_k, held over the step, which the plant takes in lockstep
 (:class:`attitude_sil.core.plant.magnetorquers.Magnetorquers`). The runner
-starts it where the controller commands a dipole (``momentum.mode``).
+starts it where the controller commands a dipole (``momentum.mode``, or
+``bdot`` among its laws).
 """
 
 from __future__ import annotations

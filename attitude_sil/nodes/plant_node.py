@@ -82,7 +82,7 @@ class PlantNode(SchemaNode):
         self.pub_field = self.step_publisher(MAGNETIC_FIELD) \
             if self.param("environment.magnetic_field.model") != "none" else None
         # where the magnetorquers fly, their torque too (added to the disturbance's)
-        self.input_names = plant_inputs(self.param("momentum.mode") != "none")
+        self.input_names = plant_inputs(self.param("magnetorquers"))
         self.subs = [self.step_subscription(name, lambda m, n=name: self._on_input(n, m)) for name in self.input_names]
         # a controller on a sim-time timer: /clock waits for the step's setpoints
         gate = (ATTITUDE_SETPOINT, RATE_SETPOINT) if self.param("command_timing") == "sim_timer" else ()

@@ -125,7 +125,7 @@ PLANT_INPUTS = (WHEEL_TORQUE, WHEEL_MOMENTUM, DISTURBANCE_TORQUE)
 
 def plant_inputs(magnetorquers: bool) -> tuple[str, ...]:
     """What the plant waits for each step: :data:`PLANT_INPUTS`, and ``magnetic_torque`` where the
-    magnetorquers fly (``momentum.mode``)."""
+    magnetorquers fly (``magnetorquers``)."""
     return PLANT_INPUTS + ((MAGNETIC_TORQUE,) if magnetorquers else ())
 
 
@@ -203,7 +203,7 @@ ROLE_INPUTS: dict[str, tuple[str, ...]] = {
     "magnetorquers": (DIPOLE_CMD, MAGNETIC_FIELD),
 }
 
-#: what each node reads besides :data:`ROLE_INPUTS` where the magnetorquers fly (``momentum.mode``)
+#: what each node reads besides :data:`ROLE_INPUTS` where the magnetorquers fly (``magnetorquers``)
 MAGNETIC_INPUTS: dict[str, tuple[str, ...]] = {"plant": (MAGNETIC_TORQUE,), "controller": DUMPING_INPUTS}
 
 
@@ -248,7 +248,7 @@ def episode_topics(external=()) -> list[str]:
 ENVIRONMENT_TOPICS: dict[str, str] = {ORBIT_TOPIC: "nav_msgs/msg/Odometry",
                                       MAGNETIC_FIELD: "sensor_msgs/msg/MagneticField"}
 
-#: the magnetorquers' topics (``momentum.mode``): the dipole the controller commands (A m^2 in B) and the rods'
+#: the magnetorquers' topics (where they fly): the dipole the controller commands (A m^2 in B) and the rods'
 #: torque on the body (N m in B, m x B), both stamped t_k and held over the step
 MAGNETIC_TOPICS: dict[str, str] = {DIPOLE_CMD: "geometry_msgs/msg/Vector3Stamped",
                                    MAGNETIC_TORQUE: "geometry_msgs/msg/Vector3Stamped"}

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from attitude_sil.core.sim.build import build_environment, build_momentum_law
+from attitude_sil.core.sim.build import build_dipole_command, build_environment
 from attitude_sil.core.sim.engine import simulate
 from attitude_sil.core.sim.scenario import load_scenario
 from attitude_sil.graph.session import run_graph
@@ -80,8 +80,7 @@ def test_the_magnetorquers_and_the_dumping_law_fly_in_the_graph_as_in_the_stepwi
         assert np.max(np.abs(a - b)) <= 1e-9 * np.max(np.abs(b)), name
     # it acted: the rods' torque is the law's dipole crossed with the field, and not nothing
     assert np.max(np.abs(engine.magnetic_torque_B)) > 1e-4
-    no_dump = simulate(scn.with_values("controller", **{"momentum.mode": "none"}).with_values(
-        "plant", **{"momentum.mode": "none"}), 1, duration=1.0)
+    no_dump = simulate(scn.with_values("controller", **{"momentum.mode": "none"}), 1, duration=1.0)
     assert np.max(np.abs(no_dump.h_wheels_B - engine.h_wheels_B)) > 1e-6
     bag = open_bag(tmp_path / "bag")
     assert bag.topics["/dipole_cmd"].count == bag.topics["/magnetic_torque"].count == 101
@@ -95,7 +94,7 @@ def test_with_estimate_feedback_the_dumping_law_reads_the_magnetometer(tmp_path)
     m_graph, m_engine = graph.trajectory.dipole_cmd_B[0], engine.dipole_cmd_B[0]
     assert np.max(np.abs(m_graph - m_engine)) <= 1e-9 * np.max(np.abs(m_engine))
     # the magnetometer's, not the truth's: the law on the true field commands another dipole
-    law = build_momentum_law(scn)
+    law = build_dipole_command(scn).dumping
     truth = law.dipole(engine.h_wheels_B[0], engine.magnetic_field_B[0])
     read = law.dipole(engine.h_wheels_B[0], engine.magnetometer_B[0])
     np.testing.assert_array_equal(m_engine, read)

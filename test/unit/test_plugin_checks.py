@@ -39,7 +39,7 @@ def plugins(monkeypatch, tmp_path):
 def test_each_break_is_skipped_in_one_line_naming_it(plugins, capsys):
     plugins("good", *BREAKS)
     registry.dispatch_module()  # the first compiled table: the compile checks run
-    assert registry.names() == ("fuzzy_pid", "ga_flc", "geometric", "pid", "good")
+    assert registry.names() == ("bdot", "fuzzy_pid", "ga_flc", "geometric", "pid", "good")
     lines = capsys.readouterr().err.splitlines()
     assert len(lines) == len(BREAKS), lines
     by_law = {name: next(x for x in lines if f"law plugin {name!r}" in x) for name in BREAKS}
@@ -57,7 +57,7 @@ def test_a_run_that_does_not_use_them_works_on(plugins, capsys):
     q = np.array([[0.0, 0.0, np.sin(0.05), np.cos(0.05)]])
     u = bank.compute(q, np.zeros((1, 3)), np.array([[0.0, 0.0, 0.0, 1.0]]), np.zeros((1, 3)), 0)
     assert np.all(np.isfinite(u)) and abs(u[0, 2]) > 0.0
-    assert bank.names == ("fuzzy_pid", "ga_flc", "geometric", "pid")
+    assert bank.names == ("bdot", "fuzzy_pid", "ga_flc", "geometric", "pid")
 
 
 def test_asking_for_a_skipped_law_says_why(plugins, capsys):

@@ -27,7 +27,7 @@ def _ep(name: str, value: str) -> EntryPoint:
 
 def test_builtins_are_the_modules_of_the_laws_package(plugins):
     plugins()
-    assert registry.names() == registry.builtin_names() == ("fuzzy_pid", "ga_flc", "geometric", "pid")
+    assert registry.names() == registry.builtin_names() == ("bdot", "fuzzy_pid", "ga_flc", "geometric", "pid")
     assert registry.get("pid") is pid.LAW
     assert registry.output_of("geometric") == "torque" and registry.output_of("pid") == "command"
 
@@ -51,7 +51,7 @@ def test_the_entry_point_must_carry_the_laws_name(plugins):
 def test_broken_plugins_are_skipped_with_one_line_each(plugins, capsys):
     plugins(_ep("missing", "no_such_module_xyz:LAW"), _ep("pid", "attitude_sil.core.control.laws.pid:LAW"),
             _ep("not_a_law", "attitude_sil.core.control.registry:names"))
-    assert registry.names() == ("fuzzy_pid", "ga_flc", "geometric", "pid")  # the package works on
+    assert registry.names() == ("bdot", "fuzzy_pid", "ga_flc", "geometric", "pid")  # the package works on
     problems = registry.plugin_problems()
     assert len(problems) == 3
     assert "could not be loaded: ModuleNotFoundError" in problems[0]

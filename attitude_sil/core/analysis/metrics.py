@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from attitude_sil.core.analysis.magnetic import MagneticFigures, magnetic_figures
 from attitude_sil.core.analysis.metric_rows import Sums
 from attitude_sil.core.analysis.pointing import pointing_columns, pointing_errors, pointing_metrics, pointing_start
 from attitude_sil.core.plant.quaternion import euler_from_quat, quat_error, quat_multiply
@@ -393,6 +394,10 @@ def episode_report(scn, tr, controller_type: str, duration_s: float, wall_s: flo
     ape, ake = pointing_errors(tr.q_BN[0], tr.q_RN[0], None if tr.q_BN_est is None else tr.q_BN_est[0])
     settle = float(m["settling_time_s"][0]) if "settling_time_s" in m else None
     out.update(pointing_metrics(tr.t, ape, ake, pointing_start(s, settle)))
+    figures = MagneticFigures(s["metrics.detumble_rate_deg_s"], scn.has_magnetorquers)
+    if figures.enabled:
+        out.update(magnetic_figures(figures, tr.t, tr.omega_BN_B[0], tr.h_wheels_B[0],
+                                    None if tr.dipole_cmd_B is None else tr.dipole_cmd_B[0]))
     if schedule:
         bounds = [0] + [k for _, k, _ in schedule] + [n]
         kinds = [controller_type] + [kind for _, _, kind in schedule]

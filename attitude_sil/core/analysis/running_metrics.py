@@ -30,6 +30,7 @@ import math
 
 import numpy as np
 
+from attitude_sil.core.analysis.magnetic import MagneticFigures
 from attitude_sil.core.analysis.metric_rows import euler_axis, first_crossing
 from attitude_sil.core.analysis.metrics import _EXTRA_KEYS, METRIC_KEYS, PAPER_001_SETTLING_ANGLE, _finite_or_none
 from attitude_sil.core.analysis.pointing import pointing_errors, pointing_metrics, pointing_start
@@ -100,8 +101,10 @@ class EpisodeAccumulator:
     """
 
     def __init__(self, scenario_values: dict, step_time: float, controller_type: str,
-                 schedule: list[tuple[float, int, str]] | None = None) -> None:
+                 schedule: list[tuple[float, int, str]] | None = None, magnetorquers: bool = False) -> None:
         s = scenario_values
+        # detumbling and momentum figures (where a threshold is set, where the magnetorquers fly)
+        self.figures = MagneticFigures(s["metrics.detumble_rate_deg_s"], magnetorquers)
         self.mode = s["metrics.mode"]
         self.axis = int(s["metrics.axis"])
         self.band = float(s["metrics.settling_band"])
@@ -148,10 +151,14 @@ class EpisodeAccumulator:
         self._kinds = [kind for _, _, kind in self.schedule]
 
     # -- feeding --------------------------------------------------------------
-    def add(self, t: float, q_BN, q_RN, tau_c_B, u_cmd, q_BN_est=None) -> None:
-        """One step: time (s), q_BN and q_RN (4,), tau_c_B (3,) N m over the step, u_cmd (3,), and the
-        estimator's q_BN (4,) where the sensing loop runs."""
+    def add(self, t: float, q_BN, q_RN, tau_c_B, u_cmd, q_BN_est=None, magnetic: tuple | None = None) -> None:
+        """One step: time (s), q_BN and q_RN (4,), tau_c_B (3,) N m over the step, u_cmd (3,), the
+        estimator's q_BN (4,) where the sensing loop runs, and where :attr:`figures` reports (its ``enabled``)
+        ``magnetic`` = (omega_BN_B (3,) rad/s, h_wheels_B (3,) N m s, the dipole commanded (3,) A m^2 or
+        None)."""
         self._pointing.append((t, q_BN, q_RN, q_BN_est))
+        if magnetic is not None:
+            self.figures.add(t, *magnetic)
         q_BN = tuple(float(v) for v in q_BN)
         q_RN = tuple(float(v) for v in q_RN)
         tau_norm = math.sqrt(float(tau_c_B[0]) ** 2 + float(tau_c_B[1]) ** 2 + float(tau_c_B[2]) ** 2)
@@ -335,6 +342,7 @@ class EpisodeAccumulator:
             if key in m:
                 out[key] = _finite_or_none(m[key])
         out.update(self.pointing(m.get("settling_time_s")))
+        out.update(self.figures.report())
         if self.schedule or len(self.segments) > 1:
             out["segments"] = [seg.report(seg.t_end) for seg in self.segments]
         return out

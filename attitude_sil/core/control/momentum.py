@@ -14,19 +14,26 @@ orbit the decay is exp(-k <I - b b^T> t), <.> the orbit average in B; a
 direction the field never leaves cannot be dumped.
 
 Its parameters are the controller's (``momentum.*``,
-:data:`MOMENTUM_PARAMS`), so no attitude law changes.
+:data:`MOMENTUM_PARAMS`), so no attitude law changes. :class:`DipoleCommand`
+is the controller's magnetic channel: this law, or B-dot while ``bdot`` is
+the active law.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
+from attitude_sil.core.control.laws.bdot import LAW as BDOT_LAW
+from attitude_sil.core.control.laws.bdot import BDot
 from attitude_sil.core.paramspec import ParamSpec
 from attitude_sil.core.paramspec import double as _d
 from attitude_sil.core.paramspec import double_array as _da
 from attitude_sil.core.plant.quaternion import cross
 
-__all__ = ["MOMENTUM_MODES", "MOMENTUM_PARAMS", "CrossProductDumping"]
+__all__ = ["MOMENTUM_MODES", "MOMENTUM_PARAMS", "CrossProductDumping", "DipoleCommand", "BDOT"]
+
+#: the law whose dipole is B-dot's (``controller_type: bdot``)
+BDOT = BDOT_LAW.name
 
 #: ``momentum.mode`` values
 MOMENTUM_MODES = ("none", "cross_product")
@@ -58,3 +65,26 @@ class CrossProductDumping:
         b2 = np.sum(b * b, axis=-1, keepdims=True)
         m = self.gain * cross(np.asarray(h_wheels_B, dtype=float) - self.target_B, b)
         return np.divide(m, b2, out=np.zeros_like(m), where=b2 > 0.0)
+
+
+class DipoleCommand:
+    """The controller's dipole each step: B-dot (:class:`~attitude_sil.core.control.laws.bdot.BDot`) while
+    ``bdot`` is the active law, else the momentum law ``dumping`` (None: ``momentum.mode: none``, no dipole).
+
+    B-dot's difference runs every step, whichever law is active, so a swap to
+    it starts from the previous step's field, not from zero.
+    """
+
+    def __init__(self, dumping: CrossProductDumping | None, bdot: BDot) -> None:
+        self.dumping = dumping
+        self.bdot = bdot
+
+    def dipole(self, active: str, h_wheels_B: np.ndarray, b_B: np.ndarray) -> np.ndarray:
+        """The dipole command (P, 3) A m^2 of step k under law ``active``, from the wheel momentum
+        ``h_wheels_B`` (P, 3) N m s and the field read ``b_B`` (P, 3) tesla, both at t_k in B."""
+        m_bdot = self.bdot.dipole(b_B)
+        if active == BDOT:
+            return m_bdot
+        if self.dumping is None:
+            return np.zeros_like(m_bdot)
+        return self.dumping.dipole(h_wheels_B, b_B)

@@ -18,7 +18,8 @@ import numpy as np
 from attitude_sil.core.analysis.metrics import flexible_split
 from attitude_sil.core.control import registry
 from attitude_sil.core.control.bank import ControllerBank
-from attitude_sil.core.control.momentum import CrossProductDumping
+from attitude_sil.core.control.laws.bdot import BDot
+from attitude_sil.core.control.momentum import CrossProductDumping, DipoleCommand
 from attitude_sil.core.environment.ephemeris import Ephemeris, FieldAlongOrbit
 from attitude_sil.core.plant.actuators import RPM, SpeedLoopWheels, TorqueActuator
 from attitude_sil.core.plant.disturbance import DisturbanceModel, orbit_rate
@@ -37,7 +38,7 @@ from attitude_sil.core.sim.scenario import Scenario, effective_values
 from attitude_sil.errors import ScenarioError
 
 __all__ = ["build_plant", "build_wheels", "build_disturbance", "build_guidance", "build_controller", "build_sensing",
-           "build_environment", "build_scene", "build_momentum_law", "build_magnetorquers", "build_magnetic_loop",
+           "build_environment", "build_scene", "build_dipole_command", "build_magnetorquers", "build_magnetic_loop",
            "law_bank", "check_episode", "schedule_from_scenario", "flexible_states", "flexible_settling",
            "initial_attitude", "motor_params", "EPISODE_VALUES", "EPISODE_MOTOR", "EPISODE_FAILURE",
            "split_episode_values", "episode_laws", "check_episode_parameters",
@@ -230,10 +231,13 @@ def build_environment(scn: Scenario) -> tuple[Ephemeris, FieldAlongOrbit]:
     return orbit, FieldAlongOrbit(orbit, p["environment.magnetic_field.model"])
 
 
-def build_momentum_law(scn: Scenario) -> CrossProductDumping | None:
-    """The controller's momentum-management law (``momentum.*``), or None with ``momentum.mode: none``."""
-    c = scn.values["controller"]
-    return None if c["momentum.mode"] == "none" else CrossProductDumping(c["momentum.gain"], c["momentum.target"])
+def build_dipole_command(scn: Scenario, gain=None) -> DipoleCommand:
+    """The controller's magnetic channel: the momentum law of ``momentum.*`` (none with ``momentum.mode:
+    none``) and B-dot at ``bdot.gain`` (its k* where 0, as the runner fills it in), or per episode ``gain``
+    (P,) N m s."""
+    c = effective_values(scn, "controller")
+    dumping = None if c["momentum.mode"] == "none" else CrossProductDumping(c["momentum.gain"], c["momentum.target"])
+    return DipoleCommand(dumping, BDot(c["bdot.gain"] if gain is None else gain, scn.dt))
 
 
 def build_magnetorquers(scn: Scenario) -> Magnetorquers:
@@ -242,13 +246,12 @@ def build_magnetorquers(scn: Scenario) -> Magnetorquers:
     return Magnetorquers(rod_axes(m["rods.axes"]), m["rods.max_dipole"])
 
 
-def build_magnetic_loop(scn: Scenario) -> MagneticLoop | None:
+def build_magnetic_loop(scn: Scenario, gain=None) -> MagneticLoop | None:
     """The magnetorquers' loop of the stepwise driver (:class:`~attitude_sil.core.sim.models.MagneticLoop`),
-    or None where the scenario flies no magnetorquers."""
-    law = build_momentum_law(scn)
-    if law is None:
+    or None where the scenario flies no magnetorquers; ``gain`` (P,) per-episode B-dot gains."""
+    if not scn.has_magnetorquers:
         return None
-    return MagneticLoop(build_environment(scn)[1], law, build_magnetorquers(scn))
+    return MagneticLoop(build_environment(scn)[1], build_dipole_command(scn, gain), build_magnetorquers(scn))
 
 
 def build_scene(values: dict) -> BodyScene:

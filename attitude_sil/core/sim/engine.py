@@ -22,6 +22,7 @@ import numpy as np
 
 from attitude_sil.core.analysis.metrics import step_summary, summarize
 from attitude_sil.core.control.bank import ControllerBank
+from attitude_sil.core.control.momentum import BDOT
 from attitude_sil.core.plant.disturbance import DisturbanceModel
 from attitude_sil.core.plant.quaternion import euler_from_quat
 from attitude_sil.core.sim.batch import COMPILED_DISTURBANCES, TRAJECTORY_FIELDS, run_compiled
@@ -216,6 +217,8 @@ class _Run:
         driver, controller = opts.driver, opts.controller
         if driver not in DRIVERS:
             raise ScenarioError(f"driver must be one of {', '.join(DRIVERS)}, got {driver!r}")
+        if isinstance(controller, str):  # the law flown first is the scenario's: what it starts follows (bdot)
+            scn = scn.with_values("controller", controller_type=controller)
         self.K = scn.steps(opts.duration)
         self.dt = scn.dt
         ev = split_episode_values(opts.episode_values)
@@ -240,8 +243,11 @@ class _Run:
         self.field = field if field.model != "none" else None  # the field at the spacecraft, for the record
         self.sensing = build_sensing(scn, P, ev["sensors"].get("seed"), ev["sensors"].get("gyro.bias_deg_h"),
                                      ev["estimator"].get("initial_attitude_rpy_deg"))
-        self.magnetic = build_magnetic_loop(scn)
+        self.magnetic = build_magnetic_loop(scn, (opts.controller_params or {}).get("bdot.gain"))
         self.swaps = dict(schedule_from_scenario(scn) if opts.schedule is None else opts.schedule)
+        if BDOT in self.swaps.values() and self.magnetic is None:
+            raise ScenarioError("a swap to bdot needs the magnetorquers flying from the start: list it in the "
+                                "scenario's schedule.controller_types, or set controller momentum.mode")
         self.compiled = False
         if driver != "stepwise":
             why = compiled_plan(*self.models)
@@ -369,14 +375,14 @@ def _simulate_stepwise(plant, wheels, dist, guide, ctrl, swaps: dict, K: int, dt
         tr.wheel_effort[:, k] = ws.effort
         tr.omega_RN_R[:, k] = w_RN
         if magnetic is not None:
-            tau_ext = tau_ext + _magnetic_step(tr, k, k * dt_ns, s.q_BN, ws.h_wheels_B, magnetic, sensing)
+            tau_ext = tau_ext + _magnetic_step(tr, k, k * dt_ns, s.q_BN, ws.h_wheels_B, magnetic, sensing, ctrl.active)
         if k < K:
             plant.advance(ws.tau_c_B, ws.h_wheels_B, tau_ext)
     return tr
 
 
 def _magnetic_step(tr: Trajectory, k: int, t_ns: int, q_BN: np.ndarray, h_wheels_B: np.ndarray,
-                   magnetic: MagneticLoop, sensing: Sensing | None) -> np.ndarray:
+                   magnetic: MagneticLoop, sensing: Sensing | None, active: str) -> np.ndarray:
     """Step ``k`` of the magnetorquers' loop, kept in ``tr``; returns the rods' torque (P, 3) N m: the field at
     t_k, its magnetometer reading (the controller's with ``feedback: estimate``), the dipole and the torque."""
     b_B = magnetic.field_B(t_ns, q_BN)
@@ -385,6 +391,6 @@ def _magnetic_step(tr: Trajectory, k: int, t_ns: int, q_BN: np.ndarray, h_wheels
         tr.magnetometer_B[:, k] = sensing.suite.magnetometer.sample(b_B, k)
         if sensing.feedback == "estimate":
             b_read = tr.magnetometer_B[:, k]
-    m_cmd, tau_mag = magnetic.step(h_wheels_B, b_B, b_read)
+    m_cmd, tau_mag = magnetic.step(active, h_wheels_B, b_B, b_read)
     tr.magnetic_field_B[:, k], tr.dipole_cmd_B[:, k], tr.magnetic_torque_B[:, k] = b_B, m_cmd, tau_mag
     return tau_mag

@@ -21,7 +21,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from attitude_sil.core.control.momentum import CrossProductDumping
+from attitude_sil.core.control.momentum import DipoleCommand
 from attitude_sil.core.environment.ephemeris import FieldAlongOrbit
 from attitude_sil.core.plant.disturbance import lvlh_attitude
 from attitude_sil.core.plant.kernels import WheelFailure
@@ -196,14 +196,14 @@ class MagneticLoop:
 
     One control step k, after the wheels' (the momentum at t_k is theirs):
     the field at the spacecraft in B at t_k (what the plant publishes on
-    ``magnetic_field``), the dumping law's dipole from the wheel momentum and
-    the field the controller reads (the truth, or the magnetometer's reading
+    ``magnetic_field``), the controller's dipole (B-dot under ``bdot``, else
+    the dumping law's from the wheel momentum) from the field it reads (the truth, or the magnetometer's reading
     with ``feedback: estimate``; the controller node's ``dipole_cmd``), the
     rods' torque m x B on the body held over the step (the ``magnetorquers``
     node's ``magnetic_torque``), which the plant adds to the disturbance.
     """
 
-    def __init__(self, field: FieldAlongOrbit, law: CrossProductDumping, rods: Magnetorquers) -> None:
+    def __init__(self, field: FieldAlongOrbit, law: DipoleCommand, rods: Magnetorquers) -> None:
         self.field = field
         self.law = law
         self.rods = rods
@@ -212,10 +212,12 @@ class MagneticLoop:
         """The true field (P, 3) tesla in B at step time ``t_ns`` for attitudes ``q_BN`` (P, 4)."""
         return self.field.field_B(np.array([t_ns]), q_BN[:, None, :])[:, 0]
 
-    def step(self, h_wheels_B: np.ndarray, b_B: np.ndarray, b_read_B: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """The dipole command (P, 3) A m^2 for the wheel momentum ``h_wheels_B`` (P, 3) N m s and the field
-        the controller reads ``b_read_B`` (P, 3) T, and the rods' torque (P, 3) N m in the true field ``b_B``."""
-        m_cmd = self.law.dipole(h_wheels_B, b_read_B)
+    def step(self, active: str, h_wheels_B: np.ndarray, b_B: np.ndarray,
+             b_read_B: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The dipole command (P, 3) A m^2 under law ``active`` for the wheel momentum ``h_wheels_B`` (P, 3)
+        N m s and the field the controller reads ``b_read_B`` (P, 3) T, and the rods' torque (P, 3) N m in the
+        true field ``b_B``."""
+        m_cmd = self.law.dipole(active, h_wheels_B, b_read_B)
         return m_cmd, self.rods.torque(m_cmd, b_B)
 
 

@@ -80,6 +80,13 @@ def _rods_rule(value: list) -> str:
     return ""
 
 
+#: whether the magnetorquers fly (plant and controller): the runner sets it where the controller commands a
+#: dipole (momentum.mode, or bdot among the laws it flies)
+_MAGNETORQUERS = ParamSpec(
+    "magnetorquers", "bool", False,
+    "the magnetorquers fly (set by the runner where momentum.mode is not none or bdot is among the laws): the "
+    "plant takes their magnetic_torque each step, the controller commands dipole_cmd")
+
 _COMMAND_RATE = _d("command_rate", 0.0, "sim_timer: the controller's timer rate, Hz (0: the control rate); its "
                    "period must be a whole number of control periods", min=0.0)
 
@@ -131,8 +138,7 @@ NODE_PARAMS: dict[str, list[ParamSpec]] = {
         _COMMAND_RATE,
         *ORBIT,
         *_ORBIT_MODEL,
-        replace(MOMENTUM_PARAMS[0], description="the controller's momentum.mode (followed unless set): other than "
-                "none, the plant takes the magnetorquers' magnetic_torque each step"),
+        _MAGNETORQUERS,
         ParamSpec("environment.magnetic_field.model", "string", "none",
                   "the geomagnetic field at the spacecraft, published on magnetic_field: none, dipole (IGRF-14's "
                   "degree 1 of the epoch) or igrf (IGRF-14 to degree 13)", choices=tuple(FIELD_MODELS)),
@@ -234,6 +240,7 @@ NODE_PARAMS: dict[str, list[ParamSpec]] = {
         *ORBIT,
         *AERO,
         *MOMENTUM_PARAMS,
+        _MAGNETORQUERS,
     ],
     "magnetorquers": [
         _d("control_period", 0.01, "control step dt, s (shared by every node)", min=0.0, min_exclusive=True, max=1.0),
@@ -316,6 +323,8 @@ NODE_PARAMS: dict[str, list[ParamSpec]] = {
         _d("metrics.settling_angle_deg", -1.0,
            "tracking: settled once the principal error angle stays below this, deg (negative: the angle of "
            "R1(0.1 deg) R2(0.1 deg) R3(0.1 deg), paper 001)"),
+        _d("metrics.detumble_rate_deg_s", 0.0, "detumble_time_s is the time from which |omega_BN| stays below "
+           "this rate, deg/s (0: not reported)", min=0.0),
         _d("metrics.beta", 1.0, "weight beta of paper 001's fitness f = -(Ts + beta Ce)", min=0.0),
         ParamSpec("feedback", "string", "truth", "what the controller reads: truth (the plant's attitude and "
                   "rate) or estimate (the estimator's, fed by the sensors node)", choices=("truth", "estimate")),

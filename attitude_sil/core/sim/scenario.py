@@ -26,9 +26,14 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import yaml
 
 from attitude_sil.core import yaml12
+from attitude_sil.core.control.laws.bdot import detumble_gain
+from attitude_sil.core.control.momentum import BDOT
+from attitude_sil.core.environment.ephemeris import Ephemeris
+from attitude_sil.core.plant.rigid_body import inertia_matrix
 from attitude_sil.core.sensing.models import SensorSuite
 from attitude_sil.core.sim.paramfile import node_key, section_node
 from attitude_sil.core.sim.params import GLOBAL_NODE, NODE_PARAMS, SCENARIO_NODE
@@ -120,8 +125,10 @@ class Scenario:
 
     @property
     def has_magnetorquers(self) -> bool:
-        """Whether the magnetorquers fly: the controller commands a dipole (``momentum.mode``)."""
-        return self.values["controller"]["momentum.mode"] != "none"
+        """Whether the magnetorquers fly: the controller commands a dipole (``momentum.mode``, or ``bdot``
+        among the laws it flies, first or scheduled)."""
+        laws = {self.values["controller"]["controller_type"], *self.values[SCENARIO_NODE]["schedule.controller_types"]}
+        return self.values["controller"]["momentum.mode"] != "none" or BDOT in laws
 
     @property
     def nodes(self) -> tuple[str, ...]:
@@ -194,11 +201,10 @@ DERIVED = {"estimator": {"initial_attitude_rpy_deg": ("plant", "initial_attitude
                          "star_tracker.latency_s": ("sensors", "star_tracker.latency_s")},
            **{node: {"command_timing": ("wheels", "command_timing"), "command_rate": ("wheels", "command_rate")}
               for node in ("plant", "guidance")}}
-DERIVED["plant"]["momentum.mode"] = ("controller", "momentum.mode")  # the plant takes the rods' torque
 
 
 #: derived values a node must not set otherwise than their source (the estimator's may differ: they are beliefs)
-SHARED_VALUES = ("command_timing", "command_rate", "momentum.mode")
+SHARED_VALUES = ("command_timing", "command_rate")
 
 
 def derived_values(scn: Scenario, node: str) -> dict[str, Any]:
@@ -206,8 +212,28 @@ def derived_values(scn: Scenario, node: str) -> dict[str, Any]:
     estimator starts from the plant's initial attitude and expects the sensors' star tracker schedule; the
     plant and the guidance order ``/clock`` for the controller timing the wheels hold commands for."""
     mine = scn.explicit.get(node, {})
-    return {name: copy.deepcopy(scn.values[src][src_name]) for name, (src, src_name) in DERIVED.get(node, {}).items()
-            if name not in mine}
+    out = {name: copy.deepcopy(scn.values[src][src_name]) for name, (src, src_name) in DERIVED.get(node, {}).items()
+           if name not in mine}
+    if node in ("plant", "controller"):  # the magnetorquers fly: the plant takes their torque, the controller
+        out["magnetorquers"] = scn.has_magnetorquers  # commands them
+    if node == "controller" and scn.values[node]["bdot.gain"] == 0.0 and scn.has_magnetorquers:
+        out["bdot.gain"] = detumble_gain_star(scn)
+    return out
+
+
+def detumble_gain_star(scn: Scenario) -> float:
+    """Avanzini and Giulietti's B-dot gain k* (:func:`~attitude_sil.core.control.laws.bdot.detumble_gain`)
+    for the plant's orbit and inertia: n from the orbit's energy at t = 0, xi_m the angle between the orbit's
+    normal and the Earth's axis (the geomagnetic equator taken as the equator: the dipole's 9.7 deg tilt turns
+    with the Earth), J_min the smallest principal inertia."""
+    p = scn.values["plant"]
+    now = Ephemeris(p, scn.dt).at(0)
+    r, v, mu = np.linalg.norm(now.r_N), np.linalg.norm(now.v_N), float(p["orbit.mu"])
+    a = 1.0 / (2.0 / r - v * v / mu)  # vis-viva
+    normal = np.cross(now.r_N, now.v_N)
+    xi_m = float(np.arccos(min(abs(normal[2]) / np.linalg.norm(normal), 1.0)))
+    j_min = float(np.min(np.linalg.eigvalsh(inertia_matrix(p["inertia"]))))
+    return detumble_gain(float(np.sqrt(mu / a**3)), xi_m, j_min)
 
 
 def effective_values(scn: Scenario, node: str) -> dict[str, Any]:
@@ -243,8 +269,9 @@ def _check_consistency(scn: Scenario) -> None:
                                     f"set it under {src} (the {node} follows)")
     _check_one_orbit(scn)
     if scn.has_magnetorquers and scn.values["plant"]["environment.magnetic_field.model"] == "none":
-        raise ScenarioError(f"{scn.source}: controller.momentum.mode {scn.values['controller']['momentum.mode']} "
-                            "drives the magnetorquers, which need a field: set plant "
+        why = "bdot" if scn.values["controller"]["momentum.mode"] == "none" else \
+            f"controller.momentum.mode {scn.values['controller']['momentum.mode']}"
+        raise ScenarioError(f"{scn.source}: {why} drives the magnetorquers, which need a field: set plant "
                             "environment.magnetic_field.model (dipole or igrf)")
     dt = scn.dt
     k = scn.duration / dt
