@@ -8,7 +8,9 @@ relative; the orbit topic carries the propagator's position and velocity.
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
+from attitude_sil.core.analysis.metrics import episode_report
 from attitude_sil.core.sim.build import build_dipole_command, build_environment
 from attitude_sil.core.sim.engine import simulate
 from attitude_sil.core.sim.scenario import load_scenario
@@ -99,3 +101,22 @@ def test_with_estimate_feedback_the_dumping_law_reads_the_magnetometer(tmp_path)
     read = law.dipole(engine.h_wheels_B[0], engine.magnetometer_B[0])
     np.testing.assert_array_equal(m_engine, read)
     assert np.max(np.abs(truth - m_engine)) > 0.0
+
+
+def test_bdot_detumbles_in_the_graph_as_in_the_stepwise_driver():
+    # the cube on B-dot at k* (the runner fills the gain in): trajectories and the run's figures the same
+    scn = load_scenario(CONFIG / "cubesat_1u_detumble.yaml")
+    graph = run_graph(scn, duration=3.0, keep_trajectory=True, progress=False)
+    engine = simulate(scn, 1, duration=3.0)
+    for name in ("omega_BN_B", "dipole_cmd_B", "magnetic_torque_B", "h_wheels_B"):
+        a, b = getattr(graph.trajectory, name)[0], getattr(engine, name)[0]
+        assert a.shape == b.shape == (31, 3), name
+        assert np.max(np.abs(a - b)) <= 1e-9 * np.max(np.abs(b)), name
+    assert np.max(np.abs(engine.dipole_cmd_B)) > 0.01  # A m^2: it acts
+    assert np.array_equal(engine.u_cmd, np.zeros_like(engine.u_cmd))  # the wheels idle
+    figures = ("detumble_time_s", "wheel_momentum_peak_Nms", "wheel_momentum_final_Nms", "dipole_effort_Am2s")
+    report = episode_report(scn, engine, "bdot", 3.0, 1.0)
+    assert report["detumble_time_s"] is None and report["dipole_effort_Am2s"] > 0.0
+    for key in figures:  # the graph's running figures against the engine trajectory's
+        expected = None if report[key] is None else pytest.approx(report[key], rel=1e-9, abs=1e-15)
+        assert graph.metrics[key] == expected, key

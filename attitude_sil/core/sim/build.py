@@ -237,7 +237,7 @@ def build_dipole_command(scn: Scenario, gain=None) -> DipoleCommand:
     (P,) N m s."""
     c = effective_values(scn, "controller")
     dumping = None if c["momentum.mode"] == "none" else CrossProductDumping(c["momentum.gain"], c["momentum.target"])
-    return DipoleCommand(dumping, BDot(c["bdot.gain"] if gain is None else gain, scn.dt))
+    return DipoleCommand(dumping, BDot(c["bdot.gain"] if gain is None else gain, c["control_period"]))
 
 
 def build_magnetorquers(scn: Scenario) -> Magnetorquers:
