@@ -66,7 +66,7 @@ def test_a_flown_law_whose_plugin_did_not_load_says_so(monkeypatch, capsys):
         with pytest.raises(BagError) as err:
             check_installed("broken_law", "bags/a")
         assert str(err.value) == ("bags/a: the bag flew controller_type broken_law, whose plugin did not load "
-                                  "(installed: fuzzy_pid, ga_flc, geometric, pid); the line above says why")
+                                  "(installed: bdot, fuzzy_pid, ga_flc, geometric, pid); the line above says why")
     finally:
         monkeypatch.undo()
         registry.refresh()
