@@ -16,6 +16,8 @@ from attitude_sil.core.sim.engine import simulate_summary
 from attitude_sil.core.sim.params import spec_for
 from attitude_sil.core.sim.scenario import load_scenario, with_parameter_file
 from attitude_sil.errors import SpecError
+from attitude_sil.storage.reader import open_bag
+from attitude_sil.storage.writer import PARAMETERS_KEY
 from attitude_sil.tuning.evaluate import PENALTY, evaluate
 from attitude_sil.tuning.optimize import run_tuning
 from attitude_sil.tuning.spec import load_spec, untunable
@@ -118,5 +120,6 @@ def test_graph_evaluation_sets_a_scalar_gene_and_gives_the_batch_cost(tmp_path):
         live = graph(x)  # each candidate's value set through the controller's parameter service
     assert batch.F[0, 0] != batch.F[1, 0]
     assert np.allclose(live.F, batch.F, rtol=1e-9, atol=1e-12), (live.F, batch.F)
-    snapshot = (tmp_path / "bags" / "g001_c001" / "metadata.yaml").read_text()
-    assert f"{GENE}: 0.45" in snapshot  # the bag records the value the candidate flew
+    # the bag records the value the candidate flew (read as YAML: the text wraps where the parameters fall)
+    snapshot = yaml.safe_load(open_bag(tmp_path / "bags" / "g001_c001").custom_data[PARAMETERS_KEY])
+    assert snapshot["/**/controller"]["ros__parameters"][GENE] == 0.45

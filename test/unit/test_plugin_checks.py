@@ -64,7 +64,7 @@ def test_asking_for_a_skipped_law_says_why(plugins, capsys):
     plugins("no_compile")
     registry.dispatch_module()
     with pytest.raises(ValueError, match="unknown controller_type 'no_compile' \\(law plugin 'no_compile'.*does "
-                                         "not compile.*\\); known: fuzzy_pid"):
+                                         "not compile.*\\); known: bdot, fuzzy_pid"):
         registry.get("no_compile")
 
 

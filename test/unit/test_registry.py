@@ -64,7 +64,7 @@ def test_broken_plugins_are_skipped_with_one_line_each(plugins, capsys):
 
 def test_an_unknown_law_is_refused_naming_the_known_ones(plugins):
     plugins()
-    with pytest.raises(ScenarioError, match="unknown controller_type 'bang'; known: fuzzy_pid, ga_flc"):
+    with pytest.raises(ScenarioError, match="unknown controller_type 'bang'; known: bdot, fuzzy_pid, ga_flc"):
         registry.get("bang")
 
 
