@@ -127,3 +127,16 @@ def test_the_direction_the_field_keeps_to_is_not_dumped():
     assert kept == pytest.approx(np.exp(-values[0] * kt), rel=0.05)
     for i in (1, 2):  # ... while the directions normal to it lose most of theirs
         assert abs(vectors[:, i] @ h_end) < 0.25 * abs(vectors[:, i] @ h0)
+
+
+def test_per_episode_gains_fly_each_episode_as_its_own_run():
+    # what the tuner and Monte Carlo hand the engine: momentum.gain and momentum.target per episode
+    scn = _scenario(200.0, dt=0.5).with_values("controller", **{"momentum.gain": 0.02})
+    gains, targets = np.array([0.01, 0.05]), np.array([[0.0, 0.0, 0.0], [0.1, -0.1, 0.05]])
+    both = simulate(scn, 2, controller_params={"momentum.gain": gains, "momentum.target": targets})
+    for p in range(2):
+        alone = simulate(scn.with_values("controller", **{"momentum.gain": float(gains[p]),
+                                                          "momentum.target": targets[p].tolist()}))
+        np.testing.assert_allclose(both.dipole_cmd_B[p], alone.dipole_cmd_B[0], rtol=1e-12, atol=1e-12)
+        np.testing.assert_allclose(both.h_wheels_B[p], alone.h_wheels_B[0], rtol=1e-12, atol=1e-15)
+    assert np.max(np.abs(both.dipole_cmd_B[0] - both.dipole_cmd_B[1])) > 1.0  # A m^2: the gains told apart

@@ -52,10 +52,11 @@ MOMENTUM_PARAMS = [
 
 
 class CrossProductDumping:
-    """The cross-product law of P episodes, gain ``gain`` 1/s towards ``target_B`` (3,) N m s."""
+    """The cross-product law of P episodes, gain ``gain`` 1/s (scalar or (P,)) towards ``target_B`` N m s
+    ((3,) or (P, 3))."""
 
-    def __init__(self, gain: float, target_B) -> None:
-        self.gain = float(gain)
+    def __init__(self, gain, target_B) -> None:
+        self.gain = np.asarray(gain, dtype=float).reshape(-1, 1)
         self.target_B = np.asarray(target_B, dtype=float)
 
     def dipole(self, h_wheels_B: np.ndarray, b_B: np.ndarray) -> np.ndarray:

@@ -231,13 +231,14 @@ def build_environment(scn: Scenario) -> tuple[Ephemeris, FieldAlongOrbit]:
     return orbit, FieldAlongOrbit(orbit, p["environment.magnetic_field.model"])
 
 
-def build_dipole_command(scn: Scenario, gain=None) -> DipoleCommand:
+def build_dipole_command(scn: Scenario, params: dict | None = None) -> DipoleCommand:
     """The controller's magnetic channel: the momentum law of ``momentum.*`` (none with ``momentum.mode:
-    none``) and B-dot at ``bdot.gain`` (its k* where 0, as the runner fills it in), or per episode ``gain``
-    (P,) N m s."""
-    c = effective_values(scn, "controller")
+    none``) and B-dot at ``bdot.gain`` (its k* where 0, as the runner fills it in); ``params`` per-episode
+    controller values (``momentum.gain`` (P,), ``momentum.target`` (P, 3), ``bdot.gain`` (P,)) override them,
+    as they do the laws' (:func:`build_controller`)."""
+    c = {**effective_values(scn, "controller"), **(params or {})}
     dumping = None if c["momentum.mode"] == "none" else CrossProductDumping(c["momentum.gain"], c["momentum.target"])
-    return DipoleCommand(dumping, BDot(c["bdot.gain"] if gain is None else gain, c["control_period"]))
+    return DipoleCommand(dumping, BDot(c["bdot.gain"], c["control_period"]))
 
 
 def build_magnetorquers(scn: Scenario) -> Magnetorquers:
@@ -246,12 +247,12 @@ def build_magnetorquers(scn: Scenario) -> Magnetorquers:
     return Magnetorquers(rod_axes(m["rods.axes"]), m["rods.max_dipole"])
 
 
-def build_magnetic_loop(scn: Scenario, gain=None) -> MagneticLoop | None:
+def build_magnetic_loop(scn: Scenario, params: dict | None = None) -> MagneticLoop | None:
     """The magnetorquers' loop of the stepwise driver (:class:`~attitude_sil.core.sim.models.MagneticLoop`),
-    or None where the scenario flies no magnetorquers; ``gain`` (P,) per-episode B-dot gains."""
+    or None where the scenario flies no magnetorquers; ``params`` as :func:`build_dipole_command`'s."""
     if not scn.has_magnetorquers:
         return None
-    return MagneticLoop(build_environment(scn)[1], build_dipole_command(scn, gain), build_magnetorquers(scn))
+    return MagneticLoop(build_environment(scn)[1], build_dipole_command(scn, params), build_magnetorquers(scn))
 
 
 def build_scene(values: dict) -> BodyScene:

@@ -243,7 +243,7 @@ class _Run:
         self.field = field if field.model != "none" else None  # the field at the spacecraft, for the record
         self.sensing = build_sensing(scn, P, ev["sensors"].get("seed"), ev["sensors"].get("gyro.bias_deg_h"),
                                      ev["estimator"].get("initial_attitude_rpy_deg"))
-        self.magnetic = build_magnetic_loop(scn, (opts.controller_params or {}).get("bdot.gain"))
+        self.magnetic = build_magnetic_loop(scn, {**(opts.controller_params or {}), **ev["controller"]} or None)
         self.swaps = dict(schedule_from_scenario(scn) if opts.schedule is None else opts.schedule)
         if BDOT in self.swaps.values() and self.magnetic is None:
             raise ScenarioError("a swap to bdot needs the magnetorquers flying from the start: list it in the "
