@@ -27,6 +27,9 @@ Costs (``cost.name``):
   plus the two-level penalty of eq. 8 on theta(tf), q(tf); tf is the gene
   ``final_time``.
 * ``ts_ce`` — the two objectives (Ts, Ce) for NSGA-II, with the death penalty.
+* ``momentum`` — the peak wheel momentum |h_w| (N m s) plus ``cost.w_dipole``
+  times the dipole effort (A m^2 s) of a scenario whose magnetorquers dump
+  it (docs/orbit-and-field.md); the gene is ``momentum.gain``.
 
 A robust-design cost (the spec's ``robust`` section: ``runs``, ``statistic``
 ``mean`` or ``max``, ``seed``, ``dispersions`` as a Monte Carlo spec's) runs
@@ -41,6 +44,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from attitude_sil.core.analysis.metrics import summarize
+from attitude_sil.core.control.momentum import PER_EPISODE_SCALARS
 from attitude_sil.core.plant.quaternion import euler_from_quat
 from attitude_sil.core.sim.build import episode_parameter_faults
 from attitude_sil.core.sim.engine import simulate, simulate_summary
@@ -148,7 +152,7 @@ def evaluate(spec: TuningSpec, x: np.ndarray, first: int = 0, threads: int | Non
         final_time = None if final_time is None else np.repeat(final_time, reps, axis=0)
     n = n_cand * reps
     groups = scalar_groups(params, n)
-    params = {k: v for k, v in params.items() if not is_scalar(k)}
+    params = {k: v for k, v in params.items() if not is_scalar(k) or k in PER_EPISODE_SCALARS}
     cost = spec.cost
     name = cost["name"]
     n_obj = 2 if name == "ts_ce" else 1
@@ -205,7 +209,8 @@ def scalar_groups(params: dict[str, np.ndarray], n: int) -> list[tuple[dict[str,
     A law's parameter record holds a scalar parameter once for all its
     episodes, so the episodes of a group run as one batch with those values
     set in the scenario (:func:`scenario_with`), and a list parameter keeps
-    its row per episode.
+    its row per episode, and so does a scalar of the controller's magnetic
+    channel (:data:`~attitude_sil.core.control.momentum.PER_EPISODE_SCALARS`).
 
     Parameters
     ----------
@@ -221,7 +226,7 @@ def scalar_groups(params: dict[str, np.ndarray], n: int) -> list[tuple[dict[str,
         the values (ROS types: int for an integer parameter) and the indices
         of its episodes. Without scalar genes, one group of every episode.
     """
-    names = [k for k in params if is_scalar(k)]
+    names = [k for k in params if is_scalar(k) and k not in PER_EPISODE_SCALARS]
     if not names:
         return [({}, np.arange(n))]
     integer = {k: spec_for("controller", k).kind == "integer" for k in names}
@@ -325,6 +330,11 @@ def score(spec: TuningSpec, scn, run: EpisodeSummary | Trajectory, final_time, F
         _add(terms, "settling_time_s", m["settling_time_s"])
     elif name == "paper004_objective":
         F[:, 0] += _paper004(run, scn, cost, final_time, terms)
+    elif name == "momentum":
+        peak, effort = m["wheel_momentum_peak_Nms"], m["dipole_effort_Am2s"]
+        F[:, 0] += np.nan_to_num(peak, nan=PENALTY, posinf=PENALTY) + float(cost.get("w_dipole", 0.0)) * effort
+        _add(terms, "wheel_momentum_peak_Nms", peak)
+        _add(terms, "dipole_effort_Am2s", effort)
 
 
 def _paper004(tr, scn, cost, final_time, terms) -> np.ndarray:

@@ -46,7 +46,7 @@ __all__ = ["SpecError", "SECTIONS", "Gene", "TuningSpec", "load_spec", "apply_ov
            "COSTS", "output_path", "untunable", "is_scalar"]
 
 ALGORITHMS = ("ga", "binary_ga", "pso", "mixed_ga", "nsga2", "root_locus")
-COSTS = ("paper000_j", "paper001_fitness", "mse", "paper004_objective", "ts_ce")
+COSTS = ("paper000_j", "paper001_fitness", "mse", "paper004_objective", "ts_ce", "momentum")
 _TOP = {"name", "description", "scenarios", "conditions", "controller", "genome", "cost", "algorithm", "seed",
         "evaluation", "output", "record", "robust"}
 
@@ -83,7 +83,7 @@ SECTIONS: dict[str, dict[str, Any]] = {
     "cost": {"name": _choice(COSTS), "beta": _real(0.0), "limit": _real(0.0, low_open=True),
              "w_ts": _real(0.0), "w_itae": _real(0.0),
              "w1": _real(0.0), "w2": _real(0.0), "w3": _real(0.0), "k1": _real(0.0), "k2": _real(0.0),
-             "K": _real(0.0), "theta_max_deg": _real(0.0, 180.0, low_open=True)},
+             "K": _real(0.0), "theta_max_deg": _real(0.0, 180.0, low_open=True), "w_dipole": _real(0.0)},
     "algorithm": {"name": _choice(ALGORITHMS), "pop_size": _integer(2, 100_000), "generations": _integer(1, 10**9),
                   "crossover": _real(0.0, 1.0), "mutation": _real(0.0, 1.0), "eta_c": _real(0.0, low_open=True),
                   "eta_m": _real(0.0, low_open=True), "w": _real(0.0), "c1": _real(0.0), "c2": _real(0.0),
@@ -325,6 +325,9 @@ def load_spec(path: str | Path) -> TuningSpec:
     cost = _section(str(p), "cost", data["cost"])
     algorithm = _section(str(p), "algorithm", data["algorithm"])
     _check_combination(str(p), genome, cost, algorithm)
+    if cost["name"] == "momentum" and not all(s.has_magnetorquers for s in scenarios):
+        raise _fail(p, "cost momentum judges the wheel momentum the magnetorquers dump: every scenario must fly "
+                    "them (controller momentum.mode cross_product)")
     conditions = data.get("conditions") or [{}]
     if not isinstance(conditions, list) or not all(isinstance(c, dict) for c in conditions):
         raise _fail(p, "conditions must be a list of mappings node.param: value")

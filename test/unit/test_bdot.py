@@ -14,7 +14,7 @@ import math
 import numpy as np
 import pytest
 
-from attitude_sil.core.analysis.magnetic import MagneticFigures
+from attitude_sil.core.analysis.magnetic import MagneticFigures, magnetic_columns
 from attitude_sil.core.control.laws.bdot import BDot, detumble_gain
 from attitude_sil.core.plant.quaternion import quat_multiply, quat_to_dcm, rotation_quaternion
 from attitude_sil.core.sim.engine import simulate
@@ -83,3 +83,19 @@ def test_bdot_without_a_field_or_from_a_swap_alone_is_one_line():
     pid = load_scenario(PRESET).with_values("controller", controller_type="pid")
     with pytest.raises(ScenarioError, match="a swap to bdot needs the magnetorquers"):
         simulate(pid, 1, duration=1.0, schedule=[(5, "bdot")])
+
+
+def test_the_batch_figures_equal_the_running_ones():
+    # magnetic_columns (the tuner's and Monte Carlo's summaries) against MagneticFigures (a run's, a bag's), on
+    # two episodes of the cube: one that detumbles within the run, one that does not
+    scn = load_scenario(PRESET).with_values("/**", control_period=0.5).with_values("plant", duration=3000.0)
+    k_star = derived_values(scn, "controller")["bdot.gain"]
+    tr = simulate(scn, 2, controller_params={"bdot.gain": k_star * np.array([1.0, 0.25])})
+    columns = magnetic_columns(tr.t, tr.omega_BN_B, tr.h_wheels_B, tr.dipole_cmd_B, 0.5)
+    for p in range(2):
+        fig = MagneticFigures(0.5, True)
+        for k in range(tr.t.size):
+            fig.add(float(tr.t[k]), tr.omega_BN_B[p, k], tr.h_wheels_B[p, k], tr.dipole_cmd_B[p, k])
+        for key, value in fig.report().items():
+            assert columns[key][p] == pytest.approx(np.nan if value is None else value, rel=1e-12, nan_ok=True), key
+    assert np.isfinite(columns["detumble_time_s"][0]) and np.isnan(columns["detumble_time_s"][1])

@@ -19,7 +19,9 @@ from attitude_sil.core.control.momentum import CrossProductDumping
 from attitude_sil.core.plant.magnetorquers import Magnetorquers, rod_axes
 from attitude_sil.core.sim.engine import simulate
 from attitude_sil.core.sim.scenario import default_config_dir, load_scenario
-from attitude_sil.errors import ScenarioError
+from attitude_sil.errors import ScenarioError, SpecError
+from attitude_sil.tuning.evaluate import evaluate
+from attitude_sil.tuning.spec import load_spec
 
 PRESET = default_config_dir() / "hst_momentum_dump.yaml"
 ORBIT_S = 5720.3648028657235  # 2 pi sqrt(a^3 / mu) of the preset's a = 6913137 m
@@ -140,3 +142,24 @@ def test_per_episode_gains_fly_each_episode_as_its_own_run():
         np.testing.assert_allclose(both.dipole_cmd_B[p], alone.dipole_cmd_B[0], rtol=1e-12, atol=1e-12)
         np.testing.assert_allclose(both.h_wheels_B[p], alone.h_wheels_B[0], rtol=1e-12, atol=1e-15)
     assert np.max(np.abs(both.dipole_cmd_B[0] - both.dipole_cmd_B[1])) > 1.0  # A m^2: the gains told apart
+
+
+def test_tune_scores_the_dumping_gain_per_candidate(tmp_path):
+    spec = load_spec(default_config_dir() / "tune_hst_momentum_dump.yaml")
+    spec.scenarios = [s.with_values("plant", duration=600.0) for s in spec.scenarios]
+    spec.conditions = [{}]
+    gains = np.array([1e-4, 1e-2])
+    ev = evaluate(spec, gains[:, None])
+    for p, gain in enumerate(gains):  # each candidate's cost is its own run's: peak |h_w| + w x dipole effort
+        alone = simulate(spec.scenarios[0].with_values("controller", **{"momentum.gain": float(gain)}))
+        h = np.linalg.norm(alone.h_wheels_B[0], axis=1)
+        effort = np.sum(np.linalg.norm(alone.dipole_cmd_B[0, :-1], axis=1) * np.diff(alone.t))
+        assert ev.F[p, 0] == pytest.approx(h.max() + 1e-6 * effort, rel=1e-9)
+    assert ev.F[1, 0] < 0.5 * ev.F[0, 0]  # the higher gain holds the momentum down
+    # a scenario whose magnetorquers do not fly has no momentum to judge: one line
+    bad = tmp_path / "bad.yaml"
+    bad.write_text((default_config_dir() / "tune_hst_momentum_dump.yaml").read_text().replace(
+        "scenarios: [hst_momentum_dump.yaml]", f"scenarios: [{default_config_dir() / 'hst_roll_step.yaml'}]"))
+    with pytest.raises(SpecError, match="cost momentum judges the wheel momentum") as err:
+        load_spec(bad)
+    assert "\n" not in str(err.value)

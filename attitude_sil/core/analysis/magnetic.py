@@ -1,7 +1,10 @@
 """The figures of momentum management and detumbling, one step at a time: what ``run --json`` adds for them.
 
 Fed a step at a time (a graph run as its messages come, a trajectory step by
-step), so a run's report and a bag's ``metrics`` give the same numbers:
+step), so a run's report and a bag's ``metrics`` give the same numbers
+(:class:`MagneticFigures`); :func:`magnetic_columns` computes them for a batch
+of trajectories at once (the tuner's and Monte Carlo's summaries; equal to
+the running figures, test/unit/test_bdot.py):
 
 * ``detumble_time_s``: the time from which |omega_BN| stays below
   ``metrics.detumble_rate_deg_s`` (the first sample after the last one at or
@@ -19,7 +22,7 @@ import math
 
 import numpy as np
 
-__all__ = ["MagneticFigures", "magnetic_figures"]
+__all__ = ["MagneticFigures", "magnetic_figures", "magnetic_columns"]
 
 
 def _norm(v) -> float:
@@ -89,3 +92,21 @@ def magnetic_figures(figures: MagneticFigures, t: np.ndarray, omega_BN_B: np.nda
     for k in range(t.size):
         figures.add(float(t[k]), omega_BN_B[k], h_wheels_B[k], None if dipole_B is None else dipole_B[k])
     return figures.report()
+
+
+def magnetic_columns(t: np.ndarray, omega_BN_B: np.ndarray, h_wheels_B: np.ndarray, dipole_B: np.ndarray | None,
+                     detumble_rate_deg_s: float) -> dict[str, np.ndarray]:
+    """The figures of P trajectories at once (t (K+1,), the others (P, K+1, 3)), each (P,), NaN for one not
+    reached: ``detumble_time_s`` where ``detumble_rate_deg_s`` > 0, the momentum and dipole figures where
+    ``dipole_B`` is given (the magnetorquers flew)."""
+    out: dict[str, np.ndarray] = {}
+    if detumble_rate_deg_s > 0.0:
+        above = np.linalg.norm(omega_BN_B, axis=2) >= math.radians(detumble_rate_deg_s)
+        last = np.where(above.any(axis=1), t.size - 1 - np.argmax(above[:, ::-1], axis=1), -1)  # -1: never above
+        out["detumble_time_s"] = np.where(last == t.size - 1, np.nan, t[np.minimum(last + 1, t.size - 1)])
+    if dipole_B is not None:
+        h = np.linalg.norm(h_wheels_B, axis=2)
+        out["wheel_momentum_peak_Nms"] = np.max(np.nan_to_num(h, nan=np.inf), axis=1)
+        out["wheel_momentum_final_Nms"] = h[:, -1]
+        out["dipole_effort_Am2s"] = np.sum(np.linalg.norm(dipole_B[:, :-1], axis=2) * np.diff(t), axis=1)
+    return out

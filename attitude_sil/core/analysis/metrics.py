@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from attitude_sil.core.analysis.magnetic import MagneticFigures, magnetic_figures
+from attitude_sil.core.analysis.magnetic import MagneticFigures, magnetic_columns, magnetic_figures
 from attitude_sil.core.analysis.metric_rows import Sums
 from attitude_sil.core.analysis.pointing import pointing_columns, pointing_errors, pointing_metrics, pointing_start
 from attitude_sil.core.plant.quaternion import euler_from_quat, quat_error, quat_multiply
@@ -268,6 +268,9 @@ def summarize(tr: Trajectory, scenario_values: dict, step_time: float = 0.0) -> 
         m = scenario_metrics(tr.t, tr.q_BN, tr.q_RN, tr.tau_c_B, scenario_values, step_time=step_time)
     if tr.q_BN_est is not None:  # the sensing loop ran: the pointing figures of a budget, per episode
         m.update(pointing_columns(tr.t, tr.q_BN, tr.q_RN, tr.q_BN_est, scenario_values, m["settling_time_s"]))
+    if tr.omega_BN_B is not None and tr.h_wheels_B is not None:  # detumbling, and the magnetorquers' figures
+        m.update(magnetic_columns(tr.t, tr.omega_BN_B, tr.h_wheels_B, tr.dipole_cmd_B,
+                                  scenario_values["metrics.detumble_rate_deg_s"]))
     finite = all_finite(tr.omega_BN_B, tr.u_cmd)  # the running sums' rule (Sums.finite): rate and command
     peak_ws = None if tr.wheel_speed is None else np.max(np.abs(np.nan_to_num(tr.wheel_speed, nan=np.inf)), axis=(1, 2))
     return EpisodeSummary(metrics=m, finite=finite,

@@ -30,7 +30,8 @@ from attitude_sil.core.paramspec import double as _d
 from attitude_sil.core.paramspec import double_array as _da
 from attitude_sil.core.plant.quaternion import cross
 
-__all__ = ["MOMENTUM_MODES", "MOMENTUM_PARAMS", "CrossProductDumping", "DipoleCommand", "BDOT"]
+__all__ = ["MOMENTUM_MODES", "MOMENTUM_PARAMS", "CrossProductDumping", "DipoleCommand", "BDOT",
+           "PER_EPISODE_SCALARS"]
 
 #: the law whose dipole is B-dot's (``controller_type: bdot``)
 BDOT = BDOT_LAW.name
@@ -49,6 +50,11 @@ MOMENTUM_PARAMS = [
     _da("momentum.target", [0.0, 0.0, 0.0], "wheel momentum the law dumps towards, N m s in B", lengths=(3,),
         runtime=True),
 ]
+
+
+#: the magnetic channel's scalar parameters it takes one per episode (a batch's candidates in one run; a law's
+#: record holds a scalar once for all its episodes)
+PER_EPISODE_SCALARS = ("momentum.gain", f"{BDOT}.gain")
 
 
 class CrossProductDumping:
