@@ -14,6 +14,8 @@ A ``dispersions`` mapping (in a Monte Carlo spec, or a tuning spec's
     sensor_noise: {attitude_std_deg: 0.001, rate_std_deg_s: 0.0005}   # seed: sensor_noise.seed + run
     gyro_bias_deg_h:      {dist: normal, scale: 1.0}           # added to sensors.gyro.bias_deg_h per axis
     sensor_seeds: true                                         # sensors.seed + run (default with the sensors on)
+    residual_dipole_Am2:  {dist: normal, scale: 0.01}          # added to disturbance.residual_dipole.moment
+    magnetometer_bias_nt: {dist: normal, scale: 200}           # added to sensors.magnetometer.bias_nt per axis
 
 ``dist: normal`` draws ``scale`` x N(0, 1), ``dist: uniform`` ``scale`` x U(-1, 1);
 ``scale`` is one number or one per axis. Run i draws from its own stream,
@@ -43,15 +45,17 @@ __all__ = ["DISPERSION_KEYS", "check_dispersions", "draw", "episode_values", "ru
 
 #: numeric dispersions: key -> (width, unit)
 _NUMERIC = {"inertia_pct": 3, "initial_attitude_deg": 3, "initial_rate_deg_s": 3, "setpoint_deg": 3,
-            "motor_constant_pct": 1, "noise_level_pct": 1, "gyro_bias_deg_h": 3}
+            "motor_constant_pct": 1, "noise_level_pct": 1, "gyro_bias_deg_h": 3, "residual_dipole_Am2": 3,
+            "magnetometer_bias_nt": 3}
 DISPERSION_KEYS = (*_NUMERIC, "noise_seeds", "wheel_failure", "sensor_noise", "sensor_seeds")
 #: the per-run uniform slots, in draw order
 _SLOTS = {"inertia_pct": slice(0, 3), "initial_attitude_deg": slice(3, 6), "initial_rate_deg_s": slice(6, 9),
           "setpoint_deg": slice(9, 12), "motor_constant_pct": slice(12, 13), "noise_level_pct": slice(13, 14),
           "failure_happens": 14, "failure_wheel": 15, "failure_time": 16, "failure_mode": 17,
-          "gyro_bias_deg_h": slice(18, 21)}
+          "gyro_bias_deg_h": slice(18, 21), "residual_dipole_Am2": slice(21, 24),
+          "magnetometer_bias_nt": slice(24, 27)}
 #: (slots are drawn in order from each run's stream: a slot added at the end leaves the others' values as they were)
-_N_SLOTS = 21
+_N_SLOTS = 27
 
 
 def _number(v: Any) -> bool:
@@ -130,11 +134,18 @@ def check_dispersions(where: str, raw: Any, scn: Scenario) -> dict:
         raise SpecError(f"{where}: dispersions of the sensors need a scenario that runs them (scenario.sensors: true "
                         "or feedback: estimate, e.g. config/hst_roll_step_sensors.yaml)")
     out.setdefault("sensor_seeds", scn.has_sensors)
+    if "residual_dipole_Am2" in out and "residual_dipole" not in scn.param("disturbance", "models"):
+        raise SpecError(f"{where}: dispersions.residual_dipole_Am2: the scenario has no residual dipole "
+                        "(add residual_dipole to disturbance.models, with a field model)")
+    if "magnetometer_bias_nt" in out and not (scn.has_sensors and scn.param(
+            "plant", "environment.magnetic_field.model") != "none"):
+        raise SpecError(f"{where}: dispersions.magnetometer_bias_nt: the scenario has no magnetometer (it needs the "
+                        "sensors and a field model)")
     return out
 
 
 def draw(seed: int, runs) -> np.ndarray:
-    """The uniform slots of runs ``runs``: (n, 21) in (0, 1), run i from ``default_rng([seed, i])``."""
+    """The uniform slots of runs ``runs``: (n, _N_SLOTS) in (0, 1), run i from ``default_rng([seed, i])``."""
     out = np.empty((len(runs), _N_SLOTS))
     for r, i in enumerate(np.asarray(runs, dtype=np.int64).tolist()):
         bits = np.random.default_rng([int(seed), i]).integers(0, 2**53, _N_SLOTS)
@@ -205,6 +216,14 @@ def episode_values(scn: Scenario, dispersions: dict, seed: int, runs) -> dict[st
                                           + _offsets(dispersions["gyro_bias_deg_h"], u[:, _SLOTS["gyro_bias_deg_h"]]))
     if dispersions.get("sensor_seeds"):
         out["sensors.seed"] = v["sensors"]["seed"] + runs
+    if "residual_dipole_Am2" in dispersions:
+        out["disturbance.residual_dipole.moment"] = (
+            np.asarray(v["disturbance"]["residual_dipole.moment"], dtype=float)
+            + _offsets(dispersions["residual_dipole_Am2"], u[:, _SLOTS["residual_dipole_Am2"]]))
+    if "magnetometer_bias_nt" in dispersions:
+        out["sensors.magnetometer.bias_nt"] = (
+            np.asarray(v["sensors"]["magnetometer.bias_nt"], dtype=float)
+            + _offsets(dispersions["magnetometer_bias_nt"], u[:, _SLOTS["magnetometer_bias_nt"]]))
     if "sensor_noise" in dispersions:
         sn = dispersions["sensor_noise"]
         out["controller.sensor_noise.attitude_std_deg"] = np.full(n, sn["attitude_std_deg"])

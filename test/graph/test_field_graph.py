@@ -14,6 +14,7 @@ from attitude_sil.core.analysis.metrics import episode_report
 from attitude_sil.core.sim.build import build_dipole_command, build_environment
 from attitude_sil.core.sim.engine import simulate
 from attitude_sil.core.sim.scenario import load_scenario
+from attitude_sil.errors import ScenarioError
 from attitude_sil.graph.session import run_graph
 from attitude_sil.storage.reader import open_bag
 from conftest import CONFIG
@@ -120,3 +121,18 @@ def test_bdot_detumbles_in_the_graph_as_in_the_stepwise_driver():
     for key in figures:  # the graph's running figures against the engine trajectory's
         expected = None if report[key] is None else pytest.approx(report[key], rel=1e-9, abs=1e-15)
         assert graph.metrics[key] == expected, key
+
+
+def test_the_residual_dipole_is_a_disturbance_in_the_field_in_graph_and_engine():
+    scn = _with_field("hst_roll_step.yaml").with_values(
+        "disturbance", models=["residual_dipole"], **{"residual_dipole.moment": [2.0, -1.0, 3.0]})
+    graph = run_graph(scn, duration=1.0, keep_trajectory=True, progress=False)
+    engine = simulate(scn, 1, duration=1.0)
+    tau, b = engine.tau_ext_B[0], engine.magnetic_field_B[0]
+    np.testing.assert_array_equal(tau, np.cross([2.0, -1.0, 3.0], b))  # m_res x B, the plant's field
+    assert np.max(np.abs(graph.trajectory.tau_ext_B[0] - tau)) <= 1e-9 * np.max(np.abs(tau))
+    # per episode (what Monte Carlo disperses): each episode its own moment
+    both = simulate(scn, 2, duration=0.1, episode_values={"disturbance.residual_dipole.moment": [[1, 0, 0], [0, 0, 5]]})
+    np.testing.assert_array_equal(both.tau_ext_B[1], np.cross([0.0, 0.0, 5.0], both.magnetic_field_B[1]))
+    with pytest.raises(ScenarioError, match="residual_dipole needs the geomagnetic field"):
+        simulate(scn.with_values("plant", **{"environment.magnetic_field.model": "none"}), 1, duration=0.1)

@@ -60,7 +60,7 @@ __all__ = [
 ]
 
 DISTURBANCE_MODELS = ("constant", "step", "impulse", "noise", "gravity_gradient_linear", "gravity_gradient",
-                      "aerodynamic")
+                      "aerodynamic", "residual_dipole")
 
 
 def orbit_rate(mu: float, radius: float) -> float:
@@ -181,9 +181,14 @@ class DisturbanceModel:
         A propagated orbit (``core.environment.ephemeris.Ephemeris``): the
         orbit models read its LVLH frame, 3 mu / r^3 and speed at each step;
         None: the circular orbit of ``values``.
+    field : optional
+        The geomagnetic field along the orbit
+        (``core.environment.ephemeris.FieldAlongOrbit``, the plant's): the
+        ``residual_dipole`` model's torque is m_res x B, m_res
+        (``residual_dipole.moment``, (3,) or per episode (P, 3) A m^2 in B).
     """
 
-    def __init__(self, values: dict, inertia: np.ndarray, seeds, orbit=None) -> None:
+    def __init__(self, values: dict, inertia: np.ndarray, seeds, orbit=None, field=None) -> None:
         models = list(values["models"])
         unknown = [m for m in models if m not in DISTURBANCE_MODELS]
         if unknown:
@@ -211,6 +216,11 @@ class DisturbanceModel:
                        "gravity_gradient" in self.models, "aerodynamic" in self.models)
         self.q_LN0 = quat_from_euler(np.radians(values["orbit.lvlh_initial_rpy_deg"]))
         self.orbit = orbit
+        self.field = field
+        self.residual_B = np.asarray(values["residual_dipole.moment"], dtype=float)
+        if "residual_dipole" in self.models and field is None:
+            raise ScenarioError("disturbance model residual_dipole needs the geomagnetic field: set plant "
+                                "environment.magnetic_field.model (dipole or igrf)")
         ratio = self.dt / values["noise.sample_time"]
         self.samples_per_step = int(round(ratio))
         if "noise" in self.models and (self.samples_per_step < 1 or abs(ratio - self.samples_per_step) > 1e-9):
@@ -286,6 +296,9 @@ class DisturbanceModel:
         elif "gravity_gradient" in self.models or "aerodynamic" in self.models:
             q_LN = lvlh_attitude(t_ns * 1e-9, self.q_LN0, self.rate)
             orbit_torques(np.ascontiguousarray(q_BN, dtype=float), q_LN, *self._orbit, tau)
+        if "residual_dipole" in self.models:  # the spacecraft's own dipole in the field: m_res x B
+            b_B = self.field.field_B(np.array([t_ns]), np.asarray(q_BN, dtype=float)[:, None, :])[:, 0]
+            tau += cross(np.broadcast_to(self.residual_B, b_B.shape), b_B)
         return tau
 
     def _impulse(self, k: int) -> float:

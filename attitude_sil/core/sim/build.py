@@ -209,19 +209,25 @@ def build_wheels(scn: Scenario, n_episodes: int = 1, per_episode: dict | None = 
 
 
 def build_disturbance(scn: Scenario, n_episodes: int = 1, seeds=None, inertia=None,
-                      noise_power=None) -> DisturbanceModel:
+                      noise_power=None, residual_dipole=None) -> DisturbanceModel:
     """Disturbance model from the ``disturbance`` parameters; seeds default to seed + p.
 
-    ``noise_power`` (P, 3) N^2 m^2 s sets each episode's ``noise.power``.
+    ``noise_power`` (P, 3) N^2 m^2 s sets each episode's ``noise.power``, ``residual_dipole`` (P, 3) A m^2 its
+    ``residual_dipole.moment``.
     """
-    d = scn.values["disturbance"]
+    d = effective_values(scn, "disturbance")  # the plant's field model
     if noise_power is not None:
         d = {**d, "noise.power": np.broadcast_to(np.asarray(noise_power, dtype=float), (n_episodes, 3))}
+    if residual_dipole is not None:
+        d = {**d, "residual_dipole.moment": np.broadcast_to(np.asarray(residual_dipole, dtype=float), (n_episodes, 3))}
     m = inertia_matrix(d["inertia"] if inertia is None else inertia)
     if seeds is None:
         seeds = [d["noise.seed"] + p for p in range(n_episodes)]
     orbit = Ephemeris(d, scn.dt) if d["orbit.model"] != "circular" else None
-    return DisturbanceModel(d, np.broadcast_to(m, (n_episodes, 3, 3)), seeds, orbit)
+    field_model = d["environment.magnetic_field.model"]
+    field = FieldAlongOrbit(Ephemeris(d, scn.dt), field_model) \
+        if "residual_dipole" in d["models"] and field_model != "none" else None
+    return DisturbanceModel(d, np.broadcast_to(m, (n_episodes, 3, 3)), seeds, orbit, field)
 
 
 def build_environment(scn: Scenario) -> tuple[Ephemeris, FieldAlongOrbit]:
@@ -272,18 +278,21 @@ def build_guidance(scn: Scenario, n_episodes: int = 1, setpoints_rpy_deg=None) -
 
 
 def build_sensing(scn: Scenario, n_episodes: int = 1, seeds=None, gyro_bias_deg_h=None,
-                  initial_rpy_deg=None) -> Sensing | None:
+                  initial_rpy_deg=None, magnetometer_bias_nt=None) -> Sensing | None:
     """The scenario's sensors and estimator for P episodes (None if it runs without them).
 
     ``seeds`` (P,) gives each episode its sensor seed (default: ``sensors.seed`` for all), ``gyro_bias_deg_h``
     (P, 3) its gyro's constant bias (default: ``sensors.gyro.bias_deg_h``), ``initial_rpy_deg`` (P, 3) its
-    filter's initial attitude (default: the estimator's, else the plant's initial attitude).
+    filter's initial attitude (default: the estimator's, else the plant's initial attitude),
+    ``magnetometer_bias_nt`` (P, 3) its magnetometer's bias (default: ``sensors.magnetometer.bias_nt``).
     """
     if not scn.has_sensors:
         return None
     values = dict(scn.values["sensors"])
     if gyro_bias_deg_h is not None:
         values["gyro.bias_deg_h"] = np.asarray(gyro_bias_deg_h, dtype=float).reshape(n_episodes, 3)
+    if magnetometer_bias_nt is not None:
+        values["magnetometer.bias_nt"] = np.asarray(magnetometer_bias_nt, dtype=float).reshape(n_episodes, 3)
     suite = SensorSuite(values, scn.dt, n_episodes, seeds)
     estimator = effective_values(scn, "estimator")
     if initial_rpy_deg is not None:
@@ -441,9 +450,9 @@ def schedule_from_scenario(scn: Scenario) -> list[tuple[int, str]]:
 EPISODE_VALUES = {
     "plant": ("inertia", "initial_attitude_rpy_deg", "initial_body_rate", "flex.case"),
     "guidance": ("setpoint_rpy_deg",),
-    "disturbance": ("inertia", "noise.seed", "noise.power"),
+    "disturbance": ("inertia", "noise.seed", "noise.power", "residual_dipole.moment"),
     "wheels": EPISODE_MOTOR + EPISODE_FAILURE,
-    "sensors": ("seed", "gyro.bias_deg_h"),
+    "sensors": ("seed", "gyro.bias_deg_h", "magnetometer.bias_nt"),
     "estimator": ("initial_attitude_rpy_deg",),
 }
 

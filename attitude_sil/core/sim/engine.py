@@ -227,7 +227,7 @@ class _Run:
                             omega0=pv.get("initial_body_rate"), flex_case=pv.get("flex.case"))
         wheels = build_wheels(scn, P, ev["wheels"])
         dist = build_disturbance(scn, P, seeds=dv.get("noise.seed"), inertia=dv.get("inertia"),
-                                 noise_power=dv.get("noise.power"))
+                                 noise_power=dv.get("noise.power"), residual_dipole=dv.get("residual_dipole.moment"))
         guide = build_guidance(scn, P, gv.get("setpoint_rpy_deg"))
         ctrl = build_controller(scn, P, params={**(opts.controller_params or {}), **ev["controller"]} or None)
         self.laws = None  # per-episode controller types (compiled driver), or None: ctrl.active for all
@@ -242,7 +242,8 @@ class _Run:
         field = build_environment(scn)[1]
         self.field = field if field.model != "none" else None  # the field at the spacecraft, for the record
         self.sensing = build_sensing(scn, P, ev["sensors"].get("seed"), ev["sensors"].get("gyro.bias_deg_h"),
-                                     ev["estimator"].get("initial_attitude_rpy_deg"))
+                                     ev["estimator"].get("initial_attitude_rpy_deg"),
+                                     ev["sensors"].get("magnetometer.bias_nt"))
         self.magnetic = build_magnetic_loop(scn, {**(opts.controller_params or {}), **ev["controller"]} or None)
         self.swaps = dict(schedule_from_scenario(scn) if opts.schedule is None else opts.schedule)
         if BDOT in self.swaps.values() and self.magnetic is None:

@@ -25,6 +25,7 @@ from attitude_sil.core.paramspec import double as _d
 from attitude_sil.core.paramspec import double_array as _da
 from attitude_sil.core.paramspec import inertia_rule as _inertia_rule
 from attitude_sil.core.paramspec import nonzero as _nonzero
+from attitude_sil.core.plant.disturbance import DISTURBANCE_MODELS
 from attitude_sil.core.plant.magnetorquers import rod_axes
 from attitude_sil.core.plant.wheels import HST_MOTOR
 from attitude_sil.core.sim.lockstep import COMMAND_TIMINGS
@@ -79,6 +80,12 @@ def _rods_rule(value: list) -> str:
         return str(exc).partition(": ")[2]
     return ""
 
+
+#: the geomagnetic field model (the plant's; the disturbances' residual dipole follows it)
+_FIELD_MODEL = ParamSpec(
+    "environment.magnetic_field.model", "string", "none",
+    "the geomagnetic field at the spacecraft, published on magnetic_field: none, dipole (IGRF-14's degree 1 of "
+    "the epoch) or igrf (IGRF-14 to degree 13)", choices=tuple(FIELD_MODELS))
 
 #: whether the magnetorquers fly (plant and controller): the runner sets it where the controller commands a
 #: dipole (momentum.mode, or bdot among the laws it flies)
@@ -139,9 +146,7 @@ NODE_PARAMS: dict[str, list[ParamSpec]] = {
         *ORBIT,
         *_ORBIT_MODEL,
         _MAGNETORQUERS,
-        ParamSpec("environment.magnetic_field.model", "string", "none",
-                  "the geomagnetic field at the spacecraft, published on magnetic_field: none, dipole (IGRF-14's "
-                  "degree 1 of the epoch) or igrf (IGRF-14 to degree 13)", choices=tuple(FIELD_MODELS)),
+        _FIELD_MODEL,
     ],
     "wheels": [
         _d("control_period", 0.01, "control step dt, s (shared by every node)", min=0.0, min_exclusive=True, max=1.0),
@@ -198,8 +203,9 @@ NODE_PARAMS: dict[str, list[ParamSpec]] = {
         _da("inertia", _HST_INERTIA, "body inertia for the gravity gradient, kg m^2 (3 or 9 values)",
             lengths=(3, 9), rule=_inertia_rule),
         ParamSpec("models", "string_array", [], "disturbance models summed (empty: none)",
-                  choices=("constant", "step", "impulse", "noise", "gravity_gradient_linear", "gravity_gradient",
-                           "aerodynamic")),
+                  choices=DISTURBANCE_MODELS),
+        _da("residual_dipole.moment", [0, 0, 0], "the spacecraft's residual magnetic dipole, A m^2 in B (model "
+            "residual_dipole: the torque m_res x B in the plant's field)", lengths=(3,)),
         _da("constant.torque", [0, 0, 0], "constant torque, N m (body axes)", lengths=(3,)),
         _da("step.torque", [0, 0, 0], "step torque from step.time on, N m", lengths=(3,)),
         _d("step.time", 0.0, "time of the torque step, s", min=0.0),
@@ -215,6 +221,7 @@ NODE_PARAMS: dict[str, list[ParamSpec]] = {
         *ORBIT,
         *_ORBIT_MODEL,
         *AERO,
+        _FIELD_MODEL,
     ],
     "guidance": [
         _d("control_period", 0.01, "control step dt, s (shared by every node)", min=0.0, min_exclusive=True, max=1.0),

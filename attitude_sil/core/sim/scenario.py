@@ -201,10 +201,11 @@ DERIVED = {"estimator": {"initial_attitude_rpy_deg": ("plant", "initial_attitude
                          "star_tracker.latency_s": ("sensors", "star_tracker.latency_s")},
            **{node: {"command_timing": ("wheels", "command_timing"), "command_rate": ("wheels", "command_rate")}
               for node in ("plant", "guidance")}}
+DERIVED["disturbance"] = {"environment.magnetic_field.model": ("plant", "environment.magnetic_field.model")}
 
 
 #: derived values a node must not set otherwise than their source (the estimator's may differ: they are beliefs)
-SHARED_VALUES = ("command_timing", "command_rate")
+SHARED_VALUES = ("command_timing", "command_rate", "environment.magnetic_field.model")
 
 
 def derived_values(scn: Scenario, node: str) -> dict[str, Any]:

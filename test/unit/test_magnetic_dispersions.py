@@ -1,0 +1,48 @@
+"""Monte Carlo disperses the residual dipole and the magnetometer's bias: each run of a batch is the run its
+dispersed scenario gives alone (what the campaign re-runs through the graph), and a spec that asks for them
+on a scenario without them is one line."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from attitude_sil.core.sim.engine import simulate
+from attitude_sil.core.sim.scenario import default_config_dir, load_scenario
+from attitude_sil.errors import SpecError
+from attitude_sil.tuning.dispersions import check_dispersions, episode_values, run_scenario
+
+CONFIG = default_config_dir()
+
+
+def _scenario():
+    scn = load_scenario(CONFIG / "hst_roll_step_sensors.yaml").with_values(
+        "plant", **{"environment.magnetic_field.model": "igrf"})
+    return scn.with_values("disturbance", models=["residual_dipole"], **{"residual_dipole.moment": [1.0, 0.0, 0.0]})
+
+
+def test_each_run_of_a_batch_is_its_dispersed_scenario_alone():
+    scn = _scenario()
+    disp = check_dispersions("mc", {"residual_dipole_Am2": {"dist": "normal", "scale": [5.0, 5.0, 5.0]},
+                                    "magnetometer_bias_nt": {"dist": "uniform", "scale": 300.0}}, scn)
+    values = episode_values(scn, disp, seed=7, runs=np.arange(3))
+    moments, biases = values["disturbance.residual_dipole.moment"], values["sensors.magnetometer.bias_nt"]
+    assert moments.shape == biases.shape == (3, 3)
+    assert np.all(np.abs(biases) <= 300.0) and len({tuple(m) for m in moments}) == 3
+    batch = simulate(scn, 3, duration=0.2, episode_values=values)
+    for i in range(3):
+        alone = simulate(run_scenario(scn, values, i), 1, duration=0.2)
+        np.testing.assert_array_equal(batch.tau_ext_B[i], alone.tau_ext_B[0])
+        np.testing.assert_array_equal(batch.magnetometer_B[i], alone.magnetometer_B[0])
+        np.testing.assert_array_equal(batch.tau_ext_B[i], np.cross(moments[i], batch.magnetic_field_B[i]))
+    # the bias moved the readings by itself: runs differ by their biases beside the common field and noise
+    assert not np.array_equal(batch.magnetometer_B[0], batch.magnetometer_B[1])
+
+
+@pytest.mark.parametrize("key, problem", [("residual_dipole_Am2", "no residual dipole"),
+                                          ("magnetometer_bias_nt", "no magnetometer")])
+def test_a_dispersion_the_scenario_cannot_take_is_one_line(key, problem):
+    with pytest.raises(SpecError, match=problem) as err:
+        check_dispersions("mc.yaml", {key: {"dist": "normal", "scale": 1.0}},
+                          load_scenario(CONFIG / "hst_roll_step.yaml"))
+    assert "\n" not in str(err.value)
