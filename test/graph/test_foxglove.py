@@ -264,7 +264,7 @@ def test_the_layout_plots_what_the_graph_publishes():
     paths = [p for cfg in panels.values() for p in cfg.get("paths", [])]
     topics = {re.match(r"(/[a-z_/]+?)[.{]", p["value"]).group(1) for p in paths}
     assert topics == {"/attitude", "/attitude_error", "/body_rate", "/wheel_state", "/voltage_cmd", "/torque_cmd",
-                      "/parameter_events", STATUS_TOPIC}
+                      "/wheel_momentum", "/dipole_cmd", "/parameter_events", STATUS_TOPIC}
     assert topics - {STATUS_TOPIC} <= {n if n.startswith("/") else "/" + n for n in RECORDED_TOPICS}
     # on sim time: the header stamp where the message has one; the status channel and /parameter_events have
     # none and are logged (live and in the bags) at their sim time, which a client takes as their time
