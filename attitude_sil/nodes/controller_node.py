@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from attitude_sil.core.control.momentum import BDOT
 from attitude_sil.core.plant.quaternion import euler_from_quat, quat_conjugate, quat_error
 from attitude_sil.core.sim.build import build_controller, build_dipole_command
 from attitude_sil.core.sim.lockstep import StepInputs, StepSequencer
@@ -64,6 +65,13 @@ class ControllerNode(LockstepNode):
         scn = self.scenario()
         self.core = build_controller(scn, 1)
         self.magnetic = build_dipole_command(scn)
+
+    def check_parameters(self, pending: dict) -> str:
+        """B-dot commands the magnetorquers: a swap to it where they do not fly is refused."""
+        if pending.get("controller_type") == BDOT and not pending.get("magnetorquers", self.param("magnetorquers")):
+            return ("controller_type bdot commands the magnetorquers, which this graph does not fly (start it from "
+                    "a scenario with bdot among its laws or controller momentum.mode set)")
+        return ""
 
     def on_parameters_set(self, names: list[str]) -> None:
         v = self.values()

@@ -9,6 +9,8 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+import rclpy
+from rclpy.parameter import Parameter
 
 from attitude_sil.core.analysis.metrics import episode_report
 from attitude_sil.core.sim.build import build_dipole_command, build_environment
@@ -16,6 +18,7 @@ from attitude_sil.core.sim.engine import simulate
 from attitude_sil.core.sim.scenario import load_scenario
 from attitude_sil.errors import ScenarioError
 from attitude_sil.graph.session import run_graph
+from attitude_sil.nodes.controller_node import ControllerNode
 from attitude_sil.storage.reader import open_bag
 from conftest import CONFIG
 
@@ -136,3 +139,17 @@ def test_the_residual_dipole_is_a_disturbance_in_the_field_in_graph_and_engine()
     np.testing.assert_array_equal(both.tau_ext_B[1], np.cross([0.0, 0.0, 5.0], both.magnetic_field_B[1]))
     with pytest.raises(ScenarioError, match="residual_dipole needs the geomagnetic field"):
         simulate(scn.with_values("plant", **{"environment.magnetic_field.model": "none"}), 1, duration=0.1)
+
+
+def test_a_swap_to_bdot_where_the_magnetorquers_do_not_fly_is_refused():
+    context = rclpy.Context()
+    rclpy.init(args=[], context=context)
+    try:
+        node = ControllerNode(context=context)  # the defaults: no magnetorquers
+        (refused,) = node.set_parameters([Parameter("controller_type", value="bdot")])
+        assert not refused.successful and "does not fly" in refused.reason
+        (taken,) = node.set_parameters([Parameter("controller_type", value="ga_flc")])
+        assert taken.successful and node.param("controller_type") == "ga_flc"
+        node.destroy_node()
+    finally:
+        rclpy.shutdown(context=context)
