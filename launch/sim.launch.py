@@ -25,6 +25,13 @@ Launch arguments:
   and the star tracker's schedule where they differ from the defaults (the
   runner copies them from the plant and the sensors; ``/**`` sets the schedule
   for both, as ``config/hst_roll_step_sensors.yaml`` does).
+* ``magnetorquers`` (default ``false``): ``true`` starts the ``magnetorquers``
+  node (:data:`attitude_sil.core.sim.scenario.MAGNETIC_NODES`) and tells the
+  plant and the controller they fly, for a file whose controller commands a
+  dipole (``momentum.mode``, ``bdot``). The file gives the field model under
+  ``/**`` where the disturbances' residual dipole reads it too, and a
+  nonzero ``bdot.gain``: for 0 the runner computes k* from the plant's orbit
+  and inertia, which a controller node started alone does not know.
 
 Unlike ``attitude-sil run``, nothing starts the episode: the nodes wait for
 ``plant/reset`` (``autostart`` is off by default; ``attitude-sil episode`` or
@@ -40,7 +47,7 @@ from launch.substitutions import LaunchConfiguration, PathJoinSubstitution, Pyth
 from launch_ros.actions import Node
 from launch_ros.substitutions import FindPackageShare
 
-from attitude_sil.core.sim.scenario import GRAPH_NODES, SENSOR_NODES
+from attitude_sil.core.sim.scenario import GRAPH_NODES, MAGNETIC_NODES, SENSOR_NODES
 from attitude_sil.ros.contract import FEEDBACK_REMAP
 
 PACKAGE = "attitude_sil"
@@ -49,7 +56,7 @@ DEFAULT_PARAMS = ("config", "hst_roll_step.yaml")
 
 def generate_launch_description() -> LaunchDescription:
     """The graph's nodes and the launch arguments ``namespace``, ``params_file``, ``controller_type``,
-    ``feedback`` and ``sensors``."""
+    ``feedback``, ``sensors`` and ``magnetorquers``."""
     namespace = LaunchConfiguration("namespace")
     params_file = LaunchConfiguration("params_file")
     controller_type = LaunchConfiguration("controller_type")
@@ -72,11 +79,16 @@ def generate_launch_description() -> LaunchDescription:
                               description="what the controller reads: truth or the estimator's output"),
         DeclareLaunchArgument("sensors", default_value="false", choices=["true", "false"],
                               description="run the sensors and the estimator with truth feedback too"),
+        DeclareLaunchArgument("magnetorquers", default_value="false", choices=["true", "false"],
+                              description="fly the magnetorquers (the file's controller commands a dipole)"),
     ]
+    magnetic = LaunchConfiguration("magnetorquers")
     for name in GRAPH_NODES:
         common = dict(package=PACKAGE, executable=f"{name}_node", name=name, namespace=namespace,
                       remappings=[("/clock", clock)], output="screen", emulate_tty=True)
         parameters = [params_file, {"use_sim_time": True}]
+        if name in ("plant", "controller"):  # they take the rods' torque, command their dipole
+            parameters.append({"magnetorquers": magnetic})
         if name == "controller":
             # with feedback:=estimate it reads the estimator's outputs (remapped onto themselves otherwise)
             common["remappings"] = [*common["remappings"], *(
@@ -91,4 +103,8 @@ def generate_launch_description() -> LaunchDescription:
         actions.append(Node(package=PACKAGE, executable=f"{name}_node", name=name, namespace=namespace,
                             remappings=[("/clock", clock)], output="screen", emulate_tty=True,
                             parameters=[params_file, {"use_sim_time": True}], condition=IfCondition(sensing)))
+    for name in MAGNETIC_NODES:
+        actions.append(Node(package=PACKAGE, executable=f"{name}_node", name=name, namespace=namespace,
+                            remappings=[("/clock", clock)], output="screen", emulate_tty=True,
+                            parameters=[params_file, {"use_sim_time": True}], condition=IfCondition(magnetic)))
     return LaunchDescription(actions)

@@ -106,6 +106,8 @@ class ControllerNode(LockstepNode):
         if slot is None:
             return
         kind = self.dumping_seq.classify(t, self.dt_ns)
+        if kind == StepSequencer.NEW:  # a new episode: what an aborted one left half-gathered is dropped
+            self.dumping.pending.clear()
         if kind not in (StepSequencer.NEW, StepSequencer.NEXT):
             self.refuse_stamp(f"{name} (with the step's other momentum inputs)", t, kind)
             return

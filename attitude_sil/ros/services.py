@@ -123,7 +123,9 @@ class PlantReset:
     match, then drops the answer): a client made just before its call lost a
     reset's answer on a loaded machine while the plant ran the episode. A
     reset cannot be asked again as a get can (:func:`ask_again`); a client
-    made early has been matched long before its first call.
+    made early has been matched long before its first call. (A plant that
+    restarts mid-session opens the window again: its new server has not
+    matched the reader yet.)
 
     Parameters
     ----------

@@ -57,6 +57,7 @@ from attitude_sil.ros.contract import (
     CLOCK,
     COMMAND_TOPICS,
     EXTERNAL,
+    MAGNETIC_TOPICS,
     OPTIONAL_TOPICS,
     RECORDED_TOPICS,
     ROLE_OUTPUTS,
@@ -234,9 +235,11 @@ def _graph_ready(recorder: Recorder, namespace: str | None, clients: dict) -> bo
 
 
 def _live_topics(recorder: Recorder, external: list[str]) -> list[str]:
-    """The step topics an episode of a live graph fills: an optional one only where somebody publishes it."""
-    return [t for t in episode_topics(external)
-            if t not in OPTIONAL_TOPICS or recorder.subs[t].get_publisher_count() > 0]
+    """The step topics an episode of a live graph fills: an optional one, and the magnetorquers' (which come
+    after the step's command), only where somebody publishes it."""
+    return [t for t in (*episode_topics(external), *MAGNETIC_TOPICS)
+            if (t not in OPTIONAL_TOPICS and t not in MAGNETIC_TOPICS)
+            or (t in recorder.subs and recorder.subs[t].get_publisher_count() > 0)]
 
 
 def play_episode(namespace: str | None = None, scenario: str | Path | None = None, timeout: float = 20.0,
@@ -348,6 +351,9 @@ class _EpisodeEnds:
         # trajectory (and its metrics) would end a step short
         commands = [n for n in CommandWatch.of(scn).topics if n in self.selected]
         ended = ended and (not commands or any(rec.last_stamp.get(n) == end_ns for n in commands))
+        # and the magnetorquers' dipole and torque, which follow the command, where they fly
+        ended = ended and all(rec.last_stamp.get(n) == end_ns for n in MAGNETIC_TOPICS
+                              if n in self.selected and n in rec.last_stamp)
         new_end = ended and not self.reported_end
         if new_end:
             steps = rec.counts.get(self.per_step[0], 0) - self.counted

@@ -38,7 +38,7 @@ import numpy as np
 from scipy.special import ndtri
 
 from attitude_sil.core.plant.wheels import GEOMETRIES
-from attitude_sil.core.sim.scenario import Scenario, effective_values
+from attitude_sil.core.sim.scenario import Scenario, derived_values, effective_values
 from attitude_sil.errors import ScenarioError, SpecError
 
 __all__ = ["DISPERSION_KEYS", "check_dispersions", "draw", "episode_values", "run_scenario", "value_columns"]
@@ -249,6 +249,10 @@ def run_scenario(scn: Scenario, values: dict[str, np.ndarray], row: int) -> Scen
     ScenarioError
         A dispersed value the schema refuses (e.g. a negative inertia).
     """
+    # the flight software's B-dot gain is the nominal plant's k*: a dispersed inertia must not move it
+    k_star = derived_values(scn, "controller").get("bdot.gain")
+    if k_star is not None:
+        scn = scn.with_values("controller", **{"bdot.gain": k_star})
     for key, col in values.items():
         node, _, name = key.partition(".")
         try:

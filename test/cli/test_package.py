@@ -19,7 +19,7 @@ import xml.etree.ElementTree as ET
 import pytest
 import setuptools
 
-from attitude_sil.core.sim.scenario import GRAPH_NODES, SENSOR_NODES
+from attitude_sil.core.sim.scenario import GRAPH_NODES, MAGNETIC_NODES, SENSOR_NODES
 from attitude_sil.ros.contract import FEEDBACK_REMAP
 from conftest import LAUNCH_FILE, ROOT, launch_actions
 
@@ -183,11 +183,12 @@ def test_launch_file_starts_the_runner_graph_on_sim_time(setup_kwargs, monkeypat
     assert "generate_launch_description" in {f.name for f in tree.body if isinstance(f, ast.FunctionDef)}
     actions = launch_actions(monkeypatch)
     arguments = {a.args[0]: a.kwargs["default_value"] for a in actions if type(a).__name__ == "DeclareLaunchArgument"}
-    assert set(arguments) == {"namespace", "params_file", "controller_type", "feedback", "sensors"}
-    assert (arguments["feedback"], arguments["sensors"]) == ("truth", "false")
+    assert set(arguments) == {"namespace", "params_file", "controller_type", "feedback", "sensors", "magnetorquers"}
+    assert (arguments["feedback"], arguments["sensors"], arguments["magnetorquers"]) == ("truth", "false", "false")
     nodes = [a for a in actions if type(a).__name__ == "Node"]
     scripts = {s.split("=")[0].strip() for s in setup_kwargs["entry_points"]["console_scripts"]}
-    assert {n.kwargs["executable"] for n in nodes} == {f"{n}_node" for n in GRAPH_NODES + SENSOR_NODES}
+    assert {n.kwargs["executable"] for n in nodes} == {f"{n}_node" for n in GRAPH_NODES + SENSOR_NODES
+                                                       + MAGNETIC_NODES}
     assert {n.kwargs["executable"] for n in nodes} <= scripts
     for node in nodes:
         assert node.kwargs["package"] == "attitude_sil" and node.kwargs["name"] + "_node" == node.kwargs["executable"]
@@ -196,8 +197,12 @@ def test_launch_file_starts_the_runner_graph_on_sim_time(setup_kwargs, monkeypat
         assert node.kwargs["namespace"].args == ("namespace",)
         remapped = [r[0] for r in node.kwargs["remappings"]]
         assert remapped == (["/clock", *FEEDBACK_REMAP] if node.kwargs["name"] == "controller" else ["/clock"])
-    # the sensing nodes start on a condition (feedback:=estimate or sensors:=true), the others always
-    assert {n.kwargs["name"] for n in nodes if "condition" in n.kwargs} == {"controller", *SENSOR_NODES}
+    # the sensing nodes start on a condition (feedback:=estimate or sensors:=true), the magnetorquers on
+    # magnetorquers:=true, which the plant and the controller are told; the others always
+    assert {n.kwargs["name"] for n in nodes if "condition" in n.kwargs} == {"controller", *SENSOR_NODES,
+                                                                          *MAGNETIC_NODES}
+    told = [n.kwargs["name"] for n in nodes for p in n.kwargs["parameters"][1:] if "magnetorquers" in p]
+    assert sorted(told) == ["controller", "controller", "plant"]
     feedback = [r[1] for n in nodes if n.kwargs["name"] == "controller" for r in n.kwargs["remappings"][1:]]
     assert all(type(f).__name__ == "PythonExpression" for f in feedback)
     assert any("estimate/attitude" in str(f.args) for f in feedback)

@@ -63,13 +63,13 @@ class MagneticFigures:
             self.t_first = t
         if self.above_last:
             self.after_above = t
-        self.above_last = _norm(omega_BN_B) >= self.rate
+        self.above_last = not _norm(omega_BN_B) < self.rate  # a non-finite rate is not below it
         h = _norm(h_wheels_B)
         self.h_peak = max(self.h_peak, h) if not math.isnan(h) else math.inf
         self.h_last = h
         if self._held is not None:
             self.effort += self._held[1] * (t - self._held[0])
-        self._held = (t, 0.0 if dipole_B is None else _norm(dipole_B))
+        self._held = (t, math.nan if dipole_B is None else _norm(dipole_B))  # a step without its dipole: unknown
 
     def report(self) -> dict:
         """The figures as ``run --json`` keys (None for one not reached)."""
@@ -101,10 +101,10 @@ def magnetic_columns(t: np.ndarray, omega_BN_B: np.ndarray, h_wheels_B: np.ndarr
     ``dipole_B`` is given (the magnetorquers flew)."""
     out: dict[str, np.ndarray] = {}
     if detumble_rate_deg_s > 0.0:
-        above = np.linalg.norm(omega_BN_B, axis=2) >= math.radians(detumble_rate_deg_s)
+        above = ~(np.linalg.norm(omega_BN_B, axis=2) < math.radians(detumble_rate_deg_s))  # NaN: not below
         last = np.where(above.any(axis=1), t.size - 1 - np.argmax(above[:, ::-1], axis=1), -1)  # -1: never above
         out["detumble_time_s"] = np.where(last == t.size - 1, np.nan, t[np.minimum(last + 1, t.size - 1)])
-    if dipole_B is not None:
+    if dipole_B is not None:  # (without one, the running figures say None: no keys here, NaN in a table)
         h = np.linalg.norm(h_wheels_B, axis=2)
         out["wheel_momentum_peak_Nms"] = np.max(np.nan_to_num(h, nan=np.inf), axis=1)
         out["wheel_momentum_final_Nms"] = h[:, -1]

@@ -233,6 +233,9 @@ class _Run:
         self.laws = None  # per-episode controller types (compiled driver), or None: ctrl.active for all
         if controller is not None and not isinstance(controller, str):
             self.laws = episode_laws(controller, P, ctrl)
+            if BDOT in self.laws:
+                raise ScenarioError("bdot cannot be one of a per-episode list of laws: it flies the magnetorquers, "
+                                    "which run in the stepwise driver (give it as the one controller_type)")
             controller = self.laws[0]
             if len(set(self.laws)) == 1:
                 self.laws = None

@@ -225,8 +225,8 @@ def derived_values(scn: Scenario, node: str) -> dict[str, Any]:
 def detumble_gain_star(scn: Scenario) -> float:
     """Avanzini and Giulietti's B-dot gain k* (:func:`~attitude_sil.core.control.laws.bdot.detumble_gain`)
     for the plant's orbit and inertia: n from the orbit's energy at t = 0, xi_m the angle between the orbit's
-    normal and the Earth's axis (the geomagnetic equator taken as the equator: the dipole's 9.7 deg tilt turns
-    with the Earth), J_min the smallest principal inertia."""
+    normal and the Earth's axis (the geomagnetic equator taken as the equator: the dipole's tilt, 9.2 deg in
+    IGRF-14 for 2026, turns with the Earth), J_min the smallest principal inertia."""
     p = scn.values["plant"]
     now = Ephemeris(p, scn.dt).at(0)
     r, v, mu = np.linalg.norm(now.r_N), np.linalg.norm(now.v_N), float(p["orbit.mu"])
