@@ -156,6 +156,9 @@ class FieldAlongOrbit:
         time, the stepwise driver, the record afterwards) gets the same bits.
         """
         t_ns = np.atleast_1d(np.asarray(t_ns, dtype=np.int64))
+        if t_ns.size == 1:  # a step at a time (the nodes, the stepwise driver): its row of the chunk
+            c, i = divmod(int(t_ns[0]) // self.orbit.dt_ns, FIELD_CHUNK)
+            return self._chunk(c)[i:i + 1].copy()
         chunks = t_ns // self.orbit.dt_ns // FIELD_CHUNK
         out = np.empty((t_ns.size, 3))
         for c in np.unique(chunks):
