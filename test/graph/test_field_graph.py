@@ -17,7 +17,7 @@ from attitude_sil.core.sim.build import build_dipole_command, build_environment
 from attitude_sil.core.sim.engine import simulate
 from attitude_sil.core.sim.scenario import load_scenario
 from attitude_sil.errors import ScenarioError
-from attitude_sil.graph.session import run_graph
+from attitude_sil.graph.session import GraphSession, run_graph
 from attitude_sil.nodes.controller_node import ControllerNode
 from attitude_sil.storage.reader import open_bag
 from conftest import CONFIG
@@ -153,3 +153,16 @@ def test_a_swap_to_bdot_where_the_magnetorquers_do_not_fly_is_refused():
         node.destroy_node()
     finally:
         rclpy.shutdown(context=context)
+
+
+def test_a_second_episode_of_the_same_graph_flies_the_first_again():
+    # B-dot's previous field direction and the controller's half-gathered momentum inputs start afresh at each
+    # episode: two episodes of one graph (the tuner's and Monte Carlo's graph mode) give the same trajectory
+    scn = load_scenario(CONFIG / "cubesat_1u_detumble.yaml")
+    with GraphSession(scn, duration=1.0) as graph:
+        first, second = (graph.run_episode(keep_trajectory=True).trajectory for _ in range(2))
+    for name in ("omega_BN_B", "dipole_cmd_B", "magnetic_torque_B"):
+        a, b = getattr(first, name), getattr(second, name)
+        assert a.shape == b.shape == (1, 11, 3), name
+        np.testing.assert_array_equal(a, b, err_msg=name)
+    assert np.max(np.abs(first.dipole_cmd_B)) > 0.01
