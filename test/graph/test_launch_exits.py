@@ -66,10 +66,12 @@ def test_every_node_of_the_launch_file_exits_0_on_a_requested_shutdown(monkeypat
     nodes = [a for a in launch_actions(monkeypatch) if type(a).__name__ == "Node"
              and not (a.kwargs["name"] == "controller" and type(a.kwargs["condition"]).__name__ == "IfCondition")]
     assert {n.kwargs["name"] for n in nodes} >= set(GRAPH_NODES + SENSOR_NODES), nodes  # none missed below
-    procs = [subprocess.Popen(_command(n, CONFIG / "hst_roll_step.yaml"), stdin=subprocess.DEVNULL,
-                              stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True, start_new_session=True)
-             for n in nodes]
-    try:
+    procs: list[subprocess.Popen] = []
+    try:  # started inside: a node that cannot start (its script not installed) leaves none of the others running
+        for n in nodes:
+            procs.append(subprocess.Popen(_command(n, CONFIG / "hst_roll_step.yaml"), stdin=subprocess.DEVNULL,
+                                          stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True,
+                                          start_new_session=True))
         _wait_for_nodes({n.kwargs["name"] for n in nodes}, procs)
         for p in procs:
             p.send_signal(sig)
