@@ -97,21 +97,12 @@ class ControllerNode(LockstepNode):
         self.pub_err.publish(stamped_vector_cdr(err[0], t, "body"))
 
     def _on_dumping(self, name: str, value: np.ndarray, msg) -> None:
+        # its own stream of steps; a new episode drops what an aborted one left half-gathered (the next step's
+        # field cannot come before this step's dipole, which the plant waits for through the rods)
         t = stamp_to_ns(msg.header.stamp)
-        if not self.finite(value):
-            self.get_logger().error(f"{name} at t={t * 1e-9:.6f} s is not finite: {value[0].tolist()}; ignored",
-                                    throttle_duration_sec=1.0)
-            return
-        slot = self.dumping.add(name, t, value)
+        slot = self.gather(name, value, t, self.dumping, self.dumping_seq, self.dumping.pending.clear)
         if slot is None:
             return
-        kind = self.dumping_seq.classify(t, self.dt_ns)
-        if kind == StepSequencer.NEW:  # a new episode: what an aborted one left half-gathered is dropped
-            self.dumping.pending.clear()
-        if kind not in (StepSequencer.NEW, StepSequencer.NEXT):
-            self.refuse_stamp(f"{name} (with the step's other momentum inputs)", t, kind)
-            return
-        self.dumping.taken(t)
         m = self.magnetic.dipole(self.core.active, slot[WHEEL_MOMENTUM], slot[MAGNETIC_FIELD])
         self.pub_dipole.publish(stamped_vector_cdr(m[0], t, "body"))
 

@@ -219,13 +219,16 @@ class LockstepNode(SchemaNode):
         self.dt_ns = int(round(self.param("control_period") * 1e9))
         self.rebuild()
 
-    def gather(self, name: str, value: np.ndarray, t: int) -> dict | None:
+    def gather(self, name: str, value: np.ndarray, t: int, inputs: StepInputs | None = None,
+               seq: StepSequencer | None = None, on_new: Callable[[], None] | None = None) -> dict | None:
         """One input of a node that steps once it holds all of them for a stamp (the controller, the sensors).
 
         ``value`` (1, 3) or (1, 4) is checked (finite; a quaternion near unit norm, renormalised) and held
         in ``self.inputs``; once the stamp ``t`` (ns) has every input and comes in sequence (``self.seq``),
         the step's inputs are returned; a new
         episode (stamp 0) calls :meth:`new_episode` first. A refused message is logged and returns None.
+        A second stream of steps of the node (the controller's momentum management) passes its own
+        ``inputs``, ``seq`` and what a new episode does to it (``on_new``).
         """
         if not self.finite(value):
             self.get_logger().error(f"{name} at t={t * 1e-9:.6f} s is not finite: {value[0].tolist()}; ignored",
@@ -238,16 +241,17 @@ class LockstepNode(SchemaNode):
                                         f"{np.linalg.norm(value):.6g}); ignored", throttle_duration_sec=1.0)
                 return None
             value = unit
-        slot = self.inputs.add(name, t, value)  # the first valid message of a step counts, as in the plant
+        inputs, seq = self.inputs if inputs is None else inputs, self.seq if seq is None else seq
+        slot = inputs.add(name, t, value)  # the first valid message of a step counts, as in the plant
         if slot is None:
             return None
-        kind = self.seq.classify(t, self.dt_ns)
+        kind = seq.classify(t, self.dt_ns)
         if kind == StepSequencer.NEW:
-            self.new_episode()
+            (self.new_episode if on_new is None else on_new)()
         elif kind != StepSequencer.NEXT:
             self.refuse_stamp(f"{name} (with the step's other inputs)", t, kind)
             return None
-        self.inputs.taken(t)
+        inputs.taken(t)
         return slot
 
 
