@@ -11,6 +11,7 @@ description, with the reason.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import replace
 from typing import Any
 
@@ -45,13 +46,21 @@ _COMMAND_TIMING = ParamSpec(
     "/clock once the step's setpoints are out; the wheels wait for each tick's command and apply it one period "
     "later); wall: a controller on the wall clock (the wheels apply the newest command, whatever its stamp)",
     choices=COMMAND_TIMINGS)
-def _epoch_rule(text: str) -> str:
-    """An ISO 8601 UTC time."""
-    try:
-        epoch_from_text(text)
-    except ScenarioError as exc:
-        return str(exc).partition(": ")[2]
-    return ""
+
+
+def _refusal(check: Callable[[Any], object]) -> Callable[[Any], str]:
+    """A ParamSpec rule from a check that raises ScenarioError ``where: why``: the why, or '' when it passes."""
+    def rule(value: Any) -> str:
+        try:
+            check(value)
+        except ScenarioError as exc:
+            return str(exc).partition(": ")[2]
+        return ""
+    return rule
+
+
+#: an ISO 8601 UTC time
+_epoch_rule = _refusal(epoch_from_text)
 
 
 #: the orbit beyond the circular one: its model, epoch and elements (guidance, disturbance and the plant, which
@@ -72,13 +81,8 @@ _ORBIT_MODEL = [
     ParamSpec("orbit.j2", "bool", True, "keplerian_j2: the Earth's oblateness J2 (false: the two-body orbit)"),
 ]
 
-def _rods_rule(value: list) -> str:
-    """Whole 3-vectors, none zero, spanning the body axes."""
-    try:
-        rod_axes(value)
-    except ScenarioError as exc:
-        return str(exc).partition(": ")[2]
-    return ""
+#: whole 3-vectors, none zero, spanning the body axes
+_rods_rule = _refusal(rod_axes)
 
 
 #: the geomagnetic field model (the plant's; the disturbances' residual dipole follows it)
