@@ -223,11 +223,12 @@ def build_disturbance(scn: Scenario, n_episodes: int = 1, seeds=None, inertia=No
     m = inertia_matrix(d["inertia"] if inertia is None else inertia)
     if seeds is None:
         seeds = [d["noise.seed"] + p for p in range(n_episodes)]
-    orbit = Ephemeris(d, scn.dt) if d["orbit.model"] != "circular" else None
+    ephemeris = Ephemeris(d, scn.dt)  # its readers get the same numbers in any order: one serves both
     field_model = d["environment.magnetic_field.model"]
-    field = FieldAlongOrbit(Ephemeris(d, scn.dt), field_model) \
+    field = FieldAlongOrbit(ephemeris, field_model) \
         if "residual_dipole" in d["models"] and field_model != "none" else None
-    return DisturbanceModel(d, np.broadcast_to(m, (n_episodes, 3, 3)), seeds, orbit, field)
+    return DisturbanceModel(d, np.broadcast_to(m, (n_episodes, 3, 3)), seeds,
+                            ephemeris if d["orbit.model"] != "circular" else None, field)
 
 
 def build_environment(scn: Scenario) -> tuple[Ephemeris, FieldAlongOrbit]:

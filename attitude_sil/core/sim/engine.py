@@ -229,7 +229,8 @@ class _Run:
         dist = build_disturbance(scn, P, seeds=dv.get("noise.seed"), inertia=dv.get("inertia"),
                                  noise_power=dv.get("noise.power"), residual_dipole=dv.get("residual_dipole.moment"))
         guide = build_guidance(scn, P, gv.get("setpoint_rpy_deg"))
-        ctrl = build_controller(scn, P, params={**(opts.controller_params or {}), **ev["controller"]} or None)
+        ctrl_params = {**(opts.controller_params or {}), **ev["controller"]} or None  # the law's and the dipole's
+        ctrl = build_controller(scn, P, params=ctrl_params)
         self.laws = None  # per-episode controller types (compiled driver), or None: ctrl.active for all
         if controller is not None and not isinstance(controller, str):
             self.laws = episode_laws(controller, P, ctrl)
@@ -247,7 +248,7 @@ class _Run:
         self.sensing = build_sensing(scn, P, ev["sensors"].get("seed"), ev["sensors"].get("gyro.bias_deg_h"),
                                      ev["estimator"].get("initial_attitude_rpy_deg"),
                                      ev["sensors"].get("magnetometer.bias_nt"))
-        self.magnetic = build_magnetic_loop(scn, {**(opts.controller_params or {}), **ev["controller"]} or None)
+        self.magnetic = build_magnetic_loop(scn, ctrl_params)
         self.swaps = dict(schedule_from_scenario(scn) if opts.schedule is None else opts.schedule)
         if BDOT in self.swaps.values() and self.magnetic is None:
             raise ScenarioError("a swap to bdot needs the magnetorquers flying from the start: list it in the "
