@@ -33,10 +33,24 @@ def _with_field(preset: str):
     return scn.with_values("plant", **{"environment.magnetic_field.model": "igrf"})
 
 
+def _fly(scn, duration: float, **graph_options):
+    """``scn`` through the graph (its trajectory kept) and through the engine: (graph run, engine trajectory)."""
+    graph = run_graph(scn, duration=duration, keep_trajectory=True, progress=False, **graph_options)
+    return graph, simulate(scn, 1, duration=duration)
+
+
+def _assert_same(graph_tr, engine_tr, names, steps: int) -> None:
+    """Each array of ``names``: ``steps`` steps (width 4 for a quaternion, else 3) in both trajectories, the graph's
+    within 1e-9 of the largest engine value."""
+    for name in names:
+        a, b = getattr(graph_tr, name)[0], getattr(engine_tr, name)[0]
+        assert a.shape == b.shape == (steps, 4 if name.startswith("q_") else 3), name
+        assert np.max(np.abs(a - b)) <= 1e-9 * np.max(np.abs(b)), name
+
+
 def test_the_graph_publishes_the_field_and_the_orbit_as_the_engine_computes_them(tmp_path):
     scn = _with_field("hst_roll_step.yaml")
-    graph = run_graph(scn, duration=1.0, keep_trajectory=True, record_dir=tmp_path / "bag", progress=False)
-    engine = simulate(scn, 1, duration=1.0)
+    graph, engine = _fly(scn, 1.0, record_dir=tmp_path / "bag")
     b_graph, b_engine = graph.trajectory.magnetic_field_B[0], engine.magnetic_field_B[0]
     assert b_graph.shape == b_engine.shape == (101, 3)
     assert np.max(np.linalg.norm(b_graph - b_engine, axis=1) / np.linalg.norm(b_engine, axis=1)) < 1e-9
@@ -58,8 +72,7 @@ def test_the_magnetometer_reads_the_field_as_the_engine_does(tmp_path):
     # the sensing loop with a field: the sensors node samples the plant's magnetic_field; its readings, their
     # declared covariance and the engine's are the same numbers
     scn = _with_field("hst_roll_step_sensors.yaml")
-    graph = run_graph(scn, duration=1.0, keep_trajectory=True, record_dir=tmp_path / "bag", progress=False)
-    engine = simulate(scn, 1, duration=1.0)
+    graph, engine = _fly(scn, 1.0, record_dir=tmp_path / "bag")
     m_graph, m_engine = graph.trajectory.magnetometer_B[0], engine.magnetometer_B[0]
     assert m_graph.shape == m_engine.shape == (101, 3)
     assert np.max(np.abs(m_graph - m_engine)) < 1e-9 * np.max(np.abs(m_engine))
@@ -77,13 +90,9 @@ def _dumping(preset: str):
 
 def test_the_magnetorquers_and_the_dumping_law_fly_in_the_graph_as_in_the_stepwise_driver(tmp_path):
     scn = _dumping("hst_roll_step.yaml")
-    graph = run_graph(scn, duration=1.0, keep_trajectory=True, record_dir=tmp_path / "bag", progress=False)
-    engine = simulate(scn, 1, duration=1.0)
-    g = graph.trajectory
-    for name in ("q_BN", "omega_BN_B", "h_wheels_B", "dipole_cmd_B", "magnetic_torque_B"):
-        a, b = getattr(g, name)[0], getattr(engine, name)[0]
-        assert a.shape == b.shape and a.shape[0] == 101, name
-        assert np.max(np.abs(a - b)) <= 1e-9 * np.max(np.abs(b)), name
+    graph, engine = _fly(scn, 1.0, record_dir=tmp_path / "bag")
+    _assert_same(graph.trajectory, engine, ["q_BN", "omega_BN_B", "h_wheels_B", "dipole_cmd_B", "magnetic_torque_B"],
+                 101)
     # it acted: the rods' torque is the law's dipole crossed with the field, and not nothing
     assert np.max(np.abs(engine.magnetic_torque_B)) > 1e-4
     no_dump = simulate(scn.with_values("controller", **{"momentum.mode": "none"}), 1, duration=1.0)
@@ -95,10 +104,9 @@ def test_the_magnetorquers_and_the_dumping_law_fly_in_the_graph_as_in_the_stepwi
 
 def test_with_estimate_feedback_the_dumping_law_reads_the_magnetometer(tmp_path):
     scn = _dumping("hst_roll_step_sensors.yaml").with_values("scenario", feedback="estimate")
-    graph = run_graph(scn, duration=0.5, keep_trajectory=True, progress=False)
-    engine = simulate(scn, 1, duration=0.5)
-    m_graph, m_engine = graph.trajectory.dipole_cmd_B[0], engine.dipole_cmd_B[0]
-    assert np.max(np.abs(m_graph - m_engine)) <= 1e-9 * np.max(np.abs(m_engine))
+    graph, engine = _fly(scn, 0.5)
+    _assert_same(graph.trajectory, engine, ["dipole_cmd_B"], 51)
+    m_engine = engine.dipole_cmd_B[0]
     # the magnetometer's, not the truth's: the law on the true field commands another dipole
     law = build_dipole_command(scn).dumping
     truth = law.dipole(engine.h_wheels_B[0], engine.magnetic_field_B[0])
@@ -110,12 +118,8 @@ def test_with_estimate_feedback_the_dumping_law_reads_the_magnetometer(tmp_path)
 def test_bdot_detumbles_in_the_graph_as_in_the_stepwise_driver():
     # the cube on B-dot at k* (the runner fills the gain in): trajectories and the run's figures the same
     scn = load_scenario(CONFIG / "cubesat_1u_detumble.yaml")
-    graph = run_graph(scn, duration=3.0, keep_trajectory=True, progress=False)
-    engine = simulate(scn, 1, duration=3.0)
-    for name in ("omega_BN_B", "dipole_cmd_B", "magnetic_torque_B", "h_wheels_B"):
-        a, b = getattr(graph.trajectory, name)[0], getattr(engine, name)[0]
-        assert a.shape == b.shape == (31, 3), name
-        assert np.max(np.abs(a - b)) <= 1e-9 * np.max(np.abs(b)), name
+    graph, engine = _fly(scn, 3.0)
+    _assert_same(graph.trajectory, engine, ["omega_BN_B", "dipole_cmd_B", "magnetic_torque_B", "h_wheels_B"], 31)
     assert np.max(np.abs(engine.dipole_cmd_B)) > 0.01  # A m^2: it acts
     assert np.array_equal(engine.u_cmd, np.zeros_like(engine.u_cmd))  # the wheels idle
     figures = ("detumble_time_s", "wheel_momentum_peak_Nms", "wheel_momentum_final_Nms", "dipole_effort_Am2s")
@@ -129,11 +133,10 @@ def test_bdot_detumbles_in_the_graph_as_in_the_stepwise_driver():
 def test_the_residual_dipole_is_a_disturbance_in_the_field_in_graph_and_engine():
     scn = _with_field("hst_roll_step.yaml").with_values(
         "disturbance", models=["residual_dipole"], **{"residual_dipole.moment": [2.0, -1.0, 3.0]})
-    graph = run_graph(scn, duration=1.0, keep_trajectory=True, progress=False)
-    engine = simulate(scn, 1, duration=1.0)
+    graph, engine = _fly(scn, 1.0)
     tau, b = engine.tau_ext_B[0], engine.magnetic_field_B[0]
     np.testing.assert_array_equal(tau, np.cross([2.0, -1.0, 3.0], b))  # m_res x B, the plant's field
-    assert np.max(np.abs(graph.trajectory.tau_ext_B[0] - tau)) <= 1e-9 * np.max(np.abs(tau))
+    _assert_same(graph.trajectory, engine, ["tau_ext_B"], 101)
     # per episode (what Monte Carlo disperses): each episode its own moment
     both = simulate(scn, 2, duration=0.1, episode_values={"disturbance.residual_dipole.moment": [[1, 0, 0], [0, 0, 5]]})
     np.testing.assert_array_equal(both.tau_ext_B[1], np.cross([0.0, 0.0, 5.0], both.magnetic_field_B[1]))
