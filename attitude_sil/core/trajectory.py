@@ -94,6 +94,14 @@ class Trajectory:
     dipole_cmd_B: np.ndarray | None = None
     magnetic_torque_B: np.ndarray | None = None
 
+    @property
+    def tau_actuators_B(self) -> np.ndarray | None:
+        """The torque the actuators put on the body (P, K+1, 3) N m, what paper 001's Ce (eq. 9) sums: the
+        wheels' ``tau_c_B`` and, where they fly, the rods' ``magnetic_torque_B``."""
+        if self.magnetic_torque_B is None or self.tau_c_B is None:
+            return self.tau_c_B
+        return self.tau_c_B + self.magnetic_torque_B
+
     def every(self, stride: int) -> Trajectory:
         """Every ``stride``-th step (k = 0, stride, 2 stride, ...), as views."""
         keep = slice(None, None, int(stride))

@@ -136,7 +136,8 @@ class StepAssembler:
     command (``voltage_cmd`` or ``torque_cmd``; with ``applied`` the wheels'
     ``applied/*`` of it), and ``estimate/attitude`` with
     ``estimate=True`` (the sensing loop runs), and ``body_rate``,
-    ``wheel_momentum`` (and ``dipole_cmd``) where the accumulator's
+    ``wheel_momentum`` (and ``dipole_cmd`` and ``magnetic_torque``, which
+    the effort counts with the wheels' torque) where the accumulator's
     detumbling and momentum figures report; steps go to the accumulator in
     stamp order, the first copy of a message counting (as
     :func:`trajectory_from_messages` takes them). Only the steps not yet
@@ -153,7 +154,8 @@ class StepAssembler:
         self.width = {**self._WIDTH, ESTIMATE_ATTITUDE: 4} if estimate else dict(self._WIDTH)
         figures = accumulator.figures  # detumbling and momentum figures: the rate, the momentum, the dipole
         if figures.enabled:
-            self.width.update({BODY_RATE: 3, WHEEL_MOMENTUM: 3, **({DIPOLE_CMD: 3} if figures.magnetorquers else {})})
+            self.width.update({BODY_RATE: 3, WHEEL_MOMENTUM: 3,
+                               **({DIPOLE_CMD: 3, MAGNETIC_TORQUE: 3} if figures.magnetorquers else {})})
         self.pending: dict[int, dict[str, np.ndarray]] = {}
         self.done = -1  # stamp of the last step handed on, ns
         self.steps = 0
@@ -180,7 +182,8 @@ class StepAssembler:
                 return
             del self.pending[first]
             magnetic = (parts[BODY_RATE], parts[WHEEL_MOMENTUM], parts.get(DIPOLE_CMD)) if BODY_RATE in parts else None
-            self.accumulator.add(first * 1e-9, parts[ATTITUDE], parts[ATTITUDE_SETPOINT], parts[WHEEL_TORQUE],
+            tau = parts[WHEEL_TORQUE] + parts[MAGNETIC_TORQUE] if MAGNETIC_TORQUE in parts else parts[WHEEL_TORQUE]
+            self.accumulator.add(first * 1e-9, parts[ATTITUDE], parts[ATTITUDE_SETPOINT], tau,  # the actuators'
                                  parts["command"], parts.get(ESTIMATE_ATTITUDE), magnetic)
             self.done = first
             self.steps += 1

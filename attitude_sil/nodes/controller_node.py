@@ -65,6 +65,7 @@ class ControllerNode(LockstepNode):
         scn = self.scenario()
         self.core = build_controller(scn, 1)
         self.magnetic = build_dipole_command(scn)
+        self.demand: tuple[int, np.ndarray] | None = None  # (stamp ns, the law's command (1, 3)) of the last step
 
     def check_parameters(self, pending: dict) -> str:
         """B-dot commands the magnetorquers: a swap to it where they do not fly is refused."""
@@ -93,6 +94,7 @@ class ControllerNode(LockstepNode):
             self.get_logger().error(f"controller_type {self.core.active} commanded non-finite values "
                                     f"{u[0].tolist()} at step {k} (t={t * 1e-9:.6f} s)", throttle_duration_sec=1.0)
         err = euler_from_quat(quat_conjugate(quat_error(slot[ATTITUDE], slot[ATTITUDE_SETPOINT])))
+        self.demand = (t, u)  # the rods' torque demand, where they make it
         self.pub_cmd[self.core.kind].publish(stamped_vector_cdr(u[0], t, "body"))
         self.pub_err.publish(stamped_vector_cdr(err[0], t, "body"))
 
@@ -103,7 +105,13 @@ class ControllerNode(LockstepNode):
         slot = self.gather(name, value, t, self.dumping, self.dumping_seq, self.dumping.pending.clear)
         if slot is None:
             return
-        m = self.magnetic.dipole(self.core.active, slot[WHEEL_MOMENTUM], slot[MAGNETIC_FIELD])
+        # this step's command came first: the wheels' momentum at t follows it
+        tau = self.demand[1] if self.demand is not None and self.demand[0] == t else None
+        if tau is None and self.magnetic.torque_rods:
+            self.get_logger().error(f"no torque demand of step t={t * 1e-9:.6f} s for the rods; zero dipole",
+                                    throttle_duration_sec=1.0)
+            tau = np.zeros((1, 3))
+        m = self.magnetic.dipole(self.core.active, slot[WHEEL_MOMENTUM], slot[MAGNETIC_FIELD], tau)
         self.pub_dipole.publish(stamped_vector_cdr(m[0], t, "body"))
 
 

@@ -61,7 +61,7 @@ class WheelsNode(LockstepNode):
         self.core = build_wheels(scn, 1)
         timing = self.param("command_timing")
         if timing != "stamped":
-            zero = (np.zeros((1, 3)), self.param("actuator") == "torque")
+            zero = (np.zeros((1, 3)), self.param("actuator") in ("torque", "none"))
             self.hold = CommandHold(timing, tick_period_ns(timing, self.param("command_rate"), self.dt_ns), zero)
             self.step_ns = None
 

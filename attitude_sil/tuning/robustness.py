@@ -36,14 +36,14 @@ def robustness(scn: Scenario) -> list[dict]:
     if scn.param("plant", "model") == "flexible_axis":  # paper 002's five plants, one episode each
         cases = list(FLEXIBLE_CASES)
         tr = simulate(scn, len(cases), schedule=[], episode_values={"plant.flex.case": cases})
-        m = scenario_metrics(tr.t, tr.q_BN, tr.q_RN, tr.tau_c_B, s, step_time=step_time)
+        m = scenario_metrics(tr.t, tr.q_BN, tr.q_RN, tr.tau_actuators_B, s, step_time=step_time)
         m.update(flexible_settling(scn, tr, flex_case=cases))
         return [{"case": case, **{k: float(m[k][i]) for k in _KEYS if k in m}} for i, case in enumerate(cases)]
     base = np.diagonal(inertia_matrix(scn.param("plant", "inertia")))
     inertias = base[None, :] * (1.0 + INERTIA_ERRORS[:, None])
     tr = simulate(scn, len(INERTIA_ERRORS), schedule=[],
                   episode_values={"plant.inertia": inertias, "disturbance.inertia": inertias})
-    m = scenario_metrics(tr.t, tr.q_BN, tr.q_RN, tr.tau_c_B, s, step_time=step_time)
+    m = scenario_metrics(tr.t, tr.q_BN, tr.q_RN, tr.tau_actuators_B, s, step_time=step_time)
     for i, d in enumerate(INERTIA_ERRORS):
         rows.append({"case": f"J {d * 100 + 0.0:+.1f} %", **{k: float(m[k][i]) for k in _KEYS if k in m}})
     return rows

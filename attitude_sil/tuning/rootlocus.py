@@ -186,7 +186,7 @@ def tune_root_locus(spec, progress=None):
     info = control.step_info(cl, T=np.linspace(0, 40, 8001))
     gains = {"pid.kp": [[kp] * 3], "pid.ki": [[ki] * 3], "pid.kd": [[kd] * 3], "pid.n": [[n] * 3]}
     tr = simulate(scn, 1, controller_params=gains, controller="pid", schedule=[])
-    m = scenario_metrics(tr.t, tr.q_BN, tr.q_RN, tr.tau_c_B, scn.values["scenario"])
+    m = scenario_metrics(tr.t, tr.q_BN, tr.q_RN, tr.tau_actuators_B, scn.values["scenario"])
     out = spec.output
     out.mkdir(parents=True, exist_ok=True)
     x = np.array([kp, ki, kd, n])

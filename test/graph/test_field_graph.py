@@ -169,3 +169,16 @@ def test_a_second_episode_of_the_same_graph_flies_the_first_again():
         assert a.shape == b.shape == (1, 11, 3), name
         np.testing.assert_array_equal(a, b, err_msg=name)
     assert np.max(np.abs(first.dipole_cmd_B)) > 0.01
+
+
+def test_hawaiisat_on_its_rods_flies_in_the_graph_as_in_the_stepwise_driver():
+    # the geometric law's torque demand made by the rods (torque_actuator magnetorquers), no wheels: the
+    # demand on torque_cmd, the dipole, the rods' torque and the attitude the same; Ce counts the rods' torque
+    scn = load_scenario(CONFIG / "hawaiisat_lvlh_magnetic.yaml")
+    graph, engine = _fly(scn, 1.0)
+    _assert_same(graph.trajectory, engine, ["q_BN", "omega_BN_B", "u_cmd", "dipole_cmd_B", "magnetic_torque_B"], 51)
+    assert np.max(np.abs(engine.magnetic_torque_B)) > 1e-4  # N m: the rods act
+    assert not np.any(engine.tau_c_B) and not np.any(engine.h_wheels_B)  # nothing else does
+    report = episode_report(scn, engine, "geometric", 1.0, 1.0)
+    assert report["control_effort_Nms"] > 1e-4
+    assert graph.metrics["control_effort_Nms"] == pytest.approx(report["control_effort_Nms"], rel=1e-9)

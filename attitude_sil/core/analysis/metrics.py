@@ -265,14 +265,15 @@ def summarize(tr: Trajectory, scenario_values: dict, step_time: float = 0.0) -> 
     ``u_cmd``; ``wheel_speed`` may be None.
     """
     with np.errstate(invalid="ignore"):
-        m = scenario_metrics(tr.t, tr.q_BN, tr.q_RN, tr.tau_c_B, scenario_values, step_time=step_time)
+        m = scenario_metrics(tr.t, tr.q_BN, tr.q_RN, tr.tau_actuators_B, scenario_values, step_time=step_time)
     if tr.q_BN_est is not None:  # the sensing loop ran: the pointing figures of a budget, per episode
         m.update(pointing_columns(tr.t, tr.q_BN, tr.q_RN, tr.q_BN_est, scenario_values, m["settling_time_s"]))
     if tr.omega_BN_B is not None and tr.h_wheels_B is not None:  # detumbling, and the magnetorquers' figures
         m.update(magnetic_columns(tr.t, tr.omega_BN_B, tr.h_wheels_B, tr.dipole_cmd_B,
                                   scenario_values["metrics.detumble_rate_deg_s"]))
     finite = all_finite(tr.omega_BN_B, tr.u_cmd)  # the running sums' rule (Sums.finite): rate and command
-    peak_ws = None if tr.wheel_speed is None else np.max(np.abs(np.nan_to_num(tr.wheel_speed, nan=np.inf)), axis=(1, 2))
+    no_wheels = tr.wheel_speed is None or tr.wheel_speed.shape[-1] == 0
+    peak_ws = None if no_wheels else np.max(np.abs(np.nan_to_num(tr.wheel_speed, nan=np.inf)), axis=(1, 2))
     return EpisodeSummary(metrics=m, finite=finite,
                           peak_command=np.max(np.abs(np.nan_to_num(tr.u_cmd, nan=np.inf)), axis=(1, 2)),
                           peak_wheel_speed=peak_ws)
@@ -380,7 +381,7 @@ def episode_report(scn, tr, controller_type: str, duration_s: float, wall_s: flo
     """
     s = scn.values["scenario"]
     n = tr.q_BN.shape[1]
-    m = scenario_metrics(tr.t, tr.q_BN[:1], tr.q_RN[:1], tr.tau_c_B[:1], s,
+    m = scenario_metrics(tr.t, tr.q_BN[:1], tr.q_RN[:1], tr.tau_actuators_B[:1], s,
                          step_time=scn.param("guidance", "step_time"))
     out: dict = {
         "scenario": scn.name,
@@ -405,8 +406,8 @@ def episode_report(scn, tr, controller_type: str, duration_s: float, wall_s: flo
         bounds = [0] + [k for _, k, _ in schedule] + [n]
         kinds = [controller_type] + [kind for _, _, kind in schedule]
         out["segments"] = [
-            {"controller_type": kind, **segment_metrics(tr.t, tr.q_BN[0], tr.q_RN[0], tr.tau_c_B[0], tr.u_cmd[0],
-                                                        k0, k1, axis=s["metrics.axis"])}
+            {"controller_type": kind, **segment_metrics(tr.t, tr.q_BN[0], tr.q_RN[0], tr.tau_actuators_B[0],
+                                                        tr.u_cmd[0], k0, k1, axis=s["metrics.axis"])}
             for kind, k0, k1 in zip(kinds, bounds[:-1], bounds[1:], strict=True) if k1 > k0
         ]
     return out

@@ -152,7 +152,8 @@ class EpisodeAccumulator:
 
     # -- feeding --------------------------------------------------------------
     def add(self, t: float, q_BN, q_RN, tau_c_B, u_cmd, q_BN_est=None, magnetic: tuple | None = None) -> None:
-        """One step: time (s), q_BN and q_RN (4,), tau_c_B (3,) N m over the step, u_cmd (3,), the
+        """One step: time (s), q_BN and q_RN (4,), tau_c_B (3,) N m the actuators' torque over the step (the
+        wheels', with the rods' where they fly), u_cmd (3,), the
         estimator's q_BN (4,) where the sensing loop runs, and where :attr:`figures` reports (its ``enabled``)
         ``magnetic`` = (omega_BN_B (3,) rad/s, h_wheels_B (3,) N m s, the dipole commanded (3,) A m^2 or
         None)."""

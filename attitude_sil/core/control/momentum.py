@@ -16,7 +16,13 @@ direction the field never leaves cannot be dumped.
 Its parameters are the controller's (``momentum.*``,
 :data:`MOMENTUM_PARAMS`), so no attitude law changes. :class:`DipoleCommand`
 is the controller's magnetic channel: this law, or B-dot while ``bdot`` is
-the active law.
+the active law, or, on a spacecraft with no wheels (``torque_actuator:
+magnetorquers``), the attitude law's torque demand tau made by the rods:
+
+    m = B x tau / |B|^2,   m x B = (I - b b^T) tau,
+
+the demand's component normal to the field (Basilisk's ``torque2Dipole``);
+the component along B is lost.
 """
 
 from __future__ import annotations
@@ -30,7 +36,7 @@ from attitude_sil.core.paramspec import double as _d
 from attitude_sil.core.paramspec import double_array as _da
 from attitude_sil.core.plant.quaternion import cross
 
-__all__ = ["MOMENTUM_MODES", "MOMENTUM_PARAMS", "CrossProductDumping", "DipoleCommand", "BDOT",
+__all__ = ["MOMENTUM_MODES", "TORQUE_ACTUATORS", "torque_dipole", "MOMENTUM_PARAMS", "CrossProductDumping", "DipoleCommand", "BDOT",
            "PER_EPISODE_SCALARS"]
 
 #: the law whose dipole is B-dot's (``controller_type: bdot``)
@@ -39,8 +45,16 @@ BDOT = BDOT_LAW.name
 #: ``momentum.mode`` values
 MOMENTUM_MODES = ("none", "cross_product")
 
-#: the controller's momentum-management parameters
+#: ``torque_actuator`` values: where a torque law's demand goes
+TORQUE_ACTUATORS = ("wheels", "magnetorquers")
+
+#: the controller's magnetic channel's parameters: momentum management, and the rods as the torque actuator
 MOMENTUM_PARAMS = [
+    ParamSpec("torque_actuator", "string", "wheels",
+              "where a torque law's demand goes: wheels (torque_cmd, made by the wheels node) or magnetorquers "
+              "(a spacecraft on rods alone, wheels actuator none: the dipole B x tau / |B|^2 on dipole_cmd, which "
+              "makes the demand's component normal to the field; torque_cmd carries the demand, unmade)",
+              choices=TORQUE_ACTUATORS),
     ParamSpec("momentum.mode", "string", "none",
               "momentum management beside the attitude law: none, or cross_product (the dipole k (h_w - "
               "h_target) x B / |B|^2 on dipole_cmd, for the magnetorquers; needs a field model)",
@@ -55,6 +69,15 @@ MOMENTUM_PARAMS = [
 #: the magnetic channel's scalar parameters it takes one per episode (a batch's candidates in one run; a law's
 #: record holds a scalar once for all its episodes)
 PER_EPISODE_SCALARS = ("momentum.gain", f"{BDOT}.gain")
+
+
+def torque_dipole(tau_B: np.ndarray, b_B: np.ndarray) -> np.ndarray:
+    """The dipole (P, 3) A m^2 whose torque in the field ``b_B`` (P, 3) tesla is the component of ``tau_B``
+    (P, 3) N m normal to it: m = B x tau / |B|^2 (zero where the field is zero), both in B."""
+    b = np.asarray(b_B, dtype=float)
+    b2 = np.sum(b * b, axis=-1, keepdims=True)
+    m = cross(b, np.asarray(tau_B, dtype=float))
+    return np.divide(m, b2, out=np.zeros_like(m), where=b2 > 0.0)
 
 
 class CrossProductDumping:
@@ -76,22 +99,29 @@ class CrossProductDumping:
 
 class DipoleCommand:
     """The controller's dipole each step: B-dot (:class:`~attitude_sil.core.control.laws.bdot.BDot`) while
-    ``bdot`` is the active law, else the momentum law ``dumping`` (None: ``momentum.mode: none``, no dipole).
+    ``bdot`` is the active law, else the attitude law's torque demand through the rods where they are the
+    torque actuator (``torque_rods``), else the momentum law ``dumping`` (None: ``momentum.mode: none``, no
+    dipole).
 
     B-dot's difference runs every step, whichever law is active, so a swap to
     it starts from the previous step's field, not from zero.
     """
 
-    def __init__(self, dumping: CrossProductDumping | None, bdot: BDot) -> None:
+    def __init__(self, dumping: CrossProductDumping | None, bdot: BDot, torque_rods: bool = False) -> None:
         self.dumping = dumping
         self.bdot = bdot
+        self.torque_rods = torque_rods
 
-    def dipole(self, active: str, h_wheels_B: np.ndarray, b_B: np.ndarray) -> np.ndarray:
+    def dipole(self, active: str, h_wheels_B: np.ndarray, b_B: np.ndarray,
+               tau_cmd_B: np.ndarray | None = None) -> np.ndarray:
         """The dipole command (P, 3) A m^2 of step k under law ``active``, from the wheel momentum
-        ``h_wheels_B`` (P, 3) N m s and the field read ``b_B`` (P, 3) tesla, both at t_k in B."""
+        ``h_wheels_B`` (P, 3) N m s, the field read ``b_B`` (P, 3) tesla and the law's torque demand
+        ``tau_cmd_B`` (P, 3) N m (read with ``torque_rods`` only), all at t_k in B."""
         m_bdot = self.bdot.dipole(b_B)
         if active == BDOT:
             return m_bdot
+        if self.torque_rods:
+            return torque_dipole(tau_cmd_B, b_B)
         if self.dumping is None:
             return np.zeros_like(m_bdot)
         return self.dumping.dipole(h_wheels_B, b_B)

@@ -8,6 +8,9 @@ the body over the step, per-actuator position, velocity, effort).
 * :class:`TorqueActuator` — an ideal torquer per body axis saturated at
   ``torque_limit`` (paper 001's magnetic torque rods, 1.2 mN m; paper 002's
   10 N m; paper 004's normalised 1.3). It stores no momentum.
+* :class:`NoActuator` — nothing on the wheels node (``actuator: none``): a
+  spacecraft on magnetorquers alone, whose rods make the law's torque demand
+  (the controller's ``torque_actuator: magnetorquers``). No torque, no joints.
 * :class:`SpeedLoopWheels` — paper 003's 1U CubeSat wheels: three wheels on
   the body axes, each the identified motor ``K / (a2 s^2 + a1 s + 1)`` (speed
   out, rpm) inside the paper's wheel-speed PID ``kp + ki/s + kd N s/(s+N)``.
@@ -27,7 +30,7 @@ from attitude_sil.core.plant.plants import exact_discretization
 from attitude_sil.core.trajectory import WheelStep
 from attitude_sil.errors import ScenarioError
 
-__all__ = ["TorqueActuator", "SpeedLoopWheels"]
+__all__ = ["TorqueActuator", "NoActuator", "SpeedLoopWheels"]
 
 RPM = 2.0 * np.pi / 60.0
 
@@ -51,6 +54,24 @@ class TorqueActuator:
         tau = np.clip(np.asarray(cmd_B, dtype=float), -self.limit, self.limit)
         zero = np.zeros_like(tau)
         return WheelStep(zero, tau, zero, zero, tau)
+
+
+class NoActuator:
+    """No torque actuator on the wheels node; see the module docstring."""
+
+    names: list[str] = []
+
+    def __init__(self, n_episodes: int) -> None:
+        self.n_episodes = n_episodes
+
+    def reset(self) -> None:
+        """Nothing to reset."""
+
+    def advance(self, cmd_B: np.ndarray, torque_mode: bool = True):
+        """No torque and no momentum whatever the command (P, 3); no joints."""
+        zero = np.zeros_like(np.asarray(cmd_B, dtype=float))
+        none = np.zeros((zero.shape[0], 0))
+        return WheelStep(zero, zero, none, none, none)
 
 
 class SpeedLoopWheels:

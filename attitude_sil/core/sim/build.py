@@ -21,7 +21,7 @@ from attitude_sil.core.control.bank import ControllerBank
 from attitude_sil.core.control.laws.bdot import BDot
 from attitude_sil.core.control.momentum import CrossProductDumping, DipoleCommand
 from attitude_sil.core.environment.ephemeris import Ephemeris, FieldAlongOrbit
-from attitude_sil.core.plant.actuators import RPM, SpeedLoopWheels, TorqueActuator
+from attitude_sil.core.plant.actuators import RPM, NoActuator, SpeedLoopWheels, TorqueActuator
 from attitude_sil.core.plant.disturbance import DisturbanceModel, orbit_rate
 from attitude_sil.core.plant.linear import LinearizedPlant
 from attitude_sil.core.plant.magnetorquers import Magnetorquers, rod_axes
@@ -174,6 +174,8 @@ def build_wheels(scn: Scenario, n_episodes: int = 1, per_episode: dict | None = 
         raise ScenarioError(f"wheels.failure and per-episode motors need actuator reaction_wheels, not {w['actuator']}")
     if w["actuator"] == "torque":
         return TorqueActuator(w["torque_limit"], n_episodes)
+    if w["actuator"] == "none":
+        return NoActuator(n_episodes)
     if w["actuator"] == "speed_loop":
         return SpeedLoopWheels(w["speed_loop.motor_gain"], w["speed_loop.motor_a2"], w["speed_loop.motor_a1"],
                                w["speed_loop.kp"], w["speed_loop.ki"], w["speed_loop.kd"], w["speed_loop.n"],
@@ -245,7 +247,8 @@ def build_dipole_command(scn: Scenario, params: dict | None = None) -> DipoleCom
     as they do the laws' (:func:`build_controller`)."""
     c = {**effective_values(scn, "controller"), **(params or {})}
     dumping = None if c["momentum.mode"] == "none" else CrossProductDumping(c["momentum.gain"], c["momentum.target"])
-    return DipoleCommand(dumping, BDot(c["bdot.gain"], c["control_period"]))
+    return DipoleCommand(dumping, BDot(c["bdot.gain"], c["control_period"]),
+                         torque_rods=c["torque_actuator"] == "magnetorquers")
 
 
 def build_magnetorquers(scn: Scenario) -> Magnetorquers:

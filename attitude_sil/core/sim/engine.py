@@ -380,22 +380,24 @@ def _simulate_stepwise(plant, wheels, dist, guide, ctrl, swaps: dict, K: int, dt
         tr.wheel_effort[:, k] = ws.effort
         tr.omega_RN_R[:, k] = w_RN
         if magnetic is not None:
-            tau_ext = tau_ext + _magnetic_step(tr, k, k * dt_ns, s.q_BN, ws.h_wheels_B, magnetic, sensing, ctrl.active)
+            tau_ext = tau_ext + _magnetic_step(tr, k, k * dt_ns, s.q_BN, ws.h_wheels_B, u, magnetic, sensing,
+                                               ctrl.active)
         if k < K:
             plant.advance(ws.tau_c_B, ws.h_wheels_B, tau_ext)
     return tr
 
 
-def _magnetic_step(tr: Trajectory, k: int, t_ns: int, q_BN: np.ndarray, h_wheels_B: np.ndarray,
+def _magnetic_step(tr: Trajectory, k: int, t_ns: int, q_BN: np.ndarray, h_wheels_B: np.ndarray, u: np.ndarray,
                    magnetic: MagneticLoop, sensing: Sensing | None, active: str) -> np.ndarray:
     """Step ``k`` of the magnetorquers' loop, kept in ``tr``; returns the rods' torque (P, 3) N m: the field at
-    t_k, its magnetometer reading (the controller's with ``feedback: estimate``), the dipole and the torque."""
+    t_k, its magnetometer reading (the controller's with ``feedback: estimate``), the dipole (from the law's
+    command ``u`` where the rods make it) and the torque."""
     b_B = magnetic.field_B(t_ns, q_BN)
     b_read = b_B
     if sensing is not None:
         tr.magnetometer_B[:, k] = sensing.suite.magnetometer.sample(b_B, k)
         if sensing.feedback == "estimate":
             b_read = tr.magnetometer_B[:, k]
-    m_cmd, tau_mag = magnetic.step(active, h_wheels_B, b_B, b_read)
+    m_cmd, tau_mag = magnetic.step(active, h_wheels_B, b_B, b_read, u)
     tr.magnetic_field_B[:, k], tr.dipole_cmd_B[:, k], tr.magnetic_torque_B[:, k] = b_B, m_cmd, tau_mag
     return tau_mag

@@ -197,7 +197,8 @@ class MagneticLoop:
     One control step k, after the wheels' (the momentum at t_k is theirs):
     the field at the spacecraft in B at t_k (what the plant publishes on
     ``magnetic_field``), the controller's dipole (B-dot under ``bdot``, else
-    the dumping law's from the wheel momentum) from the field it reads (the truth, or the magnetometer's reading
+    the law's torque demand through the rods on a spacecraft without wheels,
+    else the dumping law's from the wheel momentum) from the field it reads (the truth, or the magnetometer's reading
     with ``feedback: estimate``; the controller node's ``dipole_cmd``), the
     rods' torque m x B on the body held over the step (the ``magnetorquers``
     node's ``magnetic_torque``), which the plant adds to the disturbance.
@@ -212,12 +213,13 @@ class MagneticLoop:
         """The true field (P, 3) tesla in B at step time ``t_ns`` for attitudes ``q_BN`` (P, 4)."""
         return self.field.field_B(np.array([t_ns]), q_BN[:, None, :])[:, 0]
 
-    def step(self, active: str, h_wheels_B: np.ndarray, b_B: np.ndarray,
-             b_read_B: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def step(self, active: str, h_wheels_B: np.ndarray, b_B: np.ndarray, b_read_B: np.ndarray,
+             tau_cmd_B: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """The dipole command (P, 3) A m^2 under law ``active`` for the wheel momentum ``h_wheels_B`` (P, 3)
-        N m s and the field the controller reads ``b_read_B`` (P, 3) T, and the rods' torque (P, 3) N m in the
-        true field ``b_B``."""
-        m_cmd = self.law.dipole(active, h_wheels_B, b_read_B)
+        N m s, the field the controller reads ``b_read_B`` (P, 3) T and the law's command ``tau_cmd_B`` (P, 3)
+        (its torque demand, N m, where the rods are the torque actuator), and the rods' torque (P, 3) N m in
+        the true field ``b_B``."""
+        m_cmd = self.law.dipole(active, h_wheels_B, b_read_B, tau_cmd_B)
         return m_cmd, self.rods.torque(m_cmd, b_B)
 
 

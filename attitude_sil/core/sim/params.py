@@ -92,11 +92,11 @@ _FIELD_MODEL = ParamSpec(
     "the epoch) or igrf (IGRF-14 to degree 13)", choices=tuple(FIELD_MODELS))
 
 #: whether the magnetorquers fly (plant and controller): the runner sets it where the controller commands a
-#: dipole (momentum.mode, or bdot among the laws it flies)
+#: dipole (momentum.mode, bdot among the laws it flies, or the rods as its torque_actuator)
 _MAGNETORQUERS = ParamSpec(
     "magnetorquers", "bool", False,
-    "the magnetorquers fly (set by the runner where momentum.mode is not none or bdot is among the laws): the "
-    "plant takes their magnetic_torque each step, the controller commands dipole_cmd")
+    "the magnetorquers fly (set by the runner where momentum.mode is not none, bdot is among the laws or they "
+    "are the torque_actuator): the plant takes their magnetic_torque each step, the controller commands dipole_cmd")
 
 _COMMAND_RATE = _d("command_rate", 0.0, "sim_timer: the controller's timer rate, Hz (0: the control rate); its "
                    "period must be a whole number of control periods", min=0.0)
@@ -182,8 +182,9 @@ NODE_PARAMS: dict[str, list[ParamSpec]] = {
                   choices=("lost", "stuck")),
         ParamSpec("actuator", "string", "reaction_wheels",
                   "reaction_wheels (PMDC motors, paper 000), speed_loop (identified motor with a wheel-speed "
-                  "PID, paper 003), torque (ideal torquer saturated at torque_limit: torque rods, paper 001)",
-                  choices=("reaction_wheels", "speed_loop", "torque")),
+                  "PID, paper 003), torque (ideal torquer saturated at torque_limit: torque rods, paper 001), "
+                  "none (no wheels: the magnetorquers make the torque, controller torque_actuator magnetorquers)",
+                  choices=("reaction_wheels", "speed_loop", "torque", "none")),
         _d("torque_limit", 1.2e-3, "saturation of the torque actuator per body axis, N m (paper 001: 1.2 mN m)",
            min=0.0, min_exclusive=True),
         _d("speed_loop.motor_gain", 1.0069, "identified motor gain K (paper 003)", min=0.0, min_exclusive=True),

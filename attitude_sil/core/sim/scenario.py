@@ -125,10 +125,11 @@ class Scenario:
 
     @property
     def has_magnetorquers(self) -> bool:
-        """Whether the magnetorquers fly: the controller commands a dipole (``momentum.mode``, or ``bdot``
-        among the laws it flies, first or scheduled)."""
-        laws = {self.values["controller"]["controller_type"], *self.values[SCENARIO_NODE]["schedule.controller_types"]}
-        return self.values["controller"]["momentum.mode"] != "none" or BDOT in laws
+        """Whether the magnetorquers fly: the controller commands a dipole (``momentum.mode``, ``bdot``
+        among the laws it flies, first or scheduled, or the rods as its ``torque_actuator``)."""
+        c = self.values["controller"]
+        laws = {c["controller_type"], *self.values[SCENARIO_NODE]["schedule.controller_types"]}
+        return c["momentum.mode"] != "none" or BDOT in laws or c["torque_actuator"] == "magnetorquers"
 
     @property
     def nodes(self) -> tuple[str, ...]:
@@ -257,6 +258,25 @@ def _check_one_orbit(scn: Scenario) -> None:
                                 "plant, the guidance and the disturbances fly one orbit)")
 
 
+def _check_torque_actuator(scn: Scenario) -> None:
+    """The rods make a torque law's demand only on a spacecraft without wheels, and only that: one actuator
+    per torque, none left without one."""
+    c, actuator = scn.values["controller"], scn.values["wheels"]["actuator"]
+    rods = c["torque_actuator"] == "magnetorquers"
+    if rods and actuator != "none":
+        raise ScenarioError(f"{scn.source}: controller.torque_actuator magnetorquers sends the torque demand to "
+                            f"the rods, but wheels.actuator is {actuator}: set wheels actuator none")
+    if actuator == "none" and not rods:
+        raise ScenarioError(f"{scn.source}: wheels.actuator none makes no torque: set controller torque_actuator "
+                            "magnetorquers (the rods make the law's demand)")
+    if rods and c["momentum.mode"] != "none":
+        raise ScenarioError(f"{scn.source}: controller.momentum.mode {c['momentum.mode']} dumps wheel momentum, "
+                            "and torque_actuator magnetorquers flies no wheels: set momentum.mode none")
+    if rods and c["command"] != "torque" and c["controller_type"] != "geometric":
+        raise ScenarioError(f"{scn.source}: controller.torque_actuator magnetorquers makes a torque demand: set "
+                            "controller command torque")
+
+
 def _check_consistency(scn: Scenario) -> None:
     periods = {n: scn.values[n]["control_period"] for n in ALL_NODES}
     if len(set(periods.values())) > 1:
@@ -269,9 +289,11 @@ def _check_consistency(scn: Scenario) -> None:
                 raise ScenarioError(f"{scn.source}: {node}.{name} {mine} differs from {src}.{src_name} {theirs}; "
                                     f"set it under {src} (the {node} follows)")
     _check_one_orbit(scn)
+    _check_torque_actuator(scn)
     if scn.has_magnetorquers and scn.values["plant"]["environment.magnetic_field.model"] == "none":
-        why = "bdot" if scn.values["controller"]["momentum.mode"] == "none" else \
-            f"controller.momentum.mode {scn.values['controller']['momentum.mode']}"
+        c = scn.values["controller"]
+        why = f"controller.momentum.mode {c['momentum.mode']}" if c["momentum.mode"] != "none" else \
+            "controller.torque_actuator magnetorquers" if c["torque_actuator"] == "magnetorquers" else "bdot"
         raise ScenarioError(f"{scn.source}: {why} drives the magnetorquers, which need a field: set plant "
                             "environment.magnetic_field.model (dipole or igrf)")
     dt = scn.dt
