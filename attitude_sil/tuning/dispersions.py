@@ -16,6 +16,7 @@ A ``dispersions`` mapping (in a Monte Carlo spec, or a tuning spec's
     sensor_seeds: true                                         # sensors.seed + run (default with the sensors on)
     residual_dipole_Am2:  {dist: normal, scale: 0.01}          # added to disturbance.residual_dipole.moment
     magnetometer_bias_nt: {dist: normal, scale: 200}           # added to sensors.magnetometer.bias_nt per axis
+    epoch_s:              {dist: uniform, scale: 43200}        # added to orbit.epoch, whole seconds (the field's)
 
 ``dist: normal`` draws ``scale`` x N(0, 1), ``dist: uniform`` ``scale`` x U(-1, 1);
 ``scale`` is one number or one per axis. Run i draws from its own stream,
@@ -32,10 +33,13 @@ re-runs through the node graph exactly.
 from __future__ import annotations
 
 import difflib
+from datetime import timedelta
 from typing import Any
 
 import numpy as np
 from scipy.special import ndtri
+
+from attitude_sil.core.environment.earth_time import epoch_from_text
 
 from attitude_sil.core.plant.wheels import GEOMETRIES
 from attitude_sil.core.sim.scenario import Scenario, derived_values, effective_values
@@ -46,16 +50,16 @@ __all__ = ["DISPERSION_KEYS", "check_dispersions", "draw", "episode_values", "ru
 #: numeric dispersions: key -> (width, unit)
 _NUMERIC = {"inertia_pct": 3, "initial_attitude_deg": 3, "initial_rate_deg_s": 3, "setpoint_deg": 3,
             "motor_constant_pct": 1, "noise_level_pct": 1, "gyro_bias_deg_h": 3, "residual_dipole_Am2": 3,
-            "magnetometer_bias_nt": 3}
+            "magnetometer_bias_nt": 3, "epoch_s": 1}
 DISPERSION_KEYS = (*_NUMERIC, "noise_seeds", "wheel_failure", "sensor_noise", "sensor_seeds")
 #: the per-run uniform slots, in draw order
 _SLOTS = {"inertia_pct": slice(0, 3), "initial_attitude_deg": slice(3, 6), "initial_rate_deg_s": slice(6, 9),
           "setpoint_deg": slice(9, 12), "motor_constant_pct": slice(12, 13), "noise_level_pct": slice(13, 14),
           "failure_happens": 14, "failure_wheel": 15, "failure_time": 16, "failure_mode": 17,
           "gyro_bias_deg_h": slice(18, 21), "residual_dipole_Am2": slice(21, 24),
-          "magnetometer_bias_nt": slice(24, 27)}
+          "magnetometer_bias_nt": slice(24, 27), "epoch_s": 27}
 #: (slots are drawn in order from each run's stream: a slot added at the end leaves the others' values as they were)
-_N_SLOTS = 27
+_N_SLOTS = 28
 
 
 def _number(v: Any) -> bool:
@@ -141,6 +145,9 @@ def check_dispersions(where: str, raw: Any, scn: Scenario) -> dict:
             "plant", "environment.magnetic_field.model") != "none"):
         raise SpecError(f"{where}: dispersions.magnetometer_bias_nt: the scenario has no magnetometer (it needs the "
                         "sensors and a field model)")
+    if "epoch_s" in out and scn.param("plant", "environment.magnetic_field.model") == "none":
+        raise SpecError(f"{where}: dispersions.epoch_s: the scenario has no field model (the epoch turns the Earth "
+                        "under the orbit and dates the field)")
     return out
 
 
@@ -224,6 +231,9 @@ def episode_values(scn: Scenario, dispersions: dict, seed: int, runs) -> dict[st
         out["sensors.magnetometer.bias_nt"] = (
             np.asarray(v["sensors"]["magnetometer.bias_nt"], dtype=float)
             + _offsets(dispersions["magnetometer_bias_nt"], u[:, _SLOTS["magnetometer_bias_nt"]]))
+    if "epoch_s" in dispersions:
+        out["plant.orbit.epoch"] = _epochs(v["plant"]["orbit.epoch"],
+                                           _offsets(dispersions["epoch_s"], u[:, _SLOTS["epoch_s"]]))
     if "sensor_noise" in dispersions:
         sn = dispersions["sensor_noise"]
         out["controller.sensor_noise.attitude_std_deg"] = np.full(n, sn["attitude_std_deg"])
@@ -241,6 +251,14 @@ def _plain(value) -> Any:
     return [int(x) if a.dtype.kind in "iu" else float(x) for x in a.tolist()]
 
 
+def _epochs(epoch: str, offsets_s: np.ndarray) -> np.ndarray:
+    """``epoch`` (ISO 8601 UTC) plus each of ``offsets_s`` (n,) rounded to whole seconds, as ISO 8601 texts
+    (a time a scenario file states exactly)."""
+    start = epoch_from_text(epoch, "orbit.epoch")
+    return np.array([(start + timedelta(seconds=int(np.rint(d)))).strftime("%Y-%m-%dT%H:%M:%SZ")
+                     for d in offsets_s])
+
+
 def run_scenario(scn: Scenario, values: dict[str, np.ndarray], row: int) -> Scenario:
     """Row ``row`` of :func:`episode_values` as a scenario: the run's values set, validated.
 
@@ -255,6 +273,7 @@ def run_scenario(scn: Scenario, values: dict[str, np.ndarray], row: int) -> Scen
         scn = scn.with_values("controller", **{"bdot.gain": k_star})
     for key, col in values.items():
         node, _, name = key.partition(".")
+        node = "/**" if name.startswith("orbit.") else node  # one orbit: every node that flies it
         try:
             scn = scn.with_values(node, **{name: _plain(col[row])})
         except ScenarioError as exc:

@@ -1,12 +1,15 @@
-"""Monte Carlo disperses the residual dipole and the magnetometer's bias: each run of a batch is the run its
-dispersed scenario gives alone (what the campaign re-runs through the graph), and a spec that asks for them
-on a scenario without them is one line."""
+"""Monte Carlo disperses the residual dipole, the magnetometer's bias and the epoch: each run of a batch is the
+run its dispersed scenario gives alone (what the campaign re-runs through the graph), and a spec that asks for
+them on a scenario without them is one line. The epoch turns the Earth under the orbit: a sidereal day later
+the field is the same within the secular variation, half a day later it is another field."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
+from attitude_sil.core.environment.ephemeris import FieldAlongOrbit
+from attitude_sil.core.sim.build import build_environment
 from attitude_sil.core.sim.engine import simulate
 from attitude_sil.core.sim.scenario import default_config_dir, load_scenario
 from attitude_sil.errors import SpecError
@@ -43,8 +46,36 @@ def test_each_run_of_a_batch_is_its_dispersed_scenario_alone():
                                    np.broadcast_to(biases[i] * 1e-9, (quiet.t.size, 3)), rtol=0, atol=1e-20)
 
 
+def test_each_run_of_a_dispersed_epoch_is_its_epoch_alone():
+    # Hawai'iSat on its rods: the field the controller maps its demand through, per episode
+    scn = load_scenario(CONFIG / "hawaiisat_lvlh_magnetic.yaml")
+    disp = check_dispersions("mc", {"epoch_s": {"dist": "uniform", "scale": 43200.0}}, scn)
+    values = episode_values(scn, disp, seed=3, runs=np.arange(3))
+    epochs = values["plant.orbit.epoch"]
+    assert len(set(epochs)) == 3 and all(e.startswith(("2025-12-31T", "2026-01-01T")) for e in epochs)
+    batch = simulate(scn, 3, duration=0.4, episode_values=values)
+    for i in range(3):
+        alone = run_scenario(scn, values, i)
+        assert alone.param("guidance", "orbit.epoch") == alone.param("plant", "orbit.epoch") == epochs[i]
+        flown = simulate(alone, 1, duration=0.4)
+        for name in ("magnetic_field_B", "dipole_cmd_B", "magnetic_torque_B", "q_BN"):
+            np.testing.assert_array_equal(getattr(batch, name)[i], getattr(flown, name)[0])
+    assert np.max(np.abs(batch.magnetic_field_B[0] - batch.magnetic_field_B[1])) > 1e-7  # another field
+
+
+def test_a_sidereal_day_later_the_earth_and_its_field_are_where_they_were():
+    orbit = build_environment(load_scenario(CONFIG / "hawaiisat_lvlh_magnetic.yaml"))[0]
+    # 86,164 s, the sidereal day to the second (0.09 s short: 7e-6 rad of the Earth's turn), and half a day
+    field = FieldAlongOrbit(orbit, "igrf", ["2026-01-01T00:00:00Z", "2026-01-01T23:56:04Z", "2026-01-01T12:00:00Z"])
+    b = field.field_N(np.arange(0, 600, 7) * orbit.dt_ns * 50)  # over 10 min of the orbit
+    assert b.shape == (3, 86, 3)
+    assert np.max(np.linalg.norm(b[1] - b[0], axis=-1)) < 1e-9  # T: within a nanotesla (a day's secular change)
+    assert np.min(np.linalg.norm(b[2] - b[0], axis=-1)) > 1e-6  # the Earth half turned: microteslas apart
+
+
 @pytest.mark.parametrize("key, problem", [("residual_dipole_Am2", "no residual dipole"),
-                                          ("magnetometer_bias_nt", "no magnetometer")])
+                                          ("magnetometer_bias_nt", "no magnetometer"),
+                                          ("epoch_s", "no field model")])
 def test_a_dispersion_the_scenario_cannot_take_is_one_line(key, problem):
     with pytest.raises(SpecError, match=problem) as err:
         check_dispersions("mc.yaml", {key: {"dist": "normal", "scale": 1.0}},

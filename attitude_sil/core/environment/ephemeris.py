@@ -138,17 +138,23 @@ class FieldAlongOrbit:
         ``igrf`` with an epoch outside the coefficients' years (one line).
     """
 
-    def __init__(self, orbit: Ephemeris, model: str) -> None:
+    def __init__(self, orbit: Ephemeris, model: str, epochs=None) -> None:
         if model not in FIELD_MODELS:
             raise ValueError(f"unknown field model {model!r}")  # the schema's choices refuse it first
         self.orbit, self.model = orbit, model
-        self.year = decimal_year(orbit.epoch)
+        # one epoch per episode (a Monte Carlo's dispersed epoch: the Earth turned another way under the same
+        # orbit), or None: the orbit's for all
+        self.epochs = None if epochs is None else [epoch_from_text(str(e), "orbit.epoch") for e in epochs]
+        self.years = [decimal_year(e) for e in (self.epochs or [orbit.epoch])]
+        self.year = self.years[0]
         self._cached: tuple[int, np.ndarray] = (-1, np.zeros((0, 3)))  # (chunk, its field): _chunk
         if model != "none":
-            igrf_coefficients(self.year)  # an epoch outside IGRF-14: one line now, not at the first step
+            for year in self.years:  # an epoch outside IGRF-14: one line now, not at the first step
+                igrf_coefficients(year)
 
     def field_N(self, t_ns) -> np.ndarray:
-        """The field (n, 3) tesla in N at step times ``t_ns`` (n,) ns (whole steps of the orbit's period).
+        """The field (n, 3) tesla in N at step times ``t_ns`` (n,) ns (whole steps of the orbit's period); (P, n, 3)
+        with an epoch per episode.
 
         Evaluated :data:`FIELD_CHUNK` steps at a time, chunks aligned at step 0
         (the expansion holds (N + 1)^2 Legendre values per point), the last
@@ -158,25 +164,28 @@ class FieldAlongOrbit:
         t_ns = np.atleast_1d(np.asarray(t_ns, dtype=np.int64))
         if t_ns.size == 1:  # a step at a time (the nodes, the stepwise driver): its row of the chunk
             c, i = divmod(int(t_ns[0]) // self.orbit.dt_ns, FIELD_CHUNK)
-            return self._chunk(c)[i:i + 1].copy()
+            return self._chunk(c)[..., i:i + 1, :].copy()
         chunks = t_ns // self.orbit.dt_ns // FIELD_CHUNK
-        out = np.empty((t_ns.size, 3))
+        out = np.empty(self._chunk(int(chunks[0])).shape[:-2] + (t_ns.size, 3))
         for c in np.unique(chunks):
             sel = chunks == c
-            out[sel] = self._chunk(int(c))[t_ns[sel] // self.orbit.dt_ns - int(c) * FIELD_CHUNK]
+            out[..., sel, :] = self._chunk(int(c))[..., t_ns[sel] // self.orbit.dt_ns - int(c) * FIELD_CHUNK, :]
         return out
 
     def _chunk(self, c: int) -> np.ndarray:
-        """The field (FIELD_CHUNK, 3) in N at the steps of chunk ``c``."""
+        """The field (FIELD_CHUNK, 3) in N at the steps of chunk ``c``; (P, FIELD_CHUNK, 3) with an epoch per
+        episode, each as that epoch alone gives it."""
         if self._cached[0] != c:
             t_ns = (c * FIELD_CHUNK + np.arange(FIELD_CHUNK, dtype=np.int64)) * self.orbit.dt_ns
             r_N = np.array([self.orbit.at(int(t)).r_N for t in t_ns])
-            theta = gmst_rad(julian_date(self.orbit.epoch, t_ns * 1e-9))
-            self._cached = (c, field_eci(r_N, theta, self.year, self.model))
+            fields = [field_eci(r_N, gmst_rad(julian_date(e, t_ns * 1e-9)), y, self.model)
+                      for e, y in zip(self.epochs or [self.orbit.epoch], self.years, strict=True)]
+            self._cached = (c, fields[0] if self.epochs is None else np.stack(fields))
         return self._cached[1]
 
     def field_B(self, t_ns, q_BN: np.ndarray) -> np.ndarray:
         """The field in B (..., n, 3) tesla for attitudes ``q_BN`` (..., n, 4) at step times ``t_ns`` (n,) ns:
-        R_NB^T b_N, R_NB the rotation matrix of q_BN (``quaternion.quat_to_dcm``)."""
+        R_NB^T b_N, R_NB the rotation matrix of q_BN (``quaternion.quat_to_dcm``); with an epoch per episode,
+        ``q_BN`` is (P, n, 4)."""
         b_N = self.field_N(t_ns)
-        return np.einsum("...nji,nj->...ni", quat_to_dcm(np.asarray(q_BN, dtype=float)), b_N)
+        return np.einsum("...nji,...nj->...ni", quat_to_dcm(np.asarray(q_BN, dtype=float)), b_N)

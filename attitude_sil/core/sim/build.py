@@ -211,11 +211,11 @@ def build_wheels(scn: Scenario, n_episodes: int = 1, per_episode: dict | None = 
 
 
 def build_disturbance(scn: Scenario, n_episodes: int = 1, seeds=None, inertia=None,
-                      noise_power=None, residual_dipole=None) -> DisturbanceModel:
+                      noise_power=None, residual_dipole=None, epochs=None) -> DisturbanceModel:
     """Disturbance model from the ``disturbance`` parameters; seeds default to seed + p.
 
     ``noise_power`` (P, 3) N^2 m^2 s sets each episode's ``noise.power``, ``residual_dipole`` (P, 3) A m^2 its
-    ``residual_dipole.moment``.
+    ``residual_dipole.moment``, ``epochs`` (P,) its field's epoch (:func:`build_environment`).
     """
     d = effective_values(scn, "disturbance")  # the plant's field model
     if noise_power is not None:
@@ -227,17 +227,18 @@ def build_disturbance(scn: Scenario, n_episodes: int = 1, seeds=None, inertia=No
         seeds = [d["noise.seed"] + p for p in range(n_episodes)]
     ephemeris = Ephemeris(d, scn.dt)  # its readers get the same numbers in any order: one serves both
     field_model = d["environment.magnetic_field.model"]
-    field = FieldAlongOrbit(ephemeris, field_model) \
+    field = FieldAlongOrbit(ephemeris, field_model, epochs) \
         if "residual_dipole" in d["models"] and field_model != "none" else None
     return DisturbanceModel(d, np.broadcast_to(m, (n_episodes, 3, 3)), seeds,
                             ephemeris if d["orbit.model"] != "circular" else None, field)
 
 
-def build_environment(scn: Scenario) -> tuple[Ephemeris, FieldAlongOrbit]:
-    """The plant's orbit (what it publishes on ``orbit``) and the geomagnetic field along it."""
+def build_environment(scn: Scenario, epochs=None) -> tuple[Ephemeris, FieldAlongOrbit]:
+    """The plant's orbit (what it publishes on ``orbit``) and the geomagnetic field along it; ``epochs`` (P,)
+    ISO 8601 texts give each episode's field its own epoch (``plant.orbit.epoch`` per episode)."""
     p = scn.values["plant"]
     orbit = Ephemeris(p, scn.dt)
-    return orbit, FieldAlongOrbit(orbit, p["environment.magnetic_field.model"])
+    return orbit, FieldAlongOrbit(orbit, p["environment.magnetic_field.model"], epochs)
 
 
 def build_dipole_command(scn: Scenario, params: dict | None = None) -> DipoleCommand:
@@ -257,12 +258,14 @@ def build_magnetorquers(scn: Scenario) -> Magnetorquers:
     return Magnetorquers(rod_axes(m["rods.axes"]), m["rods.max_dipole"])
 
 
-def build_magnetic_loop(scn: Scenario, params: dict | None = None) -> MagneticLoop | None:
+def build_magnetic_loop(scn: Scenario, params: dict | None = None, epochs=None) -> MagneticLoop | None:
     """The magnetorquers' loop of the stepwise driver (:class:`~attitude_sil.core.sim.models.MagneticLoop`),
-    or None where the scenario flies no magnetorquers; ``params`` as :func:`build_dipole_command`'s."""
+    or None where the scenario flies no magnetorquers; ``params`` as :func:`build_dipole_command`'s, ``epochs``
+    as :func:`build_environment`'s."""
     if not scn.has_magnetorquers:
         return None
-    return MagneticLoop(build_environment(scn)[1], build_dipole_command(scn, params), build_magnetorquers(scn))
+    return MagneticLoop(build_environment(scn, epochs)[1], build_dipole_command(scn, params),
+                        build_magnetorquers(scn))
 
 
 def build_scene(values: dict) -> BodyScene:
@@ -452,7 +455,8 @@ def schedule_from_scenario(scn: Scenario) -> list[tuple[int, str]]:
 #: scenario values :func:`simulate` takes per episode (``episode_values``), by node; every ``controller``
 #: parameter may vary per episode too
 EPISODE_VALUES = {
-    "plant": ("inertia", "initial_attitude_rpy_deg", "initial_body_rate", "flex.case"),
+    # orbit.epoch: the field's (the Earth turned under the same orbit); the disturbances' field follows it
+    "plant": ("inertia", "initial_attitude_rpy_deg", "initial_body_rate", "flex.case", "orbit.epoch"),
     "guidance": ("setpoint_rpy_deg",),
     "disturbance": ("inertia", "noise.seed", "noise.power", "residual_dipole.moment"),
     "wheels": EPISODE_MOTOR + EPISODE_FAILURE,

@@ -226,8 +226,10 @@ class _Run:
         plant = build_plant(scn, P, inertia=pv.get("inertia"), rpy0_deg=pv.get("initial_attitude_rpy_deg"),
                             omega0=pv.get("initial_body_rate"), flex_case=pv.get("flex.case"))
         wheels = build_wheels(scn, P, ev["wheels"])
+        epochs = pv.get("orbit.epoch")  # the field's, per episode (the orbit is the same)
         dist = build_disturbance(scn, P, seeds=dv.get("noise.seed"), inertia=dv.get("inertia"),
-                                 noise_power=dv.get("noise.power"), residual_dipole=dv.get("residual_dipole.moment"))
+                                 noise_power=dv.get("noise.power"), residual_dipole=dv.get("residual_dipole.moment"),
+                                 epochs=epochs)
         guide = build_guidance(scn, P, gv.get("setpoint_rpy_deg"))
         ctrl_params = {**(opts.controller_params or {}), **ev["controller"]} or None  # the law's and the dipole's
         ctrl = build_controller(scn, P, params=ctrl_params)
@@ -243,12 +245,12 @@ class _Run:
         if controller is not None:
             ctrl.active = controller
         self.models = (plant, wheels, dist, guide, ctrl)
-        field = build_environment(scn)[1]
+        field = build_environment(scn, epochs)[1]
         self.field = field if field.model != "none" else None  # the field at the spacecraft, for the record
         self.sensing = build_sensing(scn, P, ev["sensors"].get("seed"), ev["sensors"].get("gyro.bias_deg_h"),
                                      ev["estimator"].get("initial_attitude_rpy_deg"),
                                      ev["sensors"].get("magnetometer.bias_nt"))
-        self.magnetic = build_magnetic_loop(scn, ctrl_params)
+        self.magnetic = build_magnetic_loop(scn, ctrl_params, epochs)
         self.swaps = dict(schedule_from_scenario(scn) if opts.schedule is None else opts.schedule)
         if BDOT in self.swaps.values() and self.magnetic is None:
             raise ScenarioError("a swap to bdot needs the magnetorquers flying from the start: list it in the "
