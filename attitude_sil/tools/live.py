@@ -41,7 +41,10 @@ from attitude_sil.core.sim.build import build_scene
 from attitude_sil.core.sim.paramfile import node_key, section_node
 from attitude_sil.core.sim.params import NODE_PARAMS, SCENARIO_NODE
 from attitude_sil.core.sim.scenario import (
+    ALL_NODES,
+    DERIVED,
     GRAPH_NODES,
+    SHARED_VALUES,
     Scenario,
     flatten_parameters,
     load_scenario,
@@ -57,6 +60,7 @@ from attitude_sil.ros.contract import (
     CLOCK,
     COMMAND_TOPICS,
     EXTERNAL,
+    MAGNETIC_TORQUE,
     MAGNETIC_TOPICS,
     OPTIONAL_TOPICS,
     RECORDED_TOPICS,
@@ -121,10 +125,22 @@ def graph_scenario(values: dict[str, dict], settings: dict | None, source: str) 
     ScenarioError
         The values break a rule of the schema (the message names ``source``).
     """
+    # a value a node shares with its source follows the source (a node started by hand from a file does not
+    # know it: the runner would have set it); the source's is what the graph flew
+    values = {n: {k: x for k, x in v.items() if not (k in SHARED_VALUES and k in DERIVED.get(n, {}))}
+              for n, v in values.items()}
     data: dict = {node_key(n): {"ros__parameters": v} for n, v in values.items()}
+    shared = {k: values[n][k] for n in ("plant", "controller") if n in values  # what every node shares: a node
+              for k in ("control_period",) if k in values[n]}                # that did not answer runs with it
+    if shared:
+        data = {"/**": {"ros__parameters": shared}, **data}
     if settings:
         data[SCENARIO_NODE] = {"ros__parameters": settings}
     return scenario_from_dict(data, source=source)
+
+
+#: what each node of the package publishes first (:data:`ROLE_OUTPUTS`, and the magnetorquers' torque)
+_OUTPUTS = {**ROLE_OUTPUTS, "magnetorquers": ((MAGNETIC_TORQUE,),)}
 
 
 def _own_nodes(node, namespace: str | None, spin, timeout: float) -> list[str]:
@@ -139,11 +155,17 @@ def _own_nodes(node, namespace: str | None, spin, timeout: float) -> list[str]:
     own_ns = f"/{namespace}" if namespace else "/"
     deadline = time.monotonic() + timeout
     own = []
-    for name in GRAPH_NODES:
-        topics = [node.resolve_topic_name(t) for t in ROLE_OUTPUTS[name][0]]
+    for name in ALL_NODES:
+        optional = name not in GRAPH_NODES  # the sensing loop's and the magnetorquers': where they run
+        if name == "magnetorquers" and "plant" in own:  # the plant says whether they fly: then they are waited for
+            said = get_remote_parameters(node, spin, _target(namespace, "plant"), ["magnetorquers"],
+                                         max(deadline - time.monotonic(), 0.1))
+            optional = said.get("magnetorquers") is not True
+        topics = [node.resolve_topic_name(t) for t in _OUTPUTS[name][0]]
         while True:
             infos = [i for t in topics for i in node.get_publishers_info_by_topic(t)]
-            if infos and all(i.node_name != UNKNOWN_NODE for i in infos) or time.monotonic() > deadline:
+            if infos and all(i.node_name != UNKNOWN_NODE for i in infos) or time.monotonic() > deadline \
+                    or (optional and not infos):
                 break
             spin(0.02)
         if not any(i.node_name == name and (i.node_namespace.rstrip("/") or "/") == own_ns for i in infos):
@@ -456,7 +478,7 @@ def _snapshot_values(text: str, where: str) -> dict[str, dict]:
     out: dict[str, dict] = {}
     for key, section in data.items():
         node = section_node(str(key))
-        if node in GRAPH_NODES and isinstance(section, dict):
+        if node in ALL_NODES and isinstance(section, dict):
             out.setdefault(node, {}).update(section.get("ros__parameters") or {})
     return out
 

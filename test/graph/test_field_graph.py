@@ -10,8 +10,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 import rclpy
+import yaml
 from rclpy.parameter import Parameter
 
+from attitude_sil.cli import main
 from attitude_sil.core.analysis.metrics import episode_report
 from attitude_sil.core.sim.build import build_dipole_command, build_environment
 from attitude_sil.core.sim.engine import simulate
@@ -20,7 +22,7 @@ from attitude_sil.errors import ScenarioError
 from attitude_sil.graph.session import GraphSession, run_graph
 from attitude_sil.nodes.controller_node import ControllerNode
 from attitude_sil.storage.reader import open_bag
-from conftest import CONFIG
+from conftest import CONFIG, start_python, stop_processes
 
 ORBIT = {"orbit.model": "keplerian_j2", "orbit.semi_major_axis": 6.91e6, "orbit.eccentricity": 0.001,
          "orbit.inclination_deg": 51.6, "orbit.raan_deg": 120.0, "orbit.arg_perigee_deg": 0.0,
@@ -182,3 +184,29 @@ def test_hawaiisat_on_its_rods_flies_in_the_graph_as_in_the_stepwise_driver():
     report = episode_report(scn, engine, "geometric", 1.0, 1.0)
     assert report["control_effort_Nms"] > 1e-4
     assert graph.metrics["control_effort_Nms"] == pytest.approx(report["control_effort_Nms"], rel=1e-9)
+
+
+def test_record_takes_the_magnetorquers_parameters_into_its_snapshot(tmp_path, capfd):
+    # a hand-started graph with its rods (as the launch file starts it: magnetorquers true on the plant and the
+    # controller): record asks the magnetorquers node too, so the bag keeps HST's 3,600 A m^2 bars
+    preset = CONFIG / "hst_momentum_dump.yaml"
+    over = tmp_path / "over.yaml"
+    over.write_text("/**/plant:\n  ros__parameters:\n    duration: 2.0\n    magnetorquers: true\n"
+                    "/**/controller:\n  ros__parameters:\n    magnetorquers: true\n")
+    names = ("plant", "wheels", "disturbance", "guidance", "controller", "magnetorquers")
+    procs = [start_python(["-m", f"attitude_sil.nodes.{n}_node", "--ros-args", "--params-file", str(preset),
+                           "--params-file", str(over)]) for n in names]
+    rec = start_python(["-m", "attitude_sil.cli", "record", str(tmp_path / "bag"), "--episode"])
+    try:
+        seen = ""
+        while "parameter snapshot" not in seen:  # the recorder has the graph's parameters
+            line = rec.stderr.readline()
+            assert line, seen
+            seen += line
+        assert "magnetorquers" in seen.splitlines()[-1], seen
+        assert main(["episode", "--json", "--quiet", "--scenario", str(preset)]) == 0
+        assert rec.wait(timeout=120) == 0, rec.stderr.read()
+    finally:
+        stop_processes(procs + [rec])
+    snapshot = yaml.safe_load(open_bag(tmp_path / "bag").custom_data["attitude_sil.parameters"])
+    assert snapshot["/**/magnetorquers"]["ros__parameters"]["rods.max_dipole"] == 3600.0
