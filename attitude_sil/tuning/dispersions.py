@@ -40,7 +40,6 @@ import numpy as np
 from scipy.special import ndtri
 
 from attitude_sil.core.environment.earth_time import epoch_from_text
-
 from attitude_sil.core.plant.wheels import GEOMETRIES
 from attitude_sil.core.sim.scenario import Scenario, derived_values, effective_values
 from attitude_sil.errors import ScenarioError, SpecError
@@ -126,6 +125,12 @@ def check_dispersions(where: str, raw: Any, scn: Scenario) -> dict:
                     raise SpecError(f"{at}.{k} must be a number >= 0, got {v!r}")
             out[key] = {"attitude_std_deg": float(value.get("attitude_std_deg", 0.0)),
                         "rate_std_deg_s": float(value.get("rate_std_deg_s", 0.0))}
+    return _check_against(where, out, scn)
+
+
+def _check_against(where: str, out: dict, scn: Scenario) -> dict:
+    """The checked dispersions ``out``, refused in one line where the scenario has nothing they could vary; the
+    seeds' defaults set from it."""
     if "motor_constant_pct" in out and scn.param("wheels", "actuator") != "reaction_wheels":
         raise SpecError(f"{where}: dispersions.motor_constant_pct: the scenario's actuator is "
                         f"{scn.param('wheels', 'actuator')}; motor constants need reaction_wheels")

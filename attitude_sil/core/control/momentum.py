@@ -36,8 +36,8 @@ from attitude_sil.core.paramspec import double as _d
 from attitude_sil.core.paramspec import double_array as _da
 from attitude_sil.core.plant.quaternion import cross
 
-__all__ = ["MOMENTUM_MODES", "TORQUE_ACTUATORS", "torque_dipole", "MOMENTUM_PARAMS", "CrossProductDumping", "DipoleCommand", "BDOT",
-           "PER_EPISODE_SCALARS"]
+__all__ = ["MOMENTUM_MODES", "TORQUE_ACTUATORS", "torque_dipole", "MOMENTUM_PARAMS", "CrossProductDumping",
+           "DipoleCommand", "BDOT", "PER_EPISODE_SCALARS"]
 
 #: the law whose dipole is B-dot's (``controller_type: bdot``)
 BDOT = BDOT_LAW.name
