@@ -40,7 +40,9 @@ def execute(args: argparse.Namespace) -> int:
         verdict = "PASS" if result.passed else "FAIL"
         print(f"{verdict}: {result.steps} steps, largest command deviation {result.max_deviation:.3g} "
               f"at t={result.worst_time_s:.3f} s (axis {result.worst_axis}), tolerance {result.tolerance:g}, "
-              f"{result.swaps} recorded parameter change(s) applied")
+              f"{result.swaps} recorded parameter change(s) applied"
+              + (f"; {result.dipole_steps} dipoles, largest deviation {result.dipole_deviation:.3g} A m^2"
+                 if result.dipole_steps else ""))
         return 0 if result.passed else 1
 
     options = ReplayOptions(rate=args.rate, start=args.start, duration=args.duration, topics=args.topics,

@@ -7,7 +7,11 @@ each step in turn; its command for the step (``voltage_cmd`` or
 from the parameter snapshot the runner stores in the bag's ``metadata.yaml``
 (or from ``--params FILE``), and recorded ``/parameter_events`` of the
 controller (gain changes, swaps) are applied before the step they precede,
-so a run with a live swap verifies too. This is how a user checks that a
+so a run with a live swap verifies too. Where the bag holds ``dipole_cmd``
+(the magnetorquers flew), the controller's magnetic channel is fed the
+recorded ``wheel_momentum`` and ``magnetic_field`` (the ``magnetometer``
+with estimate feedback) after each step's command, and its dipole is compared
+too. This is how a user checks that a
 controller change did not alter behaviour on a library of recorded episodes.
 
 A bag outlives the environment it was recorded in: its snapshot holds the
@@ -39,7 +43,16 @@ from attitude_sil.core.sim.params import GLOBAL_NODE, SCENARIO_NODE, spec_for
 from attitude_sil.core.sim.scenario import flatten_parameters, load_scenario, scenario_from_dict, yaml_problem
 from attitude_sil.errors import AttitudeSilError, BagError, ScenarioError
 from attitude_sil.nodes.controller_node import ControllerNode
-from attitude_sil.ros.contract import COMMAND_TOPICS, CONTROLLER_INPUTS, FEEDBACK_REMAP, STEP_TOPICS, message_class
+from attitude_sil.ros.contract import (
+    COMMAND_TOPICS,
+    CONTROLLER_INPUTS,
+    DIPOLE_CMD,
+    DUMPING_INPUTS,
+    FEEDBACK_REMAP,
+    RECORDED_TOPICS,
+    STEP_TOPICS,
+    message_class,
+)
 from attitude_sil.ros.convert import stamp_to_ns, vector_to_array
 from attitude_sil.ros.environment import localhost_environment
 from attitude_sil.ros.parameters import typed_parameter
@@ -70,6 +83,10 @@ class VerifyResult:
     tolerance : float
     swaps : int
         Recorded parameter changes applied.
+    dipole_steps : int
+        Steps whose dipole was compared (0: the bag has no ``dipole_cmd``).
+    dipole_deviation : float
+        Largest |new - recorded| of the dipole, A m^2.
     """
 
     steps: int
@@ -78,10 +95,12 @@ class VerifyResult:
     worst_axis: int
     tolerance: float
     swaps: int
+    dipole_steps: int = 0
+    dipole_deviation: float = 0.0
 
     @property
     def passed(self) -> bool:
-        return self.max_deviation <= self.tolerance
+        return self.max_deviation <= self.tolerance and self.dipole_deviation <= self.tolerance
 
 
 def controller_parameters(bag_path: str | Path, params_file: str | Path | None = None) -> dict:
@@ -198,6 +217,26 @@ def _bag_topics(reader: BagReader, feedback: str = "truth") -> tuple[dict[str, s
     return names, cmd_topics
 
 
+def _dipole_steps(reader: BagReader, feedback: str) -> tuple[dict[int, dict[str, bytes]], dict[int, np.ndarray]]:
+    """The recorded magnetic inputs (raw, by stamp) and dipoles (by stamp) where the bag holds ``dipole_cmd``,
+    else two empty mappings; BagError if an input the dipole was made from is missing."""
+    dipole = reader.find_topic(DIPOLE_CMD)
+    if dipole is None:
+        return {}, {}
+    names = {}
+    for short in DUMPING_INPUTS:
+        full = reader.find_topic(FEEDBACK_REMAP.get(short, short) if feedback == "estimate" else short)
+        if full is None:
+            raise BagError(f"{reader.paths[0]}: dipole_cmd is recorded but not {short}: cannot feed the "
+                           "controller's magnetic channel")
+        names[full] = short
+    inputs: dict[int, dict[str, bytes]] = {}
+    for msg in reader.iter_raw(topics=list(names)):
+        inputs.setdefault(msg.log_time_ns, {})[names[msg.topic]] = msg.data
+    recorded = {raw.log_time_ns: vector_to_array(msg) for raw, msg in reader.iter_decoded(topics=[dipole])}
+    return {t: v for t, v in inputs.items() if len(v) == len(DUMPING_INPUTS) and t in recorded}, recorded
+
+
 def _recorded_steps(reader: BagReader, names: dict[str, str], cmd_topics: list[str]
                     ) -> tuple[dict[int, dict[str, bytes]], dict[int, tuple[str, np.ndarray]], list[int]]:
     """The recorded inputs (raw) and commands by stamp, and the stamps of the steps that have all of them."""
@@ -237,6 +276,15 @@ def _deviation(got: tuple[str, np.ndarray], recorded: tuple[str, np.ndarray]) ->
     return float(d[axis]), axis
 
 
+def _spin_until(executor, done: Callable[[], bool], timeout: float, why: str) -> None:
+    """Spin until ``done()``; BagError ``why`` after ``timeout`` s."""
+    deadline = time.monotonic() + timeout
+    while not done():
+        if time.monotonic() > deadline:
+            raise BagError(why)
+        executor.spin_once(timeout_sec=0.05)
+
+
 def verify_controller(bag_path: str | Path, params_file: str | Path | None = None, tolerance: float = 1e-9,
                       timeout: float = 10.0, say: Callable[[str], None] | None = None) -> VerifyResult:
     """Feed the recorded plant topics to a fresh controller node and compare its commands.
@@ -263,6 +311,7 @@ def verify_controller(bag_path: str | Path, params_file: str | Path | None = Non
     if dropped and say is not None:
         say(notice(str(bag_path), dropped))
     inputs, recorded, stamps = _recorded_steps(reader, names, cmd_topics)
+    magnetic, dipoles = _dipole_steps(reader, _feedback(reader))
 
     localhost_environment()
     context = rclpy.Context()
@@ -270,40 +319,52 @@ def verify_controller(bag_path: str | Path, params_file: str | Path | None = Non
     got: dict[int, tuple[str, np.ndarray]] = {}
     executor = ctrl = feeder = None
     try:
+        if magnetic:  # the magnetorquers flew: the controller commands them
+            values = {**values, "magnetorquers": True}
         overrides = [typed_parameter(spec_for("controller", k), v) for k, v in values.items() if v != []]
         ctrl = ControllerNode(context=context, parameter_overrides=overrides)
         feeder = Node("verify_feeder", context=context)
-        pubs = {n: feeder.create_publisher(message_class(STEP_TOPICS[n]), n, LOCKSTEP_QOS) for n in INPUTS}
+        fed = INPUTS + (DUMPING_INPUTS if magnetic else ())
+        pubs = {n: feeder.create_publisher(message_class(RECORDED_TOPICS[n]), n, LOCKSTEP_QOS) for n in fed}
         for c in COMMANDS:
             feeder.create_subscription(
                 message_class(STEP_TOPICS[c]), c,
                 lambda m, c=c: got.__setitem__(stamp_to_ns(m.header.stamp), (c, vector_to_array(m))),
                 LOCKSTEP_QOS)
+        got_dipole: dict[int, np.ndarray] = {}
+        if magnetic:
+            feeder.create_subscription(message_class(RECORDED_TOPICS[DIPOLE_CMD]), DIPOLE_CMD,
+                                       lambda m: got_dipole.__setitem__(stamp_to_ns(m.header.stamp),
+                                                                        vector_to_array(m)), LOCKSTEP_QOS)
         executor = EventsExecutor(context=context)
         executor.add_node(ctrl)
         executor.add_node(feeder)
         deadline = time.monotonic() + timeout
         while any(p.get_subscription_count() < 1 for p in pubs.values()) or \
-                any(s.get_publisher_count() < 1 for s in feeder.subscriptions if s.topic_name.endswith("_cmd")):
+                any(s.get_publisher_count() < 1 for s in feeder.subscriptions
+                    if s.topic_name.endswith(("voltage_cmd", "torque_cmd", DIPOLE_CMD))):
             if time.monotonic() > deadline:
                 raise BagError("the controller node did not connect")
             executor.spin_once(timeout_sec=0.02)
         pending = list(changes)
         applied = 0
-        worst = (0.0, 0.0, 0)
+        worst, dipole_worst = (0.0, 0.0, 0), 0.0
         for t in stamps:
             applied += _apply_changes(ctrl, pending, t)
             for n in INPUTS:
                 pubs[n].publish(inputs[t][n])
-            deadline = time.monotonic() + timeout
-            while t not in got:
-                if time.monotonic() > deadline:
-                    raise BagError(f"the controller gave no command for t={t * 1e-9:.6f} s")
-                executor.spin_once(timeout_sec=0.05)
+            _spin_until(executor, lambda t=t: t in got, timeout,
+                        f"the controller gave no command for t={t * 1e-9:.6f} s")
             dev, axis = _deviation(got[t], recorded[t])
             if dev > worst[0]:
                 worst = (dev, t * 1e-9, axis)
-        return VerifyResult(len(stamps), worst[0], worst[1], worst[2], tolerance, applied)
+            if t in magnetic:  # the step's magnetic inputs come after its command, as in the graph
+                for n in DUMPING_INPUTS:
+                    pubs[n].publish(magnetic[t][n])
+                _spin_until(executor, lambda t=t: t in got_dipole, timeout, f"no dipole_cmd for t={t * 1e-9:.6f} s")
+                dipole_worst = max(dipole_worst, float(np.max(np.abs(got_dipole[t] - dipoles[t]))))
+        return VerifyResult(len(stamps), worst[0], worst[1], worst[2], tolerance, applied,
+                            sum(t in magnetic for t in stamps), dipole_worst)
     finally:
         # destroy explicitly: a context shut down with live nodes leaves them in the graph
         for name in ("executor", "ctrl", "feeder"):

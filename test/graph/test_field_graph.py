@@ -22,6 +22,7 @@ from attitude_sil.errors import ScenarioError
 from attitude_sil.graph.session import GraphSession, run_graph
 from attitude_sil.nodes.controller_node import ControllerNode
 from attitude_sil.storage.reader import open_bag
+from attitude_sil.tools.verify import verify_controller
 from conftest import CONFIG, start_python, stop_processes
 
 ORBIT = {"orbit.model": "keplerian_j2", "orbit.semi_major_axis": 6.91e6, "orbit.eccentricity": 0.001,
@@ -102,6 +103,14 @@ def test_the_magnetorquers_and_the_dumping_law_fly_in_the_graph_as_in_the_stepwi
     bag = open_bag(tmp_path / "bag")
     assert bag.topics["/dipole_cmd"].count == bag.topics["/magnetic_torque"].count == 101
     assert "/**/magnetorquers" in bag.custom_data["attitude_sil.parameters"]
+    # replay --verify-controller checks the magnetic channel too: the same law passes, another gain fails on
+    # the dipole alone (the attitude law's commands do not change)
+    same = verify_controller(tmp_path / "bag")
+    assert same.passed and same.dipole_steps == 101 and same.dipole_deviation == 0.0, same
+    other = tmp_path / "gain.yaml"
+    other.write_text("/**/controller:\n  ros__parameters:\n    momentum.gain: 0.1\n")
+    changed = verify_controller(tmp_path / "bag", params_file=other)
+    assert not changed.passed and changed.max_deviation == 0.0 and changed.dipole_deviation > 1.0, changed
 
 
 def test_with_estimate_feedback_the_dumping_law_reads_the_magnetometer(tmp_path):
@@ -173,17 +182,19 @@ def test_a_second_episode_of_the_same_graph_flies_the_first_again():
     assert np.max(np.abs(first.dipole_cmd_B)) > 0.01
 
 
-def test_hawaiisat_on_its_rods_flies_in_the_graph_as_in_the_stepwise_driver():
+def test_hawaiisat_on_its_rods_flies_in_the_graph_as_in_the_stepwise_driver(tmp_path):
     # the geometric law's torque demand made by the rods (torque_actuator magnetorquers), no wheels: the
     # demand on torque_cmd, the dipole, the rods' torque and the attitude the same; Ce counts the rods' torque
     scn = load_scenario(CONFIG / "hawaiisat_lvlh_magnetic.yaml")
-    graph, engine = _fly(scn, 1.0)
+    graph, engine = _fly(scn, 1.0, record_dir=tmp_path / "bag")
     _assert_same(graph.trajectory, engine, ["q_BN", "omega_BN_B", "u_cmd", "dipole_cmd_B", "magnetic_torque_B"], 51)
     assert np.max(np.abs(engine.magnetic_torque_B)) > 1e-4  # N m: the rods act
     assert not np.any(engine.tau_c_B) and not np.any(engine.h_wheels_B)  # nothing else does
     report = episode_report(scn, engine, "geometric", 1.0, 1.0)
     assert report["control_effort_Nms"] > 1e-4
     assert graph.metrics["control_effort_Nms"] == pytest.approx(report["control_effort_Nms"], rel=1e-9)
+    verified = verify_controller(tmp_path / "bag")  # the demand and its dipole
+    assert verified.passed and verified.steps == verified.dipole_steps == 51, verified
 
 
 def test_record_takes_the_magnetorquers_parameters_into_its_snapshot(tmp_path, capfd):
