@@ -43,10 +43,12 @@ def test_rods_make_m_cross_b_and_saturate_rod_by_rod():
     # unsaturated: the rods make the command exactly (a minimum-norm share of it)
     np.testing.assert_allclose(rods.dipole_B(m_cmd)[small], m_cmd[small], rtol=0, atol=1e-12)
     # each rod on its own: clipped at +-100, the others untouched
-    raw = m_cmd @ np.linalg.pinv(axes.T).T
-    np.testing.assert_array_equal(d, np.clip(raw, -100.0, 100.0))
+    raw = m_cmd @ np.linalg.pinv(axes.T).T  # (to the last bit of the sums' order)
+    np.testing.assert_allclose(d, np.clip(raw, -100.0, 100.0), rtol=1e-14, atol=0)
+    assert np.array_equal(np.abs(d) == 100.0, np.abs(raw) > 100.0)  # exactly the rods past their limit
     assert np.any((np.abs(raw) > 100.0).sum(axis=1) == 1)  # a row with one rod clipped
-    m = d @ axes
+    m = rods.dipole_B(m_cmd)
+    np.testing.assert_allclose(m, d @ axes, rtol=0, atol=1e-12)
     tau = rods.torque(m_cmd, b)
     np.testing.assert_array_equal(tau[:, 0], m[:, 1] * b[:, 2] - m[:, 2] * b[:, 1])
     np.testing.assert_array_equal(tau[:, 1], m[:, 2] * b[:, 0] - m[:, 0] * b[:, 2])

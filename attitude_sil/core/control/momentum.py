@@ -28,13 +28,13 @@ the component along B is lost.
 from __future__ import annotations
 
 import numpy as np
+from numba import njit
 
 from attitude_sil.core.control.laws.bdot import LAW as BDOT_LAW
 from attitude_sil.core.control.laws.bdot import BDot
 from attitude_sil.core.paramspec import ParamSpec
 from attitude_sil.core.paramspec import double as _d
 from attitude_sil.core.paramspec import double_array as _da
-from attitude_sil.core.plant.quaternion import cross
 
 __all__ = ["MOMENTUM_MODES", "TORQUE_ACTUATORS", "torque_dipole", "MOMENTUM_PARAMS", "CrossProductDumping",
            "DipoleCommand", "BDOT", "PER_EPISODE_SCALARS"]
@@ -71,13 +71,56 @@ MOMENTUM_PARAMS = [
 PER_EPISODE_SCALARS = ("momentum.gain", f"{BDOT}.gain")
 
 
+@njit(cache=True, inline="always")
+def torque_dipole_row(tau_B, b_B, p, out) -> None:
+    """Row ``p``: the dipole m = B x tau / |B|^2 into ``out`` (., 3) A m^2 for the torque demand ``tau_B`` (., 3)
+    N m in the field ``b_B`` (., 3) tesla (zero where the field is zero)."""
+    b0, b1, b2 = b_B[p, 0], b_B[p, 1], b_B[p, 2]
+    t0, t1, t2 = tau_B[p, 0], tau_B[p, 1], tau_B[p, 2]
+    bb = b0 * b0 + b1 * b1 + b2 * b2
+    out[p, 0] = out[p, 1] = out[p, 2] = 0.0
+    if bb > 0.0:
+        out[p, 0] = (b1 * t2 - b2 * t1) / bb
+        out[p, 1] = (b2 * t0 - b0 * t2) / bb
+        out[p, 2] = (b0 * t1 - b1 * t0) / bb
+
+
+@njit(cache=True, inline="always")
+def dumping_row(h_wheels_B, b_B, p, gain, target_B, out) -> None:
+    """Row ``p``: the cross-product law's dipole m = k (h_w - h_target) x B / |B|^2 into ``out`` (., 3) A m^2,
+    gain ``gain`` 1/s, target ``target_B`` (3,) N m s (zero where the field is zero)."""
+    b0, b1, b2 = b_B[p, 0], b_B[p, 1], b_B[p, 2]
+    a0, a1, a2 = h_wheels_B[p, 0] - target_B[0], h_wheels_B[p, 1] - target_B[1], h_wheels_B[p, 2] - target_B[2]
+    bb = b0 * b0 + b1 * b1 + b2 * b2
+    out[p, 0] = out[p, 1] = out[p, 2] = 0.0
+    if bb > 0.0:
+        out[p, 0] = gain * (a1 * b2 - a2 * b1) / bb
+        out[p, 1] = gain * (a2 * b0 - a0 * b2) / bb
+        out[p, 2] = gain * (a0 * b1 - a1 * b0) / bb
+
+
+@njit(cache=True)
+def _torque_dipoles(tau_B, b_B, out) -> None:
+    for p in range(b_B.shape[0]):
+        torque_dipole_row(tau_B, b_B, p, out)
+
+
+@njit(cache=True)
+def _dumping_dipoles(h_wheels_B, b_B, gain, target_B, out) -> None:
+    # gain (P,) or one for all, target (P, 3) or one for all
+    for p in range(b_B.shape[0]):
+        dumping_row(h_wheels_B, b_B, p, gain[p if gain.shape[0] > 1 else 0],
+                    target_B[p if target_B.shape[0] > 1 else 0], out)
+
+
 def torque_dipole(tau_B: np.ndarray, b_B: np.ndarray) -> np.ndarray:
     """The dipole (P, 3) A m^2 whose torque in the field ``b_B`` (P, 3) tesla is the component of ``tau_B``
-    (P, 3) N m normal to it: m = B x tau / |B|^2 (zero where the field is zero), both in B."""
-    b = np.asarray(b_B, dtype=float)
-    b2 = np.sum(b * b, axis=-1, keepdims=True)
-    m = cross(b, np.asarray(tau_B, dtype=float))
-    return np.divide(m, b2, out=np.zeros_like(m), where=b2 > 0.0)
+    (P, 3) N m normal to it: m = B x tau / |B|^2 (zero where the field is zero), both in B
+    (:func:`torque_dipole_row`)."""
+    b = np.ascontiguousarray(b_B, dtype=float)
+    out = np.empty_like(b)
+    _torque_dipoles(np.ascontiguousarray(np.broadcast_to(tau_B, b.shape), dtype=float), b, out)
+    return out
 
 
 class CrossProductDumping:
@@ -85,16 +128,17 @@ class CrossProductDumping:
     ((3,) or (P, 3))."""
 
     def __init__(self, gain, target_B) -> None:
-        self.gain = np.asarray(gain, dtype=float).reshape(-1, 1)
-        self.target_B = np.asarray(target_B, dtype=float)
+        self.gain = np.ascontiguousarray(np.asarray(gain, dtype=float).reshape(-1))
+        self.target_B = np.ascontiguousarray(np.asarray(target_B, dtype=float).reshape(-1, 3))
 
     def dipole(self, h_wheels_B: np.ndarray, b_B: np.ndarray) -> np.ndarray:
         """The dipole command (P, 3) A m^2 for wheel momenta ``h_wheels_B`` (P, 3) N m s in the field ``b_B``
-        (P, 3) tesla, both in B (zero where the field is zero)."""
-        b = np.asarray(b_B, dtype=float)
-        b2 = np.sum(b * b, axis=-1, keepdims=True)
-        m = self.gain * cross(np.asarray(h_wheels_B, dtype=float) - self.target_B, b)
-        return np.divide(m, b2, out=np.zeros_like(m), where=b2 > 0.0)
+        (P, 3) tesla, both in B (zero where the field is zero; :func:`dumping_row`)."""
+        b = np.ascontiguousarray(b_B, dtype=float)
+        out = np.empty_like(b)
+        _dumping_dipoles(np.ascontiguousarray(np.broadcast_to(h_wheels_B, b.shape), dtype=float), b, self.gain,
+                         self.target_B, out)
+        return out
 
 
 class DipoleCommand:

@@ -26,6 +26,7 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+from numba import njit
 
 from attitude_sil.core.environment.earth_time import decimal_year, epoch_from_text, gmst_rad, julian_date
 from attitude_sil.core.environment.geomagnetic import FIELD_MODELS, field_eci, igrf_coefficients
@@ -129,6 +130,23 @@ class Ephemeris:
 
 
 
+@njit(cache=True, inline="always")
+def body_field(q_BN, p, b0, b1, b2, out, r) -> None:
+    """Row ``r`` of ``out`` (., 3): the field (b0, b1, b2) in N seen in B, R_NB^T b, for the attitude in row
+    ``p`` of ``q_BN`` (., 4) (R_NB as :func:`~attitude_sil.core.plant.quaternion.quat_to_dcm`)."""
+    x, y, z, w = q_BN[p, 0], q_BN[p, 1], q_BN[p, 2], q_BN[p, 3]
+    out[r, 0] = (1 - 2 * (y * y + z * z)) * b0 + 2 * (x * y + z * w) * b1 + 2 * (x * z - y * w) * b2
+    out[r, 1] = 2 * (x * y - z * w) * b0 + (1 - 2 * (x * x + z * z)) * b1 + 2 * (y * z + x * w) * b2
+    out[r, 2] = 2 * (x * z + y * w) * b0 + 2 * (y * z - x * w) * b1 + (1 - 2 * (x * x + y * y)) * b2
+
+
+@njit(cache=True)
+def _body_fields(q_BN, b_N, out) -> None:
+    # every row: the field of row p of b_N (N, 3) in the frame of row p of q_BN (N, 4)
+    for p in range(q_BN.shape[0]):
+        body_field(q_BN, p, b_N[p, 0], b_N[p, 1], b_N[p, 2], out, p)
+
+
 class FieldAlongOrbit:
     """The main geomagnetic field at the spacecraft of ``orbit``, by ``model`` (``none``, ``dipole``, ``igrf``).
 
@@ -185,7 +203,10 @@ class FieldAlongOrbit:
 
     def field_B(self, t_ns, q_BN: np.ndarray) -> np.ndarray:
         """The field in B (..., n, 3) tesla for attitudes ``q_BN`` (..., n, 4) at step times ``t_ns`` (n,) ns:
-        R_NB^T b_N, R_NB the rotation matrix of q_BN (``quaternion.quat_to_dcm``); with an epoch per episode,
-        ``q_BN`` is (P, n, 4)."""
-        b_N = self.field_N(t_ns)
-        return np.einsum("...nji,...nj->...ni", quat_to_dcm(np.asarray(q_BN, dtype=float)), b_N)
+        R_NB^T b_N (:func:`body_field`); with an epoch per episode, ``q_BN`` is (P, n, 4)."""
+        q = np.asarray(q_BN, dtype=float)
+        b = np.broadcast_to(self.field_N(t_ns), q.shape[:-1] + (3,))
+        out = np.empty(q.shape[:-1] + (3,))
+        _body_fields(np.ascontiguousarray(q.reshape(-1, 4)), np.ascontiguousarray(b.reshape(-1, 3)),
+                     out.reshape(-1, 3))
+        return out

@@ -15,11 +15,11 @@ Nothing along the field can be made: m x B is normal to B.
 from __future__ import annotations
 
 import numpy as np
+from numba import njit
 
-from attitude_sil.core.plant.quaternion import cross
 from attitude_sil.errors import ScenarioError
 
-__all__ = ["Magnetorquers", "rod_axes"]
+__all__ = ["Magnetorquers", "rod_axes", "rods_torque_row"]
 
 
 def rod_axes(flat, where: str = "magnetorquers.rods.axes") -> np.ndarray:
@@ -56,9 +56,10 @@ class Magnetorquers:
     """
 
     def __init__(self, axes: np.ndarray, max_dipole: float) -> None:
-        self.axes = np.asarray(axes, dtype=float)
+        self.axes = np.ascontiguousarray(axes, dtype=float)
         self.max_dipole = float(max_dipole)
-        self.allocation = np.linalg.pinv(self.axes.T)  # (n, 3): the rods' minimum-norm share of a body dipole
+        # (n, 3): the rods' minimum-norm share of a body dipole
+        self.allocation = np.ascontiguousarray(np.linalg.pinv(self.axes.T))
 
     @property
     def n_rods(self) -> int:
@@ -66,14 +67,52 @@ class Magnetorquers:
 
     def rod_dipoles(self, m_cmd_B: np.ndarray) -> np.ndarray:
         """Each rod's dipole (P, n) A m^2 for body dipole commands ``m_cmd_B`` (P, 3), clipped rod by rod."""
-        d = np.asarray(m_cmd_B, dtype=float) @ self.allocation.T
-        return np.clip(d, -self.max_dipole, self.max_dipole)
+        m = np.ascontiguousarray(m_cmd_B, dtype=float)
+        d, made, tau = np.empty((m.shape[0], self.n_rods)), np.empty_like(m), np.empty_like(m)
+        _rods_torques(m, np.zeros_like(m), self.axes, self.allocation, self.max_dipole, d, made, tau)
+        return d
 
     def dipole_B(self, m_cmd_B: np.ndarray) -> np.ndarray:
         """The body dipole (P, 3) A m^2 the rods make for ``m_cmd_B`` (P, 3): A^T d."""
-        return self.rod_dipoles(m_cmd_B) @ self.axes
+        return self._made(m_cmd_B, np.zeros(np.shape(m_cmd_B)))[0]
 
     def torque(self, m_cmd_B: np.ndarray, b_B: np.ndarray) -> np.ndarray:
         """The torque on the body (P, 3) N m, m x B, for commands ``m_cmd_B`` (P, 3) A m^2 in the field
-        ``b_B`` (P, 3) tesla in B."""
-        return cross(self.dipole_B(m_cmd_B), np.asarray(b_B, dtype=float))
+        ``b_B`` (P, 3) tesla in B (:func:`rods_torque_row`)."""
+        return self._made(m_cmd_B, b_B)[1]
+
+    def _made(self, m_cmd_B, b_B) -> tuple[np.ndarray, np.ndarray]:
+        # the body dipole made and its torque in the field
+        m = np.ascontiguousarray(m_cmd_B, dtype=float)
+        d, made, tau = np.empty((m.shape[0], self.n_rods)), np.empty_like(m), np.empty_like(m)
+        _rods_torques(m, np.ascontiguousarray(np.broadcast_to(b_B, m.shape), dtype=float), self.axes,
+                      self.allocation, self.max_dipole, d, made, tau)
+        return made, tau
+
+
+@njit(cache=True, inline="always")
+def rods_torque_row(m_cmd_B, b_B, p, axes, allocation, max_dipole, d, made, tau) -> None:
+    """Row ``p``: the rods' dipoles ``d`` (., n) for the command ``m_cmd_B`` (., 3) A m^2 (allocation (n, 3),
+    each clipped to +-``max_dipole``), the body dipole they make ``made`` (., 3) = A^T d and its torque in the
+    field ``b_B`` (., 3) tesla, ``tau`` (., 3) = made x B, N m."""
+    n = axes.shape[0]
+    m0, m1, m2 = m_cmd_B[p, 0], m_cmd_B[p, 1], m_cmd_B[p, 2]
+    for i in range(n):
+        di = m0 * allocation[i, 0] + m1 * allocation[i, 1] + m2 * allocation[i, 2]
+        d[p, i] = min(max(di, -max_dipole), max_dipole)
+    for j in range(3):
+        acc = 0.0
+        for i in range(n):
+            acc += d[p, i] * axes[i, j]
+        made[p, j] = acc
+    a0, a1, a2 = made[p, 0], made[p, 1], made[p, 2]
+    b0, b1, b2 = b_B[p, 0], b_B[p, 1], b_B[p, 2]
+    tau[p, 0] = a1 * b2 - a2 * b1
+    tau[p, 1] = a2 * b0 - a0 * b2
+    tau[p, 2] = a0 * b1 - a1 * b0
+
+
+@njit(cache=True)
+def _rods_torques(m_cmd_B, b_B, axes, allocation, max_dipole, d, made, tau) -> None:
+    for p in range(m_cmd_B.shape[0]):
+        rods_torque_row(m_cmd_B, b_B, p, axes, allocation, max_dipole, d, made, tau)

@@ -58,25 +58,49 @@ def detumble_gain(mean_motion: float, xi_m: float, j_min: float) -> float:
     return 2.0 * mean_motion * (1.0 + math.sin(xi_m)) * j_min
 
 
+@njit(cache=True, inline="always")
+def bdot_row(b_B, p, previous, has_previous, gain, dt, out) -> None:
+    """Row ``p``: B-dot's dipole into ``out`` (., 3) A m^2 for the field read ``b_B`` (., 3) tesla, gain ``gain``
+    N m s, from the last reading's direction ``previous`` (., 3) (``has_previous`` False: the episode's first
+    step, no dipole), which becomes this reading's (zero where the field is zero)."""
+    b0, b1, b2 = b_B[p, 0], b_B[p, 1], b_B[p, 2]
+    norm = np.sqrt(b0 * b0 + b1 * b1 + b2 * b2)
+    u0 = u1 = u2 = 0.0
+    if norm > 0.0:
+        u0, u1, u2 = b0 / norm, b1 / norm, b2 / norm
+    out[p, 0] = out[p, 1] = out[p, 2] = 0.0
+    if has_previous and norm > 0.0:
+        out[p, 0] = -gain * ((u0 - previous[p, 0]) / dt) / norm
+        out[p, 1] = -gain * ((u1 - previous[p, 1]) / dt) / norm
+        out[p, 2] = -gain * ((u2 - previous[p, 2]) / dt) / norm
+    previous[p, 0], previous[p, 1], previous[p, 2] = u0, u1, u2
+
+
+@njit(cache=True)
+def _bdot_rows(b_B, previous, has_previous, gain, dt, out) -> None:
+    # every row, gain (P,) or one for all
+    for p in range(b_B.shape[0]):
+        bdot_row(b_B, p, previous, has_previous, gain[p if gain.shape[0] > 1 else 0], dt, out)
+
+
 class BDot:
     """The B-dot dipole of P episodes, gains ``gain`` (P,) or scalar, N m s, control period ``dt`` s."""
 
     def __init__(self, gain, dt: float) -> None:
-        self.gain = np.asarray(gain, dtype=float).reshape(-1, 1)
+        self.gain = np.ascontiguousarray(np.asarray(gain, dtype=float).reshape(-1))
         self.dt = float(dt)
         self.previous: np.ndarray | None = None  # the last reading's direction (P, 3)
 
     def dipole(self, b_B: np.ndarray) -> np.ndarray:
-        """The dipole (P, 3) A m^2 for the field read this step ``b_B`` (P, 3) tesla in B; remembers its
-        direction for the next step's difference (zero at the first step and where the field is zero)."""
-        b = np.asarray(b_B, dtype=float)
-        norm = np.sqrt(np.sum(b * b, axis=-1, keepdims=True))
-        unit = np.divide(b, norm, out=np.zeros_like(b), where=norm > 0.0)
-        m = np.zeros_like(b)
-        if self.previous is not None:
-            rate = (unit - self.previous) / self.dt
-            np.divide(-self.gain * rate, norm, out=m, where=norm > 0.0)
-        self.previous = unit
+        """The dipole (P, 3) A m^2 for the field read this step ``b_B`` (P, 3) tesla in B (:func:`bdot_row`);
+        remembers its direction for the next step's difference (zero at the first step and where the field is
+        zero)."""
+        b = np.ascontiguousarray(b_B, dtype=float)
+        first = self.previous is None
+        if first:
+            self.previous = np.zeros_like(b)
+        m = np.empty_like(b)
+        _bdot_rows(b, self.previous, not first, self.gain, self.dt, m)
         return m
 
 
