@@ -301,6 +301,23 @@ class DisturbanceModel:
             tau += cross(np.broadcast_to(self.residual_B, b_B.shape), b_B)
         return tau
 
+    def orbit_frames(self, n_steps: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """What :func:`orbit_torques` reads at steps 0..K besides the attitude, as :meth:`torque` computes it:
+        the LVLH frame q_LN (K+1, 4), the gravity gradient's gain 3 mu / r^3 (K+1,) 1/s^2 and the drag's
+        gain (K+1,) N m (the compiled driver's; no rows without the orbit models)."""
+        inertia, gg0, aero0, _, gg, aero = self._orbit
+        if not (gg or aero):
+            return np.zeros((0, 4)), np.zeros(0), np.zeros(0)
+        q_LN, gg_gain, aero_gain = np.empty((n_steps + 1, 4)), np.full(n_steps + 1, gg0), np.full(n_steps + 1, aero0)
+        for k in range(n_steps + 1):
+            t_ns = k * self.dt_ns
+            if self.orbit is not None:
+                now = self.orbit.at(t_ns)
+                q_LN[k], gg_gain[k], aero_gain[k] = now.q_LN, now.gg_gain, self._aero_gain * now.speed**2
+            else:
+                q_LN[k] = lvlh_attitude(t_ns * 1e-9, self.q_LN0, self.rate)
+        return q_LN, gg_gain, aero_gain
+
     def _impulse(self, k: int) -> float:
         """1.0 if a pulse falls in step k, else 0.0."""
         v = self.v

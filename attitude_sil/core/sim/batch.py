@@ -40,6 +40,7 @@ from attitude_sil.core.analysis.metric_rows import Sums
 from attitude_sil.core.cache import numba_cache_in
 from attitude_sil.core.control import registry
 from attitude_sil.core.control.compiled import law_addresses
+from attitude_sil.core.control.momentum import BDOT
 from attitude_sil.core.plant.kernels import WheelFailure, WheelParams
 from attitude_sil.core.plant.wheels import no_failure
 from attitude_sil.core.sim import batch_loop
@@ -48,7 +49,7 @@ from attitude_sil.core.trajectory import Trajectory
 __all__ = ["COMPILED_DISTURBANCES", "SUMMARY_COLUMNS", "TRAJECTORY_FIELDS", "run_compiled", "loop_of"]
 
 #: disturbance models the compiled driver evaluates in the loop
-COMPILED_DISTURBANCES = frozenset({"constant", "step", "noise"})
+COMPILED_DISTURBANCES = frozenset({"constant", "step", "noise", "gravity_gradient", "aerodynamic"})
 
 
 #: columns of the running sums the compiled driver keeps per episode (``sums``), in column order
@@ -87,6 +88,29 @@ class SimArrays(NamedTuple):
     tau_constant: np.ndarray
     tau_step: np.ndarray
     step_ns: int
+    # the orbit's disturbances (disturbance.orbit_torques): each step's LVLH frame (K+1, 4), gravity-gradient
+    # and drag gains (K+1,); the episodes' inertia (P, 3, 3), the centre of pressure (3,), the models on
+    orbit_q_LN: np.ndarray
+    orbit_gg: np.ndarray
+    orbit_aero: np.ndarray
+    dist_inertia: np.ndarray
+    cp_offset: np.ndarray
+    gg_on: bool
+    aero_on: bool
+    # the magnetorquers' loop (models.MagneticLoop), where ``mag``: the field in N at each step (K+1, 3), the
+    # rods (axes, allocation (n, 3), limit), the law that is B-dot (-1: none) and its gain (P,), the dumping
+    # law (on, gain (P,), target (P, 3)), or the law's torque made by the rods
+    mag: bool
+    b_N: np.ndarray
+    rod_axes: np.ndarray
+    rod_alloc: np.ndarray
+    rod_max: float
+    bdot_code: int
+    k_bdot: np.ndarray
+    dumping: bool
+    k_dump: np.ndarray
+    h_target: np.ndarray
+    torque_rods: bool
 
 
 class Outputs(NamedTuple):
@@ -102,6 +126,9 @@ class Outputs(NamedTuple):
     ws: np.ndarray
     wa: np.ndarray
     we: np.ndarray
+    b: np.ndarray
+    mc: np.ndarray
+    mt: np.ndarray
 
 
 class SumsSpec(NamedTuple):
@@ -149,7 +176,10 @@ def _writable(a):
 
 #: the Trajectory arrays the compiled driver can keep (``keep``), in its output order
 TRAJECTORY_FIELDS = ("q_BN", "omega_BN_B", "q_RN", "h_wheels_B", "u_cmd", "tau_c_B", "tau_ext_B", "wheel_speed",
-                     "wheel_angle", "wheel_effort")
+                     "wheel_angle", "wheel_effort", "magnetic_field_B", "dipole_cmd_B", "magnetic_torque_B")
+
+#: the arrays only a run with the magnetorquers fills (None in any other)
+MAGNETIC_FIELDS = ("magnetic_field_B", "dipole_cmd_B", "magnetic_torque_B")
 
 
 def _kinds(ctrl, laws: np.ndarray, swaps: dict, kept_steps: np.ndarray) -> list[str]:
@@ -164,7 +194,7 @@ def _kinds(ctrl, laws: np.ndarray, swaps: dict, kept_steps: np.ndarray) -> list[
 
 def run_compiled(models: tuple, n_steps: int, dt: float, stride: int = 1, threads: int | None = None,
                  chunk: int = CHUNK, keep=TRAJECTORY_FIELDS, sums: tuple | None = None, swaps: dict | None = None,
-                 laws=None) -> tuple[Trajectory | None, np.ndarray | None]:
+                 laws=None, magnetic=None) -> tuple[Trajectory | None, np.ndarray | None]:
     """Run built models (fresh, as the stepwise driver gets them) in the compiled loop.
 
     Parameters
@@ -198,6 +228,9 @@ def run_compiled(models: tuple, n_steps: int, dt: float, stride: int = 1, thread
     laws : sequence of str, optional
         Each episode's ``controller_type`` (default ``ctrl.active`` for all);
         all must command the same kind (volts or N m).
+    magnetic : MagneticLoop, optional
+        The magnetorquers' loop (:class:`~attitude_sil.core.sim.models.MagneticLoop`, fresh; one field for
+        every episode), run after the wheels' stage as the stepwise driver runs it.
 
     Returns
     -------
@@ -220,18 +253,19 @@ def run_compiled(models: tuple, n_steps: int, dt: float, stride: int = 1, thread
         used = {str(x) for x in laws}
     sw = sorted(swaps.items())
     kept = n_steps // stride + 1
-    out = _outputs(P, kept, wheels.assembly.n_wheels, keep)
+    out = _outputs(P, kept, wheels.assembly.n_wheels, [f for f in keep if magnetic is not None
+                                                       or f not in MAGNETIC_FIELDS])
     spec = _sums_spec(sums, P)
     sim = _sim_arrays(models, n_steps, stride, dt, law0,
                       (np.array([k for k, _ in sw], dtype=np.int64),
-                       np.array([ctrl.codes[law] for _, law in sw], dtype=np.int64)))
+                       np.array([ctrl.codes[law] for _, law in sw], dtype=np.int64)), magnetic)
     noise = (lambda lo, hi: dist.noise_torque(lo, hi, n_steps)) if "noise" in set(dist.models) else None
     run = _chunk_runner(ctrl, used | set(swaps.values()), sim,
                         Outputs(*(out[f] for f in TRAJECTORY_FIELDS)), spec, noise)
     _run_chunks(run, P, threads, chunk)
     trajectory = None
     if keep:
-        got = {f: (a if f in keep else None) for f, a in out.items()}
+        got = {f: (a if f in keep and a.shape[0] else None) for f, a in out.items()}
         steps = np.arange(0, n_steps + 1, stride)
         omega_rn = np.ascontiguousarray(np.broadcast_to(sim.omega_ref[:, None, :], (P, kept, 3)))
         trajectory = Trajectory(t=steps * dt, kind=_kinds(ctrl, laws, swaps, steps),
@@ -255,6 +289,7 @@ def _run_chunks(run, P: int, threads: int | None, chunk: int) -> None:
 def _outputs(P: int, kept: int, n_wheels: int, keep) -> dict[str, np.ndarray]:
     """The trajectory arrays, episode-major (episode, step, .) as the Trajectory holds them; no rows: not kept."""
     width = dict(q_BN=4, q_RN=4, wheel_speed=n_wheels, wheel_angle=n_wheels, wheel_effort=n_wheels)
+    keep = set(keep)
     return {f: np.empty((P, kept, width.get(f, 3)) if f in keep else (0, 0, width.get(f, 3)))
             for f in TRAJECTORY_FIELDS}
 
@@ -343,7 +378,7 @@ def _rows(field, lo: int, hi: int, P: int):
 
 
 def _sim_arrays(models: tuple, n_steps: int, stride: int, dt: float, law0: np.ndarray,
-                swaps: tuple[np.ndarray, np.ndarray]) -> SimArrays:
+                swaps: tuple[np.ndarray, np.ndarray], magnetic=None) -> SimArrays:
     """The models' arrays for the compiled loop, each contiguous and writable (one numba signature)."""
     plant, wheels, dist, guide, ctrl = models
     P = plant.n_episodes
@@ -362,5 +397,26 @@ def _sim_arrays(models: tuple, n_steps: int, stride: int, dt: float, law0: np.nd
         ctrl.sensor_att_std, ctrl.sensor_rate_std,
         _c(v["constant.torque"]) if "constant" in models else np.zeros(3),
         _c(v["step.torque"]) if "step" in models else np.zeros(3),
-        int(round(v["step.time"] * 1e9)) if "step" in models else int(np.iinfo(np.int64).max))
+        int(round(v["step.time"] * 1e9)) if "step" in models else int(np.iinfo(np.int64).max),
+        *_orbit_arrays(dist, n_steps), *_magnetic_arrays(magnetic, ctrl, P, n_steps))
     return SimArrays(*(_writable(a) for a in sim))
+
+
+def _orbit_arrays(dist, n_steps: int) -> tuple:
+    """The orbit disturbances' fields of SimArrays (no rows where neither model is on)."""
+    inertia, _, _, cp, gg, aero = dist._orbit
+    return (*dist.orbit_frames(n_steps), _c(inertia), _c(cp), bool(gg), bool(aero))
+
+
+def _magnetic_arrays(magnetic, ctrl, P: int, n_steps: int) -> tuple:
+    """The magnetorquers' fields of SimArrays (``mag`` False and no rows without them)."""
+    if magnetic is None:
+        none = np.zeros((0, 3))
+        return False, none, none, none, 0.0, -1, np.zeros(P), False, np.zeros(P), np.zeros((P, 3)), False
+    law, rods = magnetic.law, magnetic.rods
+    b_N = magnetic.field.field_N(np.arange(n_steps + 1, dtype=np.int64) * magnetic.field.orbit.dt_ns)
+    dump = law.dumping
+    return (True, _c(b_N), _c(rods.axes), _c(rods.allocation), float(rods.max_dipole),
+            int(ctrl.codes.get(BDOT, -1)), _c(law.bdot.gain, (P,)), dump is not None,
+            _c(dump.gain if dump is not None else 0.0, (P,)), _c(dump.target_B if dump is not None else 0.0, (P, 3)),
+            bool(law.torque_rods))

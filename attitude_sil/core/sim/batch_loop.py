@@ -26,6 +26,10 @@ from numba import njit
 
 from attitude_sil.core.analysis.metric_rows import Sums, euler_axis, first_crossing
 from attitude_sil.core.control.dispatch import command_stage, enter_at, reset_row
+from attitude_sil.core.control.laws.bdot import bdot_row
+from attitude_sil.core.control.momentum import dumping_row, torque_dipole_row
+from attitude_sil.core.environment.ephemeris import body_field
+from attitude_sil.core.plant.disturbance import orbit_torques
 from attitude_sil.core.plant.kernels import WheelFailure, measure_row, wheel_params_copy
 from attitude_sil.core.plant.lanes import (
     ANGLE,
@@ -47,6 +51,7 @@ from attitude_sil.core.plant.lanes import (
     wheel_lanes,
     wheels_to_lanes,
 )
+from attitude_sil.core.plant.magnetorquers import rods_torque_row
 
 #: number of running-sum columns
 N_SUMS = len(Sums)
@@ -95,6 +100,29 @@ def _ext_torque(tau_e, m, t_ns, step_ns, tau_constant, tau_step, noise, row0, k)
                 tau_e[p, i] += tau_step[i]
             if noise.shape[0] > 0:
                 tau_e[p, i] += noise[row0 + p, k, i]
+
+
+@njit(cache=True, inline="always")
+def _magnetic_stage(m, lo, k, sim, q, h, u, law, mag):
+    # the magnetorquers' loop of step k (models.MagneticLoop.step), after the wheels' stage: the field in B,
+    # B-dot's difference (every step, whichever law is active), the dipole of the law in charge, the rods'
+    # torque; mag: (previous field direction, field, B-dot's dipole, dipole, rods, made, torque) (m, .) rows
+    prev, b_B, m_bd, m_cmd, rod_d, made, tau_m = mag
+    b0, b1, b2 = sim.b_N[k, 0], sim.b_N[k, 1], sim.b_N[k, 2]
+    for p in range(m):
+        body_field(q, p, b0, b1, b2, b_B, p)
+        bdot_row(b_B, p, prev, k > 0, sim.k_bdot[lo + p], sim.dt, m_bd)
+        if law[p] == sim.bdot_code:
+            for i in range(3):
+                m_cmd[p, i] = m_bd[p, i]
+        elif sim.torque_rods:
+            torque_dipole_row(u, b_B, p, m_cmd)
+        elif sim.dumping:
+            dumping_row(h, b_B, p, sim.k_dump[lo + p], sim.h_target[lo + p], m_cmd)
+        else:
+            for i in range(3):
+                m_cmd[p, i] = 0.0
+        rods_torque_row(m_cmd, b_B, p, sim.rod_axes, sim.rod_alloc, sim.rod_max, rod_d, made, tau_m)
 
 
 @njit(cache=True, inline="always")
@@ -182,6 +210,11 @@ def _chunk(lo, hi, m, sim, recs, noise, noise_lo, out, sums, at):
     tau_c, h0 = np.empty((m, 3)), np.empty((m, 3))
     b, xw, xn = _plant_start(sim, lo, m)
     mot = motor_lanes(wp, lo, m)
+    orbit_on, inertia_d, cp = sim.gg_on or sim.aero_on, sim.dist_inertia[lo:hi].copy(), sim.cp_offset.copy()
+    n_rods = sim.rod_axes.shape[0]
+    mag = (np.zeros((m, 3)), np.empty((m, 3)), np.empty((m, 3)), np.empty((m, 3)), np.empty((m, n_rods)),
+           np.empty((m, 3)), np.zeros((m, 3)))  # _magnetic_stage's rows
+    tau_all = np.empty((m, 3))  # the disturbances' torque and the rods'
     keep = _any_kept(out)
     sums_out, with_sums = sums.out, sums.out.shape[0] > 0
     response = (sums.axis, sums.band, sums.y0, sums.r)  # out of the record once (a take per step costs refcounts)
@@ -192,6 +225,9 @@ def _chunk(lo, hi, m, sim, recs, noise, noise_lo, out, sums, at):
         q_r = qf if t_ns * 1e-9 >= sim.step_time - 1e-12 else qi
         swap, s_next = _next_swap(sw_k, sw_law, s_next, k)
         _ext_torque(tau_e, m, t_ns, sim.step_ns, tau_constant, tau_step, noise, lo - noise_lo, k)
+        if orbit_on:  # DisturbanceModel.torque's orbit models, on this step's frame and gains
+            orbit_torques(q, sim.orbit_q_LN[k], inertia_d, sim.orbit_gg[k], sim.orbit_aero[k], cp, sim.gg_on,
+                          sim.aero_on, tau_e)
         if sim.noisy:  # the law sees the measurements (ControllerBank.measure)
             for p in range(m):
                 measure_row(q, w, p, lo + p, k, s_seeds, s_att, s_rate, qm, wm)
@@ -208,10 +244,16 @@ def _chunk(lo, hi, m, sim, recs, noise, noise_lo, out, sums, at):
                 u_last[p, i] = u[p, i]
         rows_to_lanes(u, 0, b, U, m)
         wheel_lanes(m, lo, k, xw, xn, b, mot, torque, wp, fail)
+        if sim.mag:  # the rods, from the wheels' momentum at t_k
+            lanes_to_rows(b, H, h0)
+            _magnetic_stage(m, lo, k, sim, q, h0, u, law, mag)
         if keep and k % sim.stride == 0:
             lanes_to_rows(b, TC, tau_c)
             lanes_to_rows(b, H, h0)
             _keep_all(out, k // sim.stride, lo, (q, q_r, w, h0, u, tau_c, tau_e), xw, wp.k_i)
+            _keep_rows(out.b, k // sim.stride, lo, m, mag[1])  # the field in B, the dipole, the rods' torque
+            _keep_rows(out.mc, k // sim.stride, lo, m, mag[3])
+            _keep_rows(out.mt, k // sim.stride, lo, m, mag[6])
         if with_sums:
             t = k * sim.dt
             _accumulate_checks(sums_state[0], m, k, t, sim.n_steps, sim.dt, b, xw)
@@ -219,7 +261,13 @@ def _chunk(lo, hi, m, sim, recs, noise, noise_lo, out, sums, at):
                 _accumulate_response(sums_state, m, t - sim.step_time, n_after, b, response, lo)
                 n_after += 1
         if k < sim.n_steps:  # h (the wheel momentum at t_k, kept above) becomes the body's h at t_k+1
-            rows_to_lanes(tau_e, 0, b, TE, m)
+            if sim.mag:  # the plant adds the rods' torque to the disturbances'
+                for p in range(m):
+                    for i in range(3):
+                        tau_all[p, i] = tau_e[p, i] + mag[6][p, i]
+                rows_to_lanes(tau_all, 0, b, TE, m)
+            else:
+                rows_to_lanes(tau_e, 0, b, TE, m)
             rk4_body_lanes(m, b, sim.dt, sim.substeps)
             lanes_to_rows(b, Q, q)
             lanes_to_rows(b, W, w)
@@ -240,7 +288,7 @@ def _any_kept(out):
 @njit(cache=True, inline="always")
 def _keep_all(out, r, lo, rows, xw, k_i):
     # step r of every kept output: the rows (q, q_r, w, h, u, tau_c, tau_e) (m, width) and the wheels' lanes
-    o_q, o_w, o_qr, o_h, o_u, o_tc, o_te, o_ws, o_wa, o_we = out
+    o_q, o_w, o_qr, o_h, o_u, o_tc, o_te, o_ws, o_wa, o_we = out[:10]
     q, q_r, w, h0, u, tau_c, tau_e = rows
     m = q.shape[0]
     _keep_rows(o_q, r, lo, m, q)

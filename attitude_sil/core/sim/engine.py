@@ -191,7 +191,8 @@ def simulate_summary(scn: Scenario, n_episodes: int = 1, options: RunOptions | N
     opts = (options or RunOptions()).updated(changes)
     run = _Run(scn, n_episodes, opts)
     values = scn.values["scenario"]
-    if run.compiled and values["metrics.mode"] == "step":
+    # (the magnetorquers' figures come from the trajectory)
+    if run.compiled and values["metrics.mode"] == "step" and run.magnetic is None:
         plant, _, _, guide, _ = run.models
         axis = values["metrics.axis"]
         # metrics_from_trajectory's start and end of the step: the setpoint before it (or the initial
@@ -260,8 +261,8 @@ class _Run:
             why = compiled_plan(*self.models)
             if self.sensing:
                 why = "the sensors and estimator run in the stepwise driver"
-            if self.magnetic:
-                why = "the magnetorquers run in the stepwise driver"
+            if self.magnetic and self.magnetic.field.epochs is not None:
+                why = "a field epoch per episode runs in the stepwise driver"
             if driver == "compiled" and why:
                 raise ScenarioError(f"the compiled driver does not run this scenario ({why}); use driver='auto'")
             self.compiled = not why
@@ -292,7 +293,7 @@ class _Run:
         """Run the models in the chosen driver; the arrays not in ``keep`` are None."""
         if self.compiled:
             tr, _ = run_compiled(self.models, self.K, self.dt, stride=stride, threads=threads, keep=keep,
-                                 swaps=self.swaps, laws=self.laws)
+                                 swaps=self.swaps, laws=self.laws, magnetic=self.magnetic)
         else:
             tr = _simulate_stepwise(*self.models, self.swaps, self.K, self.dt, self.sensing, self.magnetic)
             tr = tr if stride == 1 else tr.every(stride)
