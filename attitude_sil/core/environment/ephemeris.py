@@ -37,6 +37,7 @@ from attitude_sil.core.environment.orbit import (
     OrbitPropagator,
     gravity_acceleration,
     lvlh_from_state,
+    norm3,
 )
 from attitude_sil.core.plant.disturbance import lvlh_attitude, orbit_rate
 from attitude_sil.core.plant.quaternion import quat_from_euler, quat_to_dcm
@@ -93,7 +94,7 @@ class Ephemeris:
             self.propagator = OrbitPropagator(el.check("orbit"), self.mu, self.j2)
             self._starts = {0: (self.propagator.r0, self.propagator.v0)}  # block -> its first state
             self._block = -1
-            self._states: tuple[np.ndarray, np.ndarray] = (np.zeros((0, 3)), np.zeros((0, 3)))
+            self._states: tuple = ()  # the block's frames (_frames)
 
     def at(self, t_ns: int) -> OrbitSample:
         """The orbit at step time ``t_ns`` (ns, a whole number of steps)."""
@@ -105,22 +106,22 @@ class Ephemeris:
             r_nl = quat_to_dcm(q)
             return OrbitSample(q, np.array([0.0, self.rate, 0.0]), 3.0 * self.rate**2,
                                float(np.sqrt(self.mu / self.radius)), r_nl @ r_L, r_nl @ v_L)
-        r, v = self._state(t_ns // self.dt_ns)
-        a = gravity_acceleration(r, self.mu, self.j2, R_EARTH)
-        q, omega = lvlh_from_state(r, v, a)
-        rn = float(np.linalg.norm(r))
-        return OrbitSample(q, omega, 3.0 * self.mu / rn**3, float(np.linalg.norm(v)), r, v)
+        block, i = divmod(t_ns // self.dt_ns, BLOCK_STEPS)
+        q, omega, gg, speed, r, v = self._frames(block)
+        return OrbitSample(q[i], omega[i], float(gg[i]), float(speed[i]), r[i], v[i])
 
-    def _state(self, k: int) -> tuple[np.ndarray, np.ndarray]:
-        """Position and velocity at step ``k``, from its block (propagated from the block before's end)."""
-        block, i = divmod(k, BLOCK_STEPS)
+    def _frames(self, block: int) -> tuple:
+        """Block ``block``'s steps (propagated from the block before's end): LVLH frames (n, 4) and rates (n, 3),
+        3 mu / r^3 (n,), speeds (n,), positions and velocities (n, 3), computed for the whole block at once."""
         if block != self._block:
             for b in range(max(self._starts) + 1, block + 1):  # blocks not reached yet, in order
                 r, v = self._propagate(b - 1)
                 self._starts[b] = (r[-1], v[-1])
-            self._states = self._propagate(block)
+            r, v = self._propagate(block)
+            q, omega = lvlh_from_state(r, v, gravity_acceleration(r, self.mu, self.j2, R_EARTH))
+            self._states = (q, omega, 3.0 * self.mu / norm3(r) ** 3, norm3(v), r, v)
             self._block = block
-        return self._states[0][i], self._states[1][i]
+        return self._states
 
     def _propagate(self, block: int) -> tuple[np.ndarray, np.ndarray]:
         """Block ``block``'s states at its BLOCK_STEPS + 1 steps, from its first state."""

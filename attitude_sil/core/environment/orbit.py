@@ -35,7 +35,7 @@ from attitude_sil.core.plant.quaternion import cross, quat_from_dcm
 from attitude_sil.errors import ScenarioError
 
 __all__ = ["MU_EARTH", "J2_EARTH", "R_EARTH", "Elements", "elements_to_state", "state_to_elements",
-           "gravity_acceleration", "OrbitPropagator", "nodal_regression_rate", "lvlh_from_state"]
+           "gravity_acceleration", "OrbitPropagator", "nodal_regression_rate", "lvlh_from_state", "norm3"]
 
 #: Earth's gravitational parameter, m^3/s^2 (EGM96)
 MU_EARTH = 3.986004418e14
@@ -178,17 +178,24 @@ class OrbitPropagator:
 
 
 def lvlh_from_state(r: np.ndarray, v: np.ndarray, a: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """The LVLH frame of position ``r``, velocity ``v`` and acceleration ``a`` (3,) in N: (q_LN (4,), omega_LN
-    in L (3,) rad/s).
+    """The LVLH frame of positions ``r``, velocities ``v`` and accelerations ``a`` (..., 3) in N: (q_LN (..., 4),
+    omega_LN in L (..., 3) rad/s), row by row.
 
     omega_LN = (0, |h| / r^2, r a_h / |h|): the track's turn, and the orbit
     plane's turn about the zenith under the acceleration's out-of-plane part
     a_h (J2), as the frame of Hill turns (Schaub and Junkins, *Analytical
     Mechanics of Space Systems*, section 14.3).
     """
-    h = cross(r, v)  # written out: np.cross costs several times more on one vector, every step
-    rn, hn = float(np.linalg.norm(r)), float(np.linalg.norm(h))
+    r, v, a = (np.asarray(u, dtype=float) for u in (r, v, a))
+    h = cross(r, v)  # written out: np.cross costs several times more
+    rn, hn = norm3(r)[..., None], norm3(h)[..., None]
     z, y = r / rn, h / hn
     x = cross(y, z)
-    omega = np.array([0.0, hn / rn**2, rn * float(a @ y) / hn])
-    return quat_from_dcm(np.column_stack([x, y, z])), omega
+    a_h = a[..., 0:1] * y[..., 0:1] + a[..., 1:2] * y[..., 1:2] + a[..., 2:3] * y[..., 2:3]
+    omega = np.concatenate([np.zeros_like(rn), hn / rn**2, rn * a_h / hn], axis=-1)
+    return quat_from_dcm(np.stack([x, y, z], axis=-1)), omega
+
+
+def norm3(u: np.ndarray) -> np.ndarray:
+    """|u| (...) of vectors ``u`` (..., 3), summed in component order (the same bits for one row or many)."""
+    return np.sqrt(u[..., 0] * u[..., 0] + u[..., 1] * u[..., 1] + u[..., 2] * u[..., 2])

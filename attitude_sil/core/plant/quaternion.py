@@ -152,24 +152,29 @@ def quat_to_dcm(q: np.ndarray) -> np.ndarray:
 
 
 def quat_from_dcm(r: np.ndarray) -> np.ndarray:
-    """The quaternion (4,) x y z w, scalar part >= 0, whose :func:`quat_to_dcm` is ``r`` (3, 3) (Shepperd's method:
-    from the largest of the four squares)."""
-    tr = r[0, 0] + r[1, 1] + r[2, 2]
-    i = int(np.argmax([tr, r[0, 0], r[1, 1], r[2, 2]]))
-    if i == 0:
+    """The quaternion (..., 4) x y z w, scalar part >= 0, whose :func:`quat_to_dcm` is ``r`` (..., 3, 3)
+    (Shepperd's method: from the largest of the four squares, row by row)."""
+    r = np.asarray(r, dtype=float)
+    r00, r11, r22 = r[..., 0, 0], r[..., 1, 1], r[..., 2, 2]
+    tr = r00 + r11 + r22
+    i = np.argmax(np.stack([tr, r00, r11, r22], axis=-1), axis=-1)[..., None]
+    with np.errstate(invalid="ignore", divide="ignore"):  # the cases not taken may take roots of negatives
         w = 0.5 * np.sqrt(1.0 + tr)
-        q = [(r[2, 1] - r[1, 2]) / (4 * w), (r[0, 2] - r[2, 0]) / (4 * w), (r[1, 0] - r[0, 1]) / (4 * w), w]
-    elif i == 1:
-        x = 0.5 * np.sqrt(1.0 + r[0, 0] - r[1, 1] - r[2, 2])
-        q = [x, (r[0, 1] + r[1, 0]) / (4 * x), (r[0, 2] + r[2, 0]) / (4 * x), (r[2, 1] - r[1, 2]) / (4 * x)]
-    elif i == 2:
-        y = 0.5 * np.sqrt(1.0 - r[0, 0] + r[1, 1] - r[2, 2])
-        q = [(r[0, 1] + r[1, 0]) / (4 * y), y, (r[1, 2] + r[2, 1]) / (4 * y), (r[0, 2] - r[2, 0]) / (4 * y)]
-    else:
-        z = 0.5 * np.sqrt(1.0 - r[0, 0] - r[1, 1] + r[2, 2])
-        q = [(r[0, 2] + r[2, 0]) / (4 * z), (r[1, 2] + r[2, 1]) / (4 * z), z, (r[1, 0] - r[0, 1]) / (4 * z)]
-    q = np.array(q, dtype=float)
-    return -q if q[3] < 0.0 else q
+        x = 0.5 * np.sqrt(1.0 + r00 - r11 - r22)
+        y = 0.5 * np.sqrt(1.0 - r00 + r11 - r22)
+        z = 0.5 * np.sqrt(1.0 - r00 - r11 + r22)
+        cases = [
+            [(r[..., 2, 1] - r[..., 1, 2]) / (4 * w), (r[..., 0, 2] - r[..., 2, 0]) / (4 * w),
+             (r[..., 1, 0] - r[..., 0, 1]) / (4 * w), w],
+            [x, (r[..., 0, 1] + r[..., 1, 0]) / (4 * x), (r[..., 0, 2] + r[..., 2, 0]) / (4 * x),
+             (r[..., 2, 1] - r[..., 1, 2]) / (4 * x)],
+            [(r[..., 0, 1] + r[..., 1, 0]) / (4 * y), y, (r[..., 1, 2] + r[..., 2, 1]) / (4 * y),
+             (r[..., 0, 2] - r[..., 2, 0]) / (4 * y)],
+            [(r[..., 0, 2] + r[..., 2, 0]) / (4 * z), (r[..., 1, 2] + r[..., 2, 1]) / (4 * z), z,
+             (r[..., 1, 0] - r[..., 0, 1]) / (4 * z)],
+        ]
+    q = np.select([i == 0, i == 1, i == 2], [np.stack(c, axis=-1) for c in cases[:3]], np.stack(cases[3], axis=-1))
+    return np.where(q[..., 3:] < 0.0, -q, q)
 
 
 def quat_error(q_BN: np.ndarray, q_RN: np.ndarray) -> np.ndarray:
