@@ -13,8 +13,11 @@ result is identical for any number of threads.
 
 What the compiled driver covers (the tuning and Monte Carlo workhorse: the HST
 and CubeSat presets and their kind): the ``rigid_body`` plant, the
-``reaction_wheels`` actuator, ``step`` guidance, the ``constant``, ``step``
-and ``noise`` disturbance models (or none), and every law of the registry,
+``reaction_wheels`` actuator, ``step`` guidance, the ``constant``, ``step``,
+``noise``, ``gravity_gradient`` and ``aerodynamic`` disturbance models (or
+none; the orbit's frames and gains computed per step beforehand), the
+magnetorquers' loop (the field along the orbit computed beforehand; B-dot,
+the dumping law and the rods in the loop), and every law of the registry,
 built in or plugin: one per episode if asked, with
 scheduled swaps and the controller bank's bumpless transfer, per-episode gains,
 motor constants, wheel failures and sensor noise (the Monte Carlo's
@@ -23,8 +26,8 @@ stepwise driver's streams by each chunk in its own thread
 (:meth:`~attitude_sil.core.plant.disturbance.DisturbanceModel.noise_torque`).
 :func:`attitude_sil.core.sim.engine.compiled_plan` says whether a run fits and, if
 not, why; everything else (the flexible and pitch plants, the torque actuator,
-LVLH guidance, the orbit disturbances) runs in the stepwise driver, which
-handles every model.
+LVLH guidance, the residual dipole, the sensing loop, a field epoch per
+episode) runs in the stepwise driver, which handles every model.
 """
 
 from __future__ import annotations
