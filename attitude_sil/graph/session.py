@@ -73,7 +73,12 @@ from attitude_sil.ros.signals import STOP_SIGNALS, Interrupted, StopSignals
 from attitude_sil.storage.writer import PARAMETERS_KEY, SCENARIO_KEY, BagWriter, check_bag_dir
 
 __all__ = ["RunError", "RunResult", "GraphSession", "Interrupted", "Progress", "STOP_SIGNALS", "run_graph",
-           "extra_parameters", "spin_episode", "episode_complete", "hold_for_viewer"]
+           "extra_parameters", "spin_episode", "episode_complete", "hold_for_viewer", "CommandsLostAtStart"]
+
+
+class CommandsLostAtStart(RunError):
+    """The episode reached its end, every step topic whole, without the first commands: a volatile publisher (flight
+    software of the user's) wrote them before its side of the DDS match with a reader that had just joined."""
 
 
 @dataclass
@@ -767,12 +772,16 @@ def _raise_if_stopped(recorder: Recorder, plant, step_topics: list[str], started
 
 def spin_episode(recorder: Recorder, spin, plant, children, k_steps: int, scn: Scenario, prog: Progress,
                  schedule: list[tuple[float, int, str]], foreign: ForeignPublishers | None = None,
-                 topics: list[str] | None = None, restart: Callable[[], None] | None = None) -> None:
+                 topics: list[str] | None = None, restart: Callable[[], None] | None = None,
+                 lost_commands: bool = False) -> None:
     """Spin until every step topic has all K+1 messages; apply scheduled swaps at their holds.
 
     ``foreign``, if given, names publishers that are not the graph's own as they appear; ``topics`` are the
     step topics to wait for (default :func:`~attitude_sil.ros.contract.episode_topics`: all but the commands,
     of which one carries each step). A publisher the recorder cannot match stops the episode with its reason.
+
+    ``lost_commands``: an episode that ends whole but for its first commands raises
+    :class:`CommandsLostAtStart` at once (the caller runs it again, the match now made), not a stall.
 
     ``restart`` (the plant's reset) starts the episode again when its first
     step has not completed within :data:`RESTART_AFTER_S` (or half the
@@ -818,9 +827,13 @@ def spin_episode(recorder: Recorder, spin, plant, children, k_steps: int, scn: S
             set_remote_parameters(recorder, spin, "controller", {"controller_type": kind})
             set_remote_parameters(recorder, spin, "plant", {"hold_at": pending[0][0] if pending else -1.0})
             last_change = time.monotonic()
-        if (n >= needed and commands() >= needed and all(counts[t] >= needed for t in step_topics)
+        if (n >= needed and all(counts[t] >= needed for t in step_topics)
                 and episode_complete(recorder.newest_stamp, step_topics, final_ns, watch.topics)):
-            return
+            if commands() >= needed:
+                return
+            if lost_commands:
+                raise CommandsLostAtStart(f"{needed - commands()} of the episode's {needed} commands did not reach "
+                                          "this tool's reader (written before the publisher matched it)")
         _raise_if_stopped(recorder, plant, step_topics, started, dt, watch)
         now = time.monotonic()
         if foreign is not None:

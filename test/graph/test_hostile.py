@@ -13,6 +13,7 @@ import subprocess
 import sys
 import time
 
+import pytest
 import rclpy
 from geometry_msgs.msg import QuaternionStamped, Vector3Stamped
 from rclpy.executors import SingleThreadedExecutor
@@ -158,6 +159,43 @@ def test_the_episode_ends_on_its_last_command_not_on_a_count_a_foreign_one_can_f
 
     spin_episode(rec, spin, None, [], K, scn, Progress(), [])
     assert len(spins) == 3
+
+
+def test_an_episode_whole_but_for_its_first_commands_says_so_at_its_end():
+    # a volatile controller of the user's writes its first commands before its side of the DDS match with a tool
+    # that just joined (episode): the episode ends with every step topic whole and those commands never come;
+    # the tool is told at the end, to run the episode again, not after a stall
+    from collections import Counter
+
+    from attitude_sil.core.sim.scenario import load_scenario
+    from attitude_sil.graph.session import CommandsLostAtStart, spin_episode
+    from attitude_sil.ros.contract import COMMAND_TOPICS, episode_topics
+
+    scn = load_scenario(ROOT / "config" / "hst_roll_step.yaml")
+    K, dt_ns = 100, int(round(scn.dt * 1e9))
+    voltage = COMMAND_TOPICS[0]
+
+    class Recorder:
+        counts, newest_stamp, error, qos_problems, plant_input_timeout = Counter(), {}, "", [], None
+        bad_command, controller_type = None, "pid"
+
+    class Progress:
+        def update(self, t):
+            pass
+
+    rec = Recorder()
+    spins = []
+
+    def spin(timeout):
+        spins.append(timeout)
+        last = K if len(spins) >= 2 else K - 1  # the last step comes at the second spin
+        for t in episode_topics():
+            rec.counts[t], rec.newest_stamp[t] = last + 1, last * dt_ns
+        rec.counts[voltage], rec.newest_stamp[voltage] = last + 1 - 11, last * dt_ns  # steps 0..10 lost
+
+    with pytest.raises(CommandsLostAtStart, match="11 of the episode's 101 commands did not reach"):
+        spin_episode(rec, spin, None, [], K, scn, Progress(), [], lost_commands=True)
+    assert len(spins) == 2
 
 
 def test_the_recorder_keeps_each_topics_greatest_stamp_whatever_comes_after():
