@@ -66,6 +66,9 @@ from attitude_sil.ros.convert import magnetic_field_msg, message_to_array, odome
 from attitude_sil.ros.node import SchemaNode, run_node, steady_clock
 from attitude_sil.storage.cdr import clock_cdr, stamped_vector_cdr
 
+#: wall s after which a step still waiting for its inputs sends its /clock again (controller on a sim-time timer)
+CLOCK_RESEND_S = 0.5
+
 
 class PlantNode(SchemaNode):
     """Spacecraft body in lockstep; see the module docstring."""
@@ -92,6 +95,7 @@ class PlantNode(SchemaNode):
         self._wall = steady_clock()
         self.lockstep = PlantLockstep(self.input_names, gate)
         self._pace_timer = None
+        self._clock_sent = 0.0  # when /clock last went out (monotonic s)
         self._watchdog = self.create_timer(0.05, self._on_watchdog, clock=self._wall)
 
     # -- state of the lockstep, for the graph tools ----------------------------
@@ -189,6 +193,7 @@ class PlantNode(SchemaNode):
         if is_tick(t_ns, self.tick_ns):
             self.await_readers([p for p in (self.pub_attitude, self.pub_rate, self.pub_flex) if p is not None], t_ns)
         self.pub_clock.publish(clock_cdr(t_ns))
+        self._clock_sent = time.monotonic()
         self._do(self.lockstep.clocked())
 
     def fail(self, reason: str) -> None:
@@ -221,6 +226,14 @@ class PlantNode(SchemaNode):
 
     def _on_watchdog(self) -> None:
         ls = self.lockstep
+        now = time.monotonic()
+        if (self.lockstep.clock_gate and ls.running and ls.clock_out and ls.publish_at is None and not ls.holding
+                and now - self._clock_sent > CLOCK_RESEND_S):
+            # a controller on a sim-time timer reads /clock best effort (rclpy's TimeSource): a lost /clock is a
+            # tick that never fires and a step that never ends. The step's /clock again, the same time: a reader
+            # that has it sees no change, one that lost it ticks
+            self.pub_clock.publish(clock_cdr(ls.t_ns))
+            self._clock_sent = now
         wired = (not ls.running and not ls.done and not ls.error and self.param("autostart")) and self.wired()
         self._do(ls.watchdog(time.monotonic(), self.param("input_timeout"), self.param("autostart"), wired))
 

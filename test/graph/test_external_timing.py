@@ -209,3 +209,46 @@ def test_a_wall_clock_rate_needs_no_whole_number_of_steps():
     assert command_period_of(scn) == 33_333_333
     with pytest.raises(ValueError, match="not a whole number of control periods"):
         command_period_of(scn.with_values("wheels", command_timing="sim_timer"))
+
+
+DROPS_A_CLOCK = """
+import sys
+import rclpy
+from geometry_msgs.msg import Vector3Stamped
+from rclpy.qos import QoSProfile, ReliabilityPolicy
+from rosgraph_msgs.msg import Clock
+rclpy.init()
+node = rclpy.create_node("my_controller")
+pub = node.create_publisher(Vector3Stamped, "voltage_cmd", 10)
+seen = set()
+def on_clock(msg):
+    t = msg.clock.sec * 10**9 + msg.clock.nanosec
+    if t == 10_000_000 and t not in seen:  # the tick at 10 ms lost once, as a best-effort reader can lose it
+        seen.add(t)
+        print("dropped", file=sys.stderr, flush=True)
+        return
+    if t > 0:  # a tick at every step: zero volts stamped with it
+        cmd = Vector3Stamped()
+        cmd.header.stamp = msg.clock
+        cmd.header.frame_id = "body"
+        pub.publish(cmd)
+node.create_subscription(Clock, "/clock", on_clock, QoSProfile(depth=1, reliability=ReliabilityPolicy.BEST_EFFORT))
+try:
+    rclpy.spin(node)
+except BaseException:
+    pass
+"""
+
+
+def test_a_lost_clock_of_a_tick_is_sent_again():
+    # a sim-time timer reads /clock best effort (rclpy's TimeSource): a /clock lost is a tick that never fires.
+    # The plant sends a waiting step's /clock again, so the episode goes on instead of stopping at its timeout
+    scn = load_scenario(SCENARIO).with_values("wheels", command_timing="sim_timer")
+    node = _start(["-c", DROPS_A_CLOCK])
+    try:
+        result = run_graph(scn, duration=0.1, external=("controller",), progress=False)
+    finally:
+        _stop([node])
+        err = node.stderr.read()
+    assert "dropped" in err, err
+    assert result.metrics["sim_time_s"] == pytest.approx(0.1)
