@@ -770,18 +770,23 @@ def _raise_if_stopped(recorder: Recorder, plant, step_topics: list[str], started
         raise RunError(recorder.qos_problems[0])
 
 
+def _commands_in(taken: int, needed: int) -> bool:
+    """Of an episode whose step topics are whole, ``taken`` of its ``needed`` commands: True if all, else
+    :class:`CommandsLostAtStart` at once (a caller can run the episode again, the match now made), not a stall."""
+    if taken < needed:
+        raise CommandsLostAtStart(f"{needed - taken} of the episode's {needed} commands did not reach this tool's "
+                                  "reader (written before the publisher matched it)")
+    return True
+
+
 def spin_episode(recorder: Recorder, spin, plant, children, k_steps: int, scn: Scenario, prog: Progress,
                  schedule: list[tuple[float, int, str]], foreign: ForeignPublishers | None = None,
-                 topics: list[str] | None = None, restart: Callable[[], None] | None = None,
-                 lost_commands: bool = False) -> None:
+                 topics: list[str] | None = None, restart: Callable[[], None] | None = None) -> None:
     """Spin until every step topic has all K+1 messages; apply scheduled swaps at their holds.
 
     ``foreign``, if given, names publishers that are not the graph's own as they appear; ``topics`` are the
     step topics to wait for (default :func:`~attitude_sil.ros.contract.episode_topics`: all but the commands,
     of which one carries each step). A publisher the recorder cannot match stops the episode with its reason.
-
-    ``lost_commands``: an episode that ends whole but for its first commands raises
-    :class:`CommandsLostAtStart` at once (the caller runs it again, the match now made), not a stall.
 
     ``restart`` (the plant's reset) starts the episode again when its first
     step has not completed within :data:`RESTART_AFTER_S` (or half the
@@ -827,13 +832,10 @@ def spin_episode(recorder: Recorder, spin, plant, children, k_steps: int, scn: S
             set_remote_parameters(recorder, spin, "controller", {"controller_type": kind})
             set_remote_parameters(recorder, spin, "plant", {"hold_at": pending[0][0] if pending else -1.0})
             last_change = time.monotonic()
-        if (n >= needed and all(counts[t] >= needed for t in step_topics)
-                and episode_complete(recorder.newest_stamp, step_topics, final_ns, watch.topics)):
-            if commands() >= needed:
-                return
-            if lost_commands:
-                raise CommandsLostAtStart(f"{needed - commands()} of the episode's {needed} commands did not reach "
-                                          "this tool's reader (written before the publisher matched it)")
+        whole = n >= needed and all(counts[t] >= needed for t in step_topics) and episode_complete(
+            recorder.newest_stamp, step_topics, final_ns, watch.topics)
+        if whole and _commands_in(commands(), needed):
+            return
         _raise_if_stopped(recorder, plant, step_topics, started, dt, watch)
         now = time.monotonic()
         if foreign is not None:

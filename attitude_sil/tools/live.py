@@ -320,10 +320,11 @@ def play_episode(namespace: str | None = None, scenario: str | Path | None = Non
             prog.t0 = wall0
             try:
                 spin_episode(rec, ros.spin, None, [], scn.steps(), scn, prog, [],
-                             topics=_live_topics(rec, external), restart=lambda: reset(ros.spin, timeout),
-                             lost_commands=not again)
+                             topics=_live_topics(rec, external), restart=lambda: reset(ros.spin, timeout))
                 break
             except CommandsLostAtStart as exc:
+                if again:
+                    raise
                 say(f"note: {exc}; the episode runs again")
         wall = time.monotonic() - wall0
         prog.update(scn.duration, force=True)

@@ -285,6 +285,23 @@ def _spin_until(executor, done: Callable[[], bool], timeout: float, why: str) ->
         executor.spin_once(timeout_sec=0.05)
 
 
+def _feed(feeder: Node, magnetic: bool, got: dict, got_dipole: dict) -> dict:
+    """The feeder's publishers of the controller's inputs (and, with ``magnetic``, of its magnetic channel's),
+    by name; its subscriptions put each command in ``got`` (stamp -> (topic, value)) and each dipole in
+    ``got_dipole`` (stamp -> value)."""
+    fed = INPUTS + (DUMPING_INPUTS if magnetic else ())
+    pubs = {n: feeder.create_publisher(message_class(RECORDED_TOPICS[n]), n, LOCKSTEP_QOS) for n in fed}
+    for c in COMMANDS:
+        feeder.create_subscription(
+            message_class(STEP_TOPICS[c]), c,
+            lambda m, c=c: got.__setitem__(stamp_to_ns(m.header.stamp), (c, vector_to_array(m))), LOCKSTEP_QOS)
+    if magnetic:
+        feeder.create_subscription(message_class(RECORDED_TOPICS[DIPOLE_CMD]), DIPOLE_CMD,
+                                   lambda m: got_dipole.__setitem__(stamp_to_ns(m.header.stamp), vector_to_array(m)),
+                                   LOCKSTEP_QOS)
+    return pubs
+
+
 def verify_controller(bag_path: str | Path, params_file: str | Path | None = None, tolerance: float = 1e-9,
                       timeout: float = 10.0, say: Callable[[str], None] | None = None) -> VerifyResult:
     """Feed the recorded plant topics to a fresh controller node and compare its commands.
@@ -324,18 +341,8 @@ def verify_controller(bag_path: str | Path, params_file: str | Path | None = Non
         overrides = [typed_parameter(spec_for("controller", k), v) for k, v in values.items() if v != []]
         ctrl = ControllerNode(context=context, parameter_overrides=overrides)
         feeder = Node("verify_feeder", context=context)
-        fed = INPUTS + (DUMPING_INPUTS if magnetic else ())
-        pubs = {n: feeder.create_publisher(message_class(RECORDED_TOPICS[n]), n, LOCKSTEP_QOS) for n in fed}
-        for c in COMMANDS:
-            feeder.create_subscription(
-                message_class(STEP_TOPICS[c]), c,
-                lambda m, c=c: got.__setitem__(stamp_to_ns(m.header.stamp), (c, vector_to_array(m))),
-                LOCKSTEP_QOS)
         got_dipole: dict[int, np.ndarray] = {}
-        if magnetic:
-            feeder.create_subscription(message_class(RECORDED_TOPICS[DIPOLE_CMD]), DIPOLE_CMD,
-                                       lambda m: got_dipole.__setitem__(stamp_to_ns(m.header.stamp),
-                                                                        vector_to_array(m)), LOCKSTEP_QOS)
+        pubs = _feed(feeder, bool(magnetic), got, got_dipole)
         executor = EventsExecutor(context=context)
         executor.add_node(ctrl)
         executor.add_node(feeder)

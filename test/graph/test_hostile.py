@@ -164,7 +164,7 @@ def test_the_episode_ends_on_its_last_command_not_on_a_count_a_foreign_one_can_f
 def test_an_episode_whole_but_for_its_first_commands_says_so_at_its_end():
     # a volatile controller of the user's writes its first commands before its side of the DDS match with a tool
     # that just joined (episode): the episode ends with every step topic whole and those commands never come;
-    # the tool is told at the end, to run the episode again, not after a stall
+    # the tool is told at the end (episode runs it again; run says so in one line), not after a stall
     from collections import Counter
 
     from attitude_sil.core.sim.scenario import load_scenario
@@ -194,7 +194,7 @@ def test_an_episode_whole_but_for_its_first_commands_says_so_at_its_end():
         rec.counts[voltage], rec.newest_stamp[voltage] = last + 1 - 11, last * dt_ns  # steps 0..10 lost
 
     with pytest.raises(CommandsLostAtStart, match="11 of the episode's 101 commands did not reach"):
-        spin_episode(rec, spin, None, [], K, scn, Progress(), [], lost_commands=True)
+        spin_episode(rec, spin, None, [], K, scn, Progress(), [])
     assert len(spins) == 2
 
 

@@ -210,11 +210,7 @@ def _chunk(lo, hi, m, sim, recs, noise, noise_lo, out, sums, at):
     tau_c, h0 = np.empty((m, 3)), np.empty((m, 3))
     b, xw, xn = _plant_start(sim, lo, m)
     mot = motor_lanes(wp, lo, m)
-    orbit_on, inertia_d, cp = sim.gg_on or sim.aero_on, sim.dist_inertia[lo:hi].copy(), sim.cp_offset.copy()
-    n_rods = sim.rod_axes.shape[0]
-    mag = (np.zeros((m, 3)), np.empty((m, 3)), np.empty((m, 3)), np.empty((m, 3)), np.empty((m, n_rods)),
-           np.empty((m, 3)), np.zeros((m, 3)))  # _magnetic_stage's rows
-    tau_all = np.empty((m, 3))  # the disturbances' torque and the rods'
+    orbit_on, inertia_d, cp, mag, tau_all = _environment_start(sim, lo, hi, m)
     keep = _any_kept(out)
     sums_out, with_sums = sums.out, sums.out.shape[0] > 0
     response = (sums.axis, sums.band, sums.y0, sums.r)  # out of the record once (a take per step costs refcounts)
@@ -250,10 +246,7 @@ def _chunk(lo, hi, m, sim, recs, noise, noise_lo, out, sums, at):
         if keep and k % sim.stride == 0:
             lanes_to_rows(b, TC, tau_c)
             lanes_to_rows(b, H, h0)
-            _keep_all(out, k // sim.stride, lo, (q, q_r, w, h0, u, tau_c, tau_e), xw, wp.k_i)
-            _keep_rows(out.b, k // sim.stride, lo, m, mag[1])  # the field in B, the dipole, the rods' torque
-            _keep_rows(out.mc, k // sim.stride, lo, m, mag[3])
-            _keep_rows(out.mt, k // sim.stride, lo, m, mag[6])
+            _keep_all(out, k // sim.stride, lo, (q, q_r, w, h0, u, tau_c, tau_e), xw, wp.k_i, mag)
         if with_sums:
             t = k * sim.dt
             _accumulate_checks(sums_state[0], m, k, t, sim.n_steps, sim.dt, b, xw)
@@ -261,19 +254,33 @@ def _chunk(lo, hi, m, sim, recs, noise, noise_lo, out, sums, at):
                 _accumulate_response(sums_state, m, t - sim.step_time, n_after, b, response, lo)
                 n_after += 1
         if k < sim.n_steps:  # h (the wheel momentum at t_k, kept above) becomes the body's h at t_k+1
-            if sim.mag:  # the plant adds the rods' torque to the disturbances'
-                for p in range(m):
-                    for i in range(3):
-                        tau_all[p, i] = tau_e[p, i] + mag[6][p, i]
-                rows_to_lanes(tau_all, 0, b, TE, m)
-            else:
-                rows_to_lanes(tau_e, 0, b, TE, m)
+            rows_to_lanes(_body_torque(sim.mag, m, tau_e, mag[6], tau_all), 0, b, TE, m)
             rk4_body_lanes(m, b, sim.dt, sim.substeps)
             lanes_to_rows(b, Q, q)
             lanes_to_rows(b, W, w)
         copy_wheels(xn, xw)  # copied, not swapped: a loop over a swapped pair of arrays stays scalar (bench/README.md)
     if with_sums:
         _sums_end(sums_state, n_after, sums_out, lo)
+
+
+@njit(cache=True, inline="always")
+def _environment_start(sim, lo, hi, m):
+    # whether the orbit's disturbances fly, the episodes' inertia for them and the centre of pressure (private
+    # copies), _magnetic_stage's rows, and the rows of the disturbances' torque plus the rods'
+    mag = (np.zeros((m, 3)), np.empty((m, 3)), np.empty((m, 3)), np.empty((m, 3)), np.empty((m, sim.rod_axes.shape[0])),
+           np.empty((m, 3)), np.zeros((m, 3)))
+    return sim.gg_on or sim.aero_on, sim.dist_inertia[lo:hi].copy(), sim.cp_offset.copy(), mag, np.empty((m, 3))
+
+
+@njit(cache=True, inline="always")
+def _body_torque(mag_on, m, tau_e, tau_m, tau_all):
+    # the torque the plant adds to the control torque: the disturbances' and, where they fly, the rods'
+    if not mag_on:
+        return tau_e
+    for p in range(m):
+        for i in range(3):
+            tau_all[p, i] = tau_e[p, i] + tau_m[p, i]
+    return tau_all
 
 
 @njit(cache=True, inline="always")
@@ -286,8 +293,9 @@ def _any_kept(out):
 
 
 @njit(cache=True, inline="always")
-def _keep_all(out, r, lo, rows, xw, k_i):
-    # step r of every kept output: the rows (q, q_r, w, h, u, tau_c, tau_e) (m, width) and the wheels' lanes
+def _keep_all(out, r, lo, rows, xw, k_i, mag):
+    # step r of every kept output: the rows (q, q_r, w, h, u, tau_c, tau_e) (m, width), the wheels' lanes, and
+    # the magnetorquers' field in B, dipole and torque (_magnetic_stage's rows)
     o_q, o_w, o_qr, o_h, o_u, o_tc, o_te, o_ws, o_wa, o_we = out[:10]
     q, q_r, w, h0, u, tau_c, tau_e = rows
     m = q.shape[0]
@@ -299,6 +307,9 @@ def _keep_all(out, r, lo, rows, xw, k_i):
     _keep_rows(o_tc, r, lo, m, tau_c)
     _keep_rows(o_te, r, lo, m, tau_e)
     _keep_wheels(o_ws, o_wa, o_we, r, lo, xw, k_i)
+    _keep_rows(out.b, r, lo, m, mag[1])
+    _keep_rows(out.mc, r, lo, m, mag[3])
+    _keep_rows(out.mt, r, lo, m, mag[6])
 
 
 @njit(cache=True, inline="always")
