@@ -19,8 +19,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from attitude_sil.core.sim.build import build_wheels
+from attitude_sil.core.plant.wheels import allocation_over
+from attitude_sil.core.sim.build import available_wheels, build_wheels
 from attitude_sil.core.sim.lockstep import CommandHold, StepSequencer, tick_period_ns
+from attitude_sil.errors import ScenarioError
 from attitude_sil.ros.contract import (
     APPLIED_COMMAND_TOPIC,
     CLOCK,
@@ -64,6 +66,26 @@ class WheelsNode(LockstepNode):
             zero = (np.zeros((1, 3)), self.param("actuator") in ("torque", "none"))
             self.hold = CommandHold(timing, tick_period_ns(timing, self.param("command_rate"), self.dt_ns), zero)
             self.step_ns = None
+
+    def check_parameters(self, pending: dict) -> str:
+        """The available wheels must span the three body axes."""
+        if not {"allocation", "available"} & set(pending) or self.param("actuator") != "reaction_wheels":
+            return ""
+        values = {**self.values(), **pending}
+        if "available" in pending:  # a set is checked as it is given, whichever allocation flies now
+            values["allocation"] = "available"
+        try:
+            allocation_over(self.core.assembly.axes_B, available_wheels(values, self.core.assembly.n_wheels))
+        except ScenarioError as exc:
+            return str(exc)
+        return ""
+
+    def on_parameters_set(self, names: list[str]) -> None:
+        if {"allocation", "available"} & set(names) and self.param("actuator") == "reaction_wheels":
+            # the next command on is shared among the wheels now available (the episode goes on)
+            self.core.assembly.set_available(available_wheels(self.values(), self.core.assembly.n_wheels))
+            self.get_logger().info(f"allocation {self.param('allocation')} over wheels "
+                                   f"{self.param('available') or 'all'}")
 
     def _on_command(self, msg, torque_mode: bool) -> None:
         t = stamp_to_ns(msg.header.stamp)

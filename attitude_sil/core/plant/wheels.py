@@ -43,6 +43,7 @@ __all__ = [
     "orthogonal_triad",
     "GEOMETRIES",
     "WheelAssembly",
+    "allocation_over",
     "no_failure",
     "HST_MOTOR",
 ]
@@ -164,6 +165,30 @@ def _motor_transition(resistance: float, inductance: float, torque_constant: flo
     return e[:3, :3].T.copy(), e[:3, 3].copy()
 
 
+def allocation_over(axes_B: np.ndarray, available: list[int] | None = None) -> np.ndarray:
+    """The allocation (n, 3) of a body-axis command over the wheels ``available`` (0-based indices; None: all):
+    the pseudo-inverse of their axes (paper 000 eq. 14 over them), zero rows for the others.
+
+    Over every wheel of HST's pyramid, a unit roll command with wheel 1 lost
+    delivers (0.750, -0.687, 0.731); over the three that remain, (1, 0, 0).
+
+    Raises
+    ------
+    ScenarioError
+        Available wheels whose axes do not span the three body axes.
+    """
+    a = np.asarray(axes_B, dtype=float)
+    if available is None:
+        return np.linalg.pinv(a)
+    idx = sorted(set(int(i) for i in available))
+    if np.linalg.matrix_rank(a[:, idx]) < 3 if idx else True:
+        raise ScenarioError(f"wheels.available: wheels {', '.join(str(i + 1) for i in idx) or 'none'} do not span "
+                            "the three body axes: some torques could not be made")
+    out = np.zeros((a.shape[1], 3))
+    out[idx] = np.linalg.pinv(a[:, idx])
+    return out
+
+
 class WheelAssembly:
     """A set of identical PMDC reaction wheels on fixed axes, batch over episodes.
 
@@ -177,14 +202,14 @@ class WheelAssembly:
     """
 
     def __init__(self, axes_B: np.ndarray, motor: MotorParams, dt: float,
-                 motors: list[MotorParams] | None = None) -> None:
+                 motors: list[MotorParams] | None = None, available: list[int] | None = None) -> None:
         motor.validate()
         self.axes_B = np.asarray(axes_B, dtype=float)
         self.n_wheels = self.axes_B.shape[1]
         self.motor = motor
         self.dt = float(dt)
-        # eq. 14: body-axis command -> wheel command
-        self.allocation = np.linalg.pinv(self.axes_B)
+        # eq. 14: body-axis command -> wheel command, over every wheel or the available ones
+        self.allocation = allocation_over(self.axes_B, available)
         m = motor
         phi_T, gamma = _motor_transition(m.resistance, m.inductance, m.torque_constant, m.back_emf_constant,
                                          m.rotor_inertia, m.viscous_friction, self.dt)
@@ -195,6 +220,11 @@ class WheelAssembly:
         gain = m.rotor_inertia / m.viscous_friction * (1.0 - decay) if m.viscous_friction > 0.0 else self.dt
         self.coast = np.array([decay, gain])
         self.set_motors(motors)
+
+    def set_available(self, available: list[int] | None) -> None:
+        """Share commands from now on among the wheels ``available`` (0-based; None: all), :func:`allocation_over`."""
+        self.allocation = allocation_over(self.axes_B, available)
+        self.params = self.params._replace(allocation=self.allocation)
 
     def set_motors(self, motors: list[MotorParams] | None) -> None:
         """Per-episode motor constants (one :class:`MotorParams` per episode), or None for the nominal motor.

@@ -40,7 +40,7 @@ from attitude_sil.errors import ScenarioError
 __all__ = ["build_plant", "build_wheels", "build_disturbance", "build_guidance", "build_controller", "build_sensing",
            "build_environment", "build_scene", "build_dipole_command", "build_magnetorquers", "build_magnetic_loop",
            "law_bank", "check_episode", "schedule_from_scenario", "flexible_states", "flexible_settling",
-           "initial_attitude", "motor_params", "EPISODE_VALUES", "EPISODE_MOTOR", "EPISODE_FAILURE",
+           "initial_attitude", "motor_params", "available_wheels", "EPISODE_VALUES", "EPISODE_MOTOR", "EPISODE_FAILURE",
            "split_episode_values", "episode_laws", "check_episode_parameters",
            "episode_parameter_faults"]
 
@@ -157,6 +157,17 @@ EPISODE_MOTOR = ("motor.resistance", "motor.inductance", "motor.torque_constant"
 EPISODE_FAILURE = ("failure.wheel", "failure.time", "failure.mode")
 
 
+def available_wheels(w: dict, n: int) -> list[int] | None:
+    """The 0-based wheels the allocation shares a command among (``wheels.allocation: available``), or None:
+    all, by the pseudo-inverse over every wheel."""
+    if w["allocation"] != "available":
+        return None
+    chosen = list(w["available"]) or list(range(1, n + 1))
+    if any(not 1 <= i <= n for i in chosen):
+        raise ScenarioError(f"wheels.available {chosen}: the {w['geometry']} geometry has wheels 1..{n}")
+    return [i - 1 for i in chosen]
+
+
 def build_wheels(scn: Scenario, n_episodes: int = 1, per_episode: dict | None = None):
     """The actuator of the scenario's ``wheels`` parameters (``actuator``).
 
@@ -187,7 +198,7 @@ def build_wheels(scn: Scenario, n_episodes: int = 1, per_episode: dict | None = 
         cols = {k: np.broadcast_to(np.asarray(per_episode.get(k, w[k]), dtype=float), (n_episodes,))
                 for k in EPISODE_MOTOR}
         motors = [motor_params({**w, **{k: float(cols[k][p]) for k in EPISODE_MOTOR}}) for p in range(n_episodes)]
-    assembly = WheelAssembly(axes, motor_params(w), w["control_period"], motors)
+    assembly = WheelAssembly(axes, motor_params(w), w["control_period"], motors, available_wheels(w, axes.shape[1]))
     speed0 = None
     if w["initial_speed_rpm"]:
         if len(w["initial_speed_rpm"]) != assembly.n_wheels:

@@ -156,6 +156,12 @@ NODE_PARAMS: dict[str, list[ParamSpec]] = {
         _d("control_period", 0.01, "control step dt, s (shared by every node)", min=0.0, min_exclusive=True, max=1.0),
         ParamSpec("geometry", "string", "hst_pyramid", "wheel axes: hst_pyramid (paper 000 eq. 13) or orthogonal",
                   choices=("hst_pyramid", "orthogonal")),
+        ParamSpec("allocation", "string", "pseudo_inverse",
+                  "how a body-axis command is shared among the wheels: pseudo_inverse (paper 000 eq. 14 over every "
+                  "wheel) or available (the pseudo-inverse over the wheels of available alone)",
+                  choices=("pseudo_inverse", "available"), runtime=True),
+        ParamSpec("available", "integer_array", [], "allocation available: the wheels (1..n of the geometry) the "
+                  "command is shared among (empty: all); they must span the three body axes", min=1, runtime=True),
         _d("motor.resistance", HST_MOTOR["motor.resistance"], "armature resistance R_a, ohm (assumed)",
            min=0.0, min_exclusive=True),
         _d("motor.inductance", HST_MOTOR["motor.inductance"], "armature inductance L_a, H (assumed)",
