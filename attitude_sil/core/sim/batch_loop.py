@@ -102,7 +102,7 @@ def _ext_torque(tau_e, m, t_ns, step_ns, tau_constant, tau_step, noise, row0, k)
                 tau_e[p, i] += noise[row0 + p, k, i]
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)  # not inlined: compiled once, not again in the loop of every set of laws
 def _magnetic_stage(m, lo, k, sim, q, h, u, law, mag):
     # the magnetorquers' loop of step k (models.MagneticLoop.step), after the wheels' stage: the field in B,
     # B-dot's difference (every step, whichever law is active), the dipole of the law in charge, the rods'
