@@ -130,10 +130,11 @@ def graph_scenario(values: dict[str, dict], settings: dict | None, source: str) 
     values = {n: {k: x for k, x in v.items() if not (k in SHARED_VALUES and k in DERIVED.get(n, {}))}
               for n, v in values.items()}
     data: dict = {node_key(n): {"ros__parameters": v} for n, v in values.items()}
-    shared = {k: values[n][k] for n in ("plant", "controller") if n in values  # what every node shares: a node
-              for k in ("control_period",) if k in values[n]}                # that did not answer runs with it
-    if shared:
-        data = {"/**": {"ros__parameters": shared}, **data}
+    # the control period every node shares: a node that did not answer runs with the graph's
+    period = next((values[n]["control_period"] for n in ("plant", "controller")
+                   if "control_period" in values.get(n, {})), None)
+    if period is not None:
+        data = {"/**": {"ros__parameters": {"control_period": period}}, **data}
     if settings:
         data[SCENARIO_NODE] = {"ros__parameters": settings}
     return scenario_from_dict(data, source=source)

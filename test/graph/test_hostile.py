@@ -117,29 +117,29 @@ def test_nan_stale_and_future_messages_on_every_input_change_nothing(tmp_path):
     assert math.isclose(reader.end_ns * 1e-9, 4.0, abs_tol=0.02)  # no stray stamp stretched the bag
 
 
+def _episode_follower():
+    """What spin_episode follows, without ROS: the HST roll step's scenario, a recorder of counts and greatest
+    stamps (fresh, empty) and a progress line that says nothing."""
+    from collections import Counter
+    from types import SimpleNamespace
+
+    from attitude_sil.core.sim.scenario import load_scenario
+
+    rec = SimpleNamespace(counts=Counter(), newest_stamp={}, error="", qos_problems=[], plant_input_timeout=None,
+                          bad_command=None, controller_type="pid")
+    return load_scenario(ROOT / "config" / "hst_roll_step.yaml"), rec, SimpleNamespace(update=lambda t: None)
+
+
 def test_the_episode_ends_on_its_last_command_not_on_a_count_a_foreign_one_can_fill():
     # the race the attack above could lose (1 run in 4 here): a foreign node's finite commands stamped five steps
     # back, in order on their own topic, are taken by the recorder; counted, they made "every command of the
     # episode is in" true before the last real one came, and the run's metrics missed its last step
-    from collections import Counter
-
-    from attitude_sil.core.sim.scenario import load_scenario
     from attitude_sil.graph.session import spin_episode
     from attitude_sil.ros.contract import COMMAND_TOPICS, episode_topics
 
-    scn = load_scenario(ROOT / "config" / "hst_roll_step.yaml")
+    scn, rec, progress = _episode_follower()
     K, dt_ns = 100, int(round(scn.dt * 1e9))
     voltage, torque = COMMAND_TOPICS
-
-    class Recorder:
-        counts, newest_stamp, error, qos_problems, plant_input_timeout = Counter(), {}, "", [], None
-        bad_command, controller_type = None, "pid"
-
-    class Progress:
-        def update(self, t):
-            pass
-
-    rec = Recorder()
     spins = []
 
     def spin(timeout):
@@ -157,7 +157,7 @@ def test_the_episode_ends_on_its_last_command_not_on_a_count_a_foreign_one_can_f
                 rec.counts[t] += 1
                 rec.newest_stamp[t] = K * dt_ns
 
-    spin_episode(rec, spin, None, [], K, scn, Progress(), [])
+    spin_episode(rec, spin, None, [], K, scn, progress, [])
     assert len(spins) == 3
 
 
@@ -165,25 +165,12 @@ def test_an_episode_whole_but_for_its_first_commands_says_so_at_its_end():
     # a volatile controller of the user's writes its first commands before its side of the DDS match with a tool
     # that just joined (episode): the episode ends with every step topic whole and those commands never come;
     # the tool is told at the end (episode runs it again; run says so in one line), not after a stall
-    from collections import Counter
-
-    from attitude_sil.core.sim.scenario import load_scenario
     from attitude_sil.graph.session import CommandsLostAtStart, spin_episode
     from attitude_sil.ros.contract import COMMAND_TOPICS, episode_topics
 
-    scn = load_scenario(ROOT / "config" / "hst_roll_step.yaml")
+    scn, rec, progress = _episode_follower()
     K, dt_ns = 100, int(round(scn.dt * 1e9))
     voltage = COMMAND_TOPICS[0]
-
-    class Recorder:
-        counts, newest_stamp, error, qos_problems, plant_input_timeout = Counter(), {}, "", [], None
-        bad_command, controller_type = None, "pid"
-
-    class Progress:
-        def update(self, t):
-            pass
-
-    rec = Recorder()
     spins = []
 
     def spin(timeout):
@@ -194,7 +181,7 @@ def test_an_episode_whole_but_for_its_first_commands_says_so_at_its_end():
         rec.counts[voltage], rec.newest_stamp[voltage] = last + 1 - 11, last * dt_ns  # steps 0..10 lost
 
     with pytest.raises(CommandsLostAtStart, match="11 of the episode's 101 commands did not reach"):
-        spin_episode(rec, spin, None, [], K, scn, Progress(), [])
+        spin_episode(rec, spin, None, [], K, scn, progress, [])
     assert len(spins) == 2
 
 

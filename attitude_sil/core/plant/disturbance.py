@@ -288,14 +288,11 @@ class DisturbanceModel:
         if "gravity_gradient_linear" in self.models:
             rpy = euler_from_quat(q_BN)
             tau[:, :2] += self.gg_gain * rpy[:, :2]
-        if ("gravity_gradient" in self.models or "aerodynamic" in self.models) and self.orbit is not None:
-            now = self.orbit.at(t_ns)  # a propagated orbit: this step's frame, gravity-gradient gain and speed
-            inertia, _, _, cp, gg, aero = self._orbit
-            orbit_torques(np.ascontiguousarray(q_BN, dtype=float), now.q_LN, inertia, now.gg_gain,
-                          self._aero_gain * now.speed**2, cp, gg, aero, tau)
-        elif "gravity_gradient" in self.models or "aerodynamic" in self.models:
-            q_LN = lvlh_attitude(t_ns * 1e-9, self.q_LN0, self.rate)
-            orbit_torques(np.ascontiguousarray(q_BN, dtype=float), q_LN, *self._orbit, tau)
+        inertia, _, _, cp, gg, aero = self._orbit
+        if gg or aero:  # this step's frame and gains: the propagated orbit's, or the circular one's
+            q_LN, gg_gain, aero_gain = self._frame(t_ns)
+            orbit_torques(np.ascontiguousarray(q_BN, dtype=float), q_LN, inertia, gg_gain, aero_gain, cp, gg, aero,
+                          tau)
         if "residual_dipole" in self.models:  # the spacecraft's own dipole in the field: m_res x B
             b_B = self.field.field_B(np.array([t_ns]), np.asarray(q_BN, dtype=float)[:, None, :])[:, 0]
             tau += cross(np.broadcast_to(self.residual_B, b_B.shape), b_B)
@@ -305,18 +302,21 @@ class DisturbanceModel:
         """What :func:`orbit_torques` reads at steps 0..K besides the attitude, as :meth:`torque` computes it:
         the LVLH frame q_LN (K+1, 4), the gravity gradient's gain 3 mu / r^3 (K+1,) 1/s^2 and the drag's
         gain (K+1,) N m (the compiled driver's; no rows without the orbit models)."""
-        inertia, gg0, aero0, _, gg, aero = self._orbit
+        _, _, _, _, gg, aero = self._orbit
         if not (gg or aero):
             return np.zeros((0, 4)), np.zeros(0), np.zeros(0)
-        q_LN, gg_gain, aero_gain = np.empty((n_steps + 1, 4)), np.full(n_steps + 1, gg0), np.full(n_steps + 1, aero0)
+        q_LN, gg_gain, aero_gain = np.empty((n_steps + 1, 4)), np.empty(n_steps + 1), np.empty(n_steps + 1)
         for k in range(n_steps + 1):
-            t_ns = k * self.dt_ns
-            if self.orbit is not None:
-                now = self.orbit.at(t_ns)
-                q_LN[k], gg_gain[k], aero_gain[k] = now.q_LN, now.gg_gain, self._aero_gain * now.speed**2
-            else:
-                q_LN[k] = lvlh_attitude(t_ns * 1e-9, self.q_LN0, self.rate)
+            q_LN[k], gg_gain[k], aero_gain[k] = self._frame(k * self.dt_ns)
         return q_LN, gg_gain, aero_gain
+
+    def _frame(self, t_ns: int) -> tuple[np.ndarray, float, float]:
+        """The LVLH frame q_LN (4,), the gravity gradient's gain 3 mu / r^3 and the drag's gain at step time
+        ``t_ns``: from the propagated orbit, or the circular one's (its gains constant)."""
+        if self.orbit is not None:
+            now = self.orbit.at(t_ns)
+            return now.q_LN, now.gg_gain, self._aero_gain * now.speed**2
+        return lvlh_attitude(t_ns * 1e-9, self.q_LN0, self.rate), self._orbit[1], self._orbit[2]
 
     def _impulse(self, k: int) -> float:
         """1.0 if a pulse falls in step k, else 0.0."""

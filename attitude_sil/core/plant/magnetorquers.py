@@ -67,27 +67,24 @@ class Magnetorquers:
 
     def rod_dipoles(self, m_cmd_B: np.ndarray) -> np.ndarray:
         """Each rod's dipole (P, n) A m^2 for body dipole commands ``m_cmd_B`` (P, 3), clipped rod by rod."""
-        m = np.ascontiguousarray(m_cmd_B, dtype=float)
-        d, made, tau = np.empty((m.shape[0], self.n_rods)), np.empty_like(m), np.empty_like(m)
-        _rods_torques(m, np.zeros_like(m), self.axes, self.allocation, self.max_dipole, d, made, tau)
-        return d
+        return self._run(m_cmd_B, 0.0)[0]
 
     def dipole_B(self, m_cmd_B: np.ndarray) -> np.ndarray:
         """The body dipole (P, 3) A m^2 the rods make for ``m_cmd_B`` (P, 3): A^T d."""
-        return self._made(m_cmd_B, np.zeros(np.shape(m_cmd_B)))[0]
+        return self._run(m_cmd_B, 0.0)[1]
 
     def torque(self, m_cmd_B: np.ndarray, b_B: np.ndarray) -> np.ndarray:
         """The torque on the body (P, 3) N m, m x B, for commands ``m_cmd_B`` (P, 3) A m^2 in the field
         ``b_B`` (P, 3) tesla in B (:func:`rods_torque_row`)."""
-        return self._made(m_cmd_B, b_B)[1]
+        return self._run(m_cmd_B, b_B)[2]
 
-    def _made(self, m_cmd_B, b_B) -> tuple[np.ndarray, np.ndarray]:
-        # the body dipole made and its torque in the field
+    def _run(self, m_cmd_B, b_B) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        # the rods' dipoles, the body dipole they make and its torque in the field b_B (0.0: none)
         m = np.ascontiguousarray(m_cmd_B, dtype=float)
         d, made, tau = np.empty((m.shape[0], self.n_rods)), np.empty_like(m), np.empty_like(m)
         _rods_torques(m, np.ascontiguousarray(np.broadcast_to(b_B, m.shape), dtype=float), self.axes,
                       self.allocation, self.max_dipole, d, made, tau)
-        return made, tau
+        return d, made, tau
 
 
 @njit(cache=True, inline="always")
