@@ -73,12 +73,13 @@ from attitude_sil.ros.signals import STOP_SIGNALS, Interrupted, StopSignals
 from attitude_sil.storage.writer import PARAMETERS_KEY, SCENARIO_KEY, BagWriter, check_bag_dir
 
 __all__ = ["RunError", "RunResult", "GraphSession", "Interrupted", "Progress", "STOP_SIGNALS", "run_graph",
-           "extra_parameters", "spin_episode", "episode_complete", "hold_for_viewer", "CommandsLostAtStart"]
+           "extra_parameters", "spin_episode", "episode_complete", "hold_for_viewer", "CommandsLost"]
 
 
-class CommandsLostAtStart(RunError):
-    """The episode reached its end, every step topic whole, without the first commands: a volatile publisher (flight
-    software of the user's) wrote them before its side of the DDS match with a reader that had just joined."""
+class CommandsLost(RunError):
+    """The episode reached its end, every step topic whole, without some of its commands: a volatile publisher
+    (flight software of the user's) wrote them before its side of the DDS match with a reader that had just
+    joined, or past its history's depth while that reader fell behind."""
 
 
 @dataclass
@@ -772,10 +773,10 @@ def _raise_if_stopped(recorder: Recorder, plant, step_topics: list[str], started
 
 def _commands_in(taken: int, needed: int) -> bool:
     """Of an episode whose step topics are whole, ``taken`` of its ``needed`` commands: True if all, else
-    :class:`CommandsLostAtStart` at once (a caller can run the episode again, the match now made), not a stall."""
+    :class:`CommandsLost` at once (a caller can run the episode again, the match now made), not a stall."""
     if taken < needed:
-        raise CommandsLostAtStart(f"{needed - taken} of the episode's {needed} commands did not reach this tool's "
-                                  "reader (written before the publisher matched it)")
+        raise CommandsLost(f"{needed - taken} of the episode's {needed} commands did not reach this tool's "
+                           "reader (written before the publisher matched it, or past its history's depth)")
     return True
 
 

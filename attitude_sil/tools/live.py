@@ -53,7 +53,7 @@ from attitude_sil.core.sim.scenario import (
 )
 from attitude_sil.errors import AttitudeSilError, BagError, RunError, ScenarioError
 from attitude_sil.graph.launcher import namespace_kwargs
-from attitude_sil.graph.session import CommandsLostAtStart, CommandWatch, Progress, spin_episode
+from attitude_sil.graph.session import CommandsLost, CommandWatch, Progress, spin_episode
 from attitude_sil.graph.trajectory import KEPT_TOPICS, trajectory_from_messages
 from attitude_sil.nodes.recorder_node import Recorder
 from attitude_sil.ros.contract import (
@@ -313,7 +313,7 @@ def play_episode(namespace: str | None = None, scenario: str | Path | None = Non
         if scn.duration <= 0.0:
             raise RunError(f"plant.duration is 0 on the graph{where} (run until stopped): the episode would not end; "
                            f"set it, e.g. attitude-sil param set {_target(ns, 'plant')} duration 20.0")
-        for again in (False, True):  # a second time where a volatile publisher's first commands were lost
+        for again in (False, True):  # a second time where a volatile publisher's commands were lost
             rec.start_episode(None)
             reset(ros.spin, max(deadline - time.monotonic(), 0.1))
             wall0 = time.monotonic()
@@ -323,7 +323,7 @@ def play_episode(namespace: str | None = None, scenario: str | Path | None = Non
                 spin_episode(rec, ros.spin, None, [], scn.steps(), scn, prog, [],
                              topics=_live_topics(rec, external), restart=lambda: reset(ros.spin, timeout))
                 break
-            except CommandsLostAtStart as exc:
+            except CommandsLost as exc:
                 if again:
                     raise
                 say(f"note: {exc}; the episode runs again")

@@ -131,13 +131,15 @@ def test_hand_started_graph_with_a_default_qos_controller(builtin, tmp_path, cap
     assert episode["controller_type"] == "external"
     _same_metrics(episode, builtin[DURATION])
     # the recorder joined the graph and reads volatile, as ros2 bag record does: a volatile publisher's first steps
-    # can be written before its side of the DDS match with the recorder exists, which no reader can observe
-    # (docs/flight-software.md); from the first message taken nothing is lost, up to the episode's last step
+    # can be written before its side of the DDS match with the recorder exists, which no reader can observe, and
+    # a keep-last-10 publisher (the default QoS) drops what a recorder more than 10 messages behind has not taken
+    # (seen on a loaded machine: steps 31-36); docs/flight-software.md. The bag holds this episode's commands,
+    # each step once and in order, up to its last step
     steps = round(DURATION / 0.01) + 1
     bag = open_bag(tmp_path / "live")
-    assert bag.topics["/attitude"].count == steps  # the package's topics are transient-local: all of them
+    assert bag.topics["/attitude"].count == steps  # the package's topics: transient-local, depth 1000, all of them
     k = [round(m.log_time_ns / 1e7) for m in bag.iter_raw("/voltage_cmd")]
-    assert k[-1] == steps - 1 and k == list(range(k[0], steps)), k
+    assert k[-1] == steps - 1 and k == sorted(set(k)), k
 
 
 BEST_EFFORT = """

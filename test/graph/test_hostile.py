@@ -165,7 +165,7 @@ def test_an_episode_whole_but_for_its_first_commands_says_so_at_its_end():
     # a volatile controller of the user's writes its first commands before its side of the DDS match with a tool
     # that just joined (episode): the episode ends with every step topic whole and those commands never come;
     # the tool is told at the end (episode runs it again; run says so in one line), not after a stall
-    from attitude_sil.graph.session import CommandsLostAtStart, spin_episode
+    from attitude_sil.graph.session import CommandsLost, spin_episode
     from attitude_sil.ros.contract import COMMAND_TOPICS, episode_topics
 
     scn, rec, progress = _episode_follower()
@@ -180,7 +180,7 @@ def test_an_episode_whole_but_for_its_first_commands_says_so_at_its_end():
             rec.counts[t], rec.newest_stamp[t] = last + 1, last * dt_ns
         rec.counts[voltage], rec.newest_stamp[voltage] = last + 1 - 11, last * dt_ns  # steps 0..10 lost
 
-    with pytest.raises(CommandsLostAtStart, match="11 of the episode's 101 commands did not reach"):
+    with pytest.raises(CommandsLost, match="11 of the episode's 101 commands did not reach"):
         spin_episode(rec, spin, None, [], K, scn, progress, [])
     assert len(spins) == 2
 
