@@ -68,6 +68,10 @@ from attitude_sil.storage.cdr import clock_cdr, stamped_vector_cdr
 
 #: wall s after which a step still waiting for its inputs sends its /clock again (controller on a sim-time timer)
 CLOCK_RESEND_S = 0.5
+#: at the episode's first tick, every this many resends is the episode's start (/clock 0) instead: a timer that
+#: missed the jump back to 0 took its phase from a later /clock (rcl: a timer whose clock jumps back by more than
+#: its period next fires one period after the first time it sees) and would tick between the episode's ticks
+REPHASE_EVERY = 3
 
 
 class PlantNode(SchemaNode):
@@ -96,6 +100,7 @@ class PlantNode(SchemaNode):
         self.lockstep = PlantLockstep(self.input_names, gate)
         self._pace_timer = None
         self._clock_sent = 0.0  # when /clock last went out (monotonic s)
+        self._resends = 0  # /clock sent again for the current step
         self._watchdog = self.create_timer(0.05, self._on_watchdog, clock=self._wall)
 
     # -- state of the lockstep, for the graph tools ----------------------------
@@ -194,6 +199,7 @@ class PlantNode(SchemaNode):
             self.await_readers([p for p in (self.pub_attitude, self.pub_rate, self.pub_flex) if p is not None], t_ns)
         self.pub_clock.publish(clock_cdr(t_ns))
         self._clock_sent = time.monotonic()
+        self._resends = 0
         self._do(self.lockstep.clocked())
 
     def fail(self, reason: str) -> None:
@@ -229,13 +235,30 @@ class PlantNode(SchemaNode):
         now = time.monotonic()
         if (self.lockstep.clock_gate and ls.running and ls.clock_out and ls.publish_at is None and not ls.holding
                 and now - self._clock_sent > CLOCK_RESEND_S):
-            # a controller on a sim-time timer reads /clock best effort (rclpy's TimeSource): a lost /clock is a
-            # tick that never fires and a step that never ends. The step's /clock again, the same time: a reader
-            # that has it sees no change, one that lost it ticks
-            self.pub_clock.publish(clock_cdr(ls.t_ns))
-            self._clock_sent = now
+            self._resend_clock(ls.t_ns, now)
         wired = (not ls.running and not ls.done and not ls.error and self.param("autostart")) and self.wired()
         self._do(ls.watchdog(time.monotonic(), self.param("input_timeout"), self.param("autostart"), wired))
+
+    def _resend_clock(self, t_ns: int, now: float) -> None:
+        """A step still waits for its inputs: its ``/clock`` again, or, every :data:`REPHASE_EVERY` th time at the
+        episode's first tick, ``/clock`` 0 (the step's own follows at the next resend).
+
+        A controller on a sim-time timer reads ``/clock`` best effort (rclpy's TimeSource, depth 1): a lost
+        ``/clock`` is a tick that never fires, and the same time again brings it (a reader that has it sees no
+        change). A lost jump back to 0 at a new episode is worse: the timer takes its phase from the first time it
+        sees after the jump (t_s + T, not T), and never fires at the tick the wheels wait for. ``/clock`` 0 again
+        puts it back in phase (0 + T); one in phase but slow sees no change unless it already fired, and then ticks
+        twice at T (after ``REPHASE_EVERY * CLOCK_RESEND_S`` without an answer).
+        """
+        self._resends += 1
+        if t_ns == self.tick_ns and self._resends % REPHASE_EVERY == 0:
+            self.get_logger().warning(
+                f"no command for the first tick t={t_ns * 1e-9:g} s in {self._resends * CLOCK_RESEND_S:.1f} s: "
+                "sending /clock 0 again (a sim-time timer that missed the jump back to 0 ticks out of phase)")
+            self.pub_clock.publish(clock_cdr(0))
+        else:
+            self.pub_clock.publish(clock_cdr(t_ns))
+        self._clock_sent = now
 
 
 def main(args: list[str] | None = None) -> int:

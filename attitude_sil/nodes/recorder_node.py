@@ -145,6 +145,7 @@ class Recorder(Node):
         self.newest_ns = 0  # the latest stamp taken on any topic this episode, ns
         self.kept: dict[str, list[tuple[int, bytes]]] = {name: [] for name in keep}
         self.keeping = True  # False: the kept topics go to ``sink`` only, nothing stays in memory
+        self.across_episodes = False  # see start_episode
         self.sink: Callable[[str, int, bytes], None] | None = None  # (topic, stamp ns, CDR) of kept topics
         self.subs = {}
         for name, type_name in (topics or RECORDED_TOPICS).items():
@@ -176,12 +177,16 @@ class Recorder(Node):
             self.start_episode(writer)
 
     def start_episode(self, writer: BagWriter | None, keeping: bool = True,
-                      sink: Callable[[str, int, bytes], None] | None = None) -> None:
+                      sink: Callable[[str, int, bytes], None] | None = None, across_episodes: bool = False) -> None:
         """Clear counts and kept messages and record to ``writer`` (None: stop recording).
 
         ``keeping``: keep the kept topics' messages in memory (``kept``);
-        ``sink``: also hand each of them to this callable as it comes.
+        ``sink``: also hand each of them to this callable as it comes;
+        ``across_episodes``: what follows may span episodes (a ``/clock`` back to 0 starts one); else it is one
+        episode, and a ``/clock`` 0 within it, the plant sending its start again
+        (``PlantNode._resend_clock``), is not recorded.
         """
+        self.across_episodes = across_episodes
         self.keeping = keeping
         self.sink = sink
         self.counts.clear()
@@ -260,6 +265,8 @@ class Recorder(Node):
             t = self.sim_now
         elif name == CLOCK:
             # the plant's clock goes forward a step at a time, or back to 0 at a reset
+            if t == 0 and self.clock_ns > 0 and not self.across_episodes:
+                return  # within one episode: the plant sending its start again for a sim-time timer out of phase
             if t != 0 and self._clock_known and not self.clock_ns <= t <= self.clock_ns + MAX_CLOCK_JUMP_NS:
                 self._refuse(name, t, "jumps the clock")
                 return

@@ -56,6 +56,7 @@ class WheelsNode(LockstepNode):
                                 for mode in (False, True)}
             self.step_subscription(CLOCK, self._on_clock)
         self.step_ns: int | None = None  # held commands: the step started on /clock, not yet taken
+        self.clock_ns: int | None = None  # held commands: the latest /clock
         self.new_episode()
 
     def rebuild(self) -> None:
@@ -115,6 +116,9 @@ class WheelsNode(LockstepNode):
     def _on_clock(self, msg) -> None:
         """A held-command step starts on ``/clock``."""
         t = stamp_to_ns(msg.clock)
+        previous, self.clock_ns = self.clock_ns, t
+        if self.hold.replays_start(t, self.step_ns, previous):
+            return  # the plant bringing a sim-time timer back in phase: the tick still waits
         kind = self.seq.classify(t, self.dt_ns)
         if kind == StepSequencer.NEW:
             self.new_episode()  # a hold of its own, with no command yet

@@ -435,7 +435,7 @@ def record_graph(bag: str | Path, topics: list[str] | None = None, namespace: st
             writer = BagWriter(bag)
         except (FileExistsError, ValueError, OSError) as exc:
             raise AttitudeSilError(str(exc)) from None
-        rec.start_episode(writer)
+        rec.start_episode(writer, across_episodes=True)
         say(f"recording {len(selected)} topic(s){where} to {bag}; Ctrl-C to stop")
         clients = {n: AsyncParameterClient(rec, _target(ns, n)) for n in GRAPH_NODES}
         scn = None

@@ -252,3 +252,30 @@ def test_a_lost_clock_of_a_tick_is_sent_again():
         err = node.stderr.read()
     assert "dropped" in err, err
     assert result.metrics["sim_time_s"] == pytest.approx(0.1)
+
+
+def test_a_timer_that_missed_the_jump_back_to_0_is_brought_back_in_phase(tmp_path, capfd):
+    # a new episode sends /clock back to 0; a sim-time reader that loses that 0 (depth 1, best effort) first sees a
+    # later time t_s, and rcl restarts its timer from there: it would tick at t_s + T, never at the tick T the
+    # wheels wait for. The relay loses the 0 every time; the plant sends /clock 0 again at the unanswered first
+    # tick, and the second episode matches the reference as the first does, its bag one /clock a step
+    scn = load_scenario(SCENARIO).with_values("wheels", command_timing="sim_timer", command_rate=10.0)
+    relay = _start([str(ROOT / "test" / "graph" / "lossy_clock.py"), "0.1"])
+    node = _start([str(TIMER), "--ros-args", "-p", "use_sim_time:=true", "-p", "rate:=10.0",
+                   "-r", "/clock:=/lossy_clock"])
+    try:
+        first = run_graph(scn, duration=1.0, external=("controller",), keep_trajectory=True, progress=False)
+        capfd.readouterr()
+        second = run_graph(scn, duration=1.0, external=("controller",), record_dir=tmp_path / "bag",
+                           keep_trajectory=True, progress=False)
+        err = capfd.readouterr().err
+    finally:
+        assert _stop([node, relay]) == [0, 0], node.stderr.read() + relay.stderr.read()
+    assert "sending /clock 0 again" in err, err
+    q_ref, u_ref = let_reference(scn, 1.0, 10)
+    for run in (first, second):
+        assert np.max(np.abs(run.trajectory.q_BN[0] - q_ref)) <= 1e-12
+        assert np.max(np.abs(run.trajectory.u_cmd[0] - u_ref)) <= 1e-12
+    bag = open_bag(tmp_path / "bag")
+    assert [stamp_from_cdr(m.data) for m in bag.iter_raw("/clock")] == [k * 10_000_000 for k in range(101)]
+    assert sorted(t for t, _ in vectors(bag, "/voltage_cmd")) == [j * 100_000_000 for j in range(1, 11)]

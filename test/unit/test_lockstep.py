@@ -240,6 +240,21 @@ def test_sim_timer_commands_take_effect_one_period_after_their_tick():
     assert np.all(value == 2.0) and torque_mode is True
 
 
+def test_a_clock_0_at_the_unanswered_first_tick_replays_the_start_and_two_in_a_row_start_an_episode():
+    # the plant sends /clock 0 again among its first tick's own (a timer out of phase); a reset plant sends a new
+    # episode's 0 twice 0.5 s apart: the first 0 after a tick's /clock is a replay, a second 0 in a row is not
+    hold = _hold("sim_timer", period_steps=10)
+    tick = 10 * DT
+    assert hold.replays_start(0, tick, previous_ns=tick)
+    assert not hold.replays_start(0, tick, previous_ns=0)  # the second 0 in a row: a new episode
+    assert not hold.replays_start(0, None, previous_ns=tick)  # no step in hand: a new episode
+    assert not hold.replays_start(0, 20 * DT, previous_ns=20 * DT)  # a later tick: the timer ticked in phase
+    assert not hold.replays_start(DT, tick, previous_ns=tick)  # only a 0 is the start
+    hold.offer(tick, np.ones((1, 3)), False, tick)
+    assert not hold.replays_start(0, tick, previous_ns=tick)  # answered: a 0 now is a new episode
+    assert not _hold("wall").replays_start(0, tick, previous_ns=tick)
+
+
 def test_sim_timer_refuses_stamps_off_its_ticks_or_ahead_of_the_clock():
     hold = _hold("sim_timer", period_steps=10)
     assert "not a tick" in hold.offer(15 * DT, np.ones((1, 3)), False, 15 * DT)

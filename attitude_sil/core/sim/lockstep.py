@@ -341,6 +341,18 @@ class CommandHold:
         """The step at ``t_ns`` (ns) is a tick whose command has not come yet: the wheels wait for it."""
         return self.is_tick(t_ns) and t_ns not in self.ticks
 
+    def replays_start(self, clock_ns: int, step_ns: int | None, previous_ns: int | None) -> bool:
+        """``/clock`` ``clock_ns`` (ns) is the plant sending the episode's start again, not a new episode.
+
+        A plant whose first tick ``step_ns`` (ns, the step in hand) stays unanswered sends ``/clock`` 0 again
+        among the tick's own (``PlantNode._resend_clock``): a timer that missed the jump back to 0 took its phase
+        from a later time. That 0 comes after a ``/clock`` of the tick (``previous_ns``, the ``/clock`` before it);
+        a new episode's 0 while the tick waits (its plant was reset) is sent again by the plant 0.5 s later, and the
+        second 0 in a row is taken as one.
+        """
+        return (clock_ns == 0 and step_ns is not None and step_ns == self.period_ns and self.waits_at(step_ns)
+                and previous_ns is not None and previous_ns > 0)
+
     def offer(self, t_ns: int, value: np.ndarray, torque_mode: bool, latest_ns: int | None) -> str:
         """A command stamped ``t_ns`` (ns) came; ``latest_ns`` is the latest stamp one may carry (the step whose
         ``/clock`` is out: a tick's command may overtake that ``/clock`` on its way to the wheels; None: no
