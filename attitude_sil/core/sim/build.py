@@ -32,6 +32,7 @@ from attitude_sil.core.plant.scene import BodyScene, body_scene
 from attitude_sil.core.plant.wheels import GEOMETRIES, MotorParams, WheelAssembly
 from attitude_sil.core.sensing.mekf import Mekf, MekfSettings
 from attitude_sil.core.sensing.models import SensorSuite
+from attitude_sil.core.sim.faults import wheel_failure_values
 from attitude_sil.core.sim.models import Guidance, MagneticLoop, Plant, Sensing, Wheels, per_episode
 from attitude_sil.core.sim.params import NODE_PARAMS, spec_for
 from attitude_sil.core.sim.scenario import Scenario, effective_values
@@ -180,6 +181,7 @@ def build_wheels(scn: Scenario, n_episodes: int = 1, per_episode: dict | None = 
     if unknown:
         raise ScenarioError(f"wheels.{unknown[0]} cannot vary per episode (known: "
                             f"{', '.join(EPISODE_MOTOR + EPISODE_FAILURE)})")
+    w = {**w, **wheel_failure_values(w)}  # a wheel fault of the faults list, as the failure.* keys say it
     fails = w["failure.wheel"] != 0 or np.any(np.asarray(per_episode.get("failure.wheel", 0)) != 0)
     if w["actuator"] != "reaction_wheels" and (fails or per_episode):
         raise ScenarioError(f"wheels.failure and per-episode motors need actuator reaction_wheels, not {w['actuator']}")

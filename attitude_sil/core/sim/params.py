@@ -29,6 +29,7 @@ from attitude_sil.core.paramspec import nonzero as _nonzero
 from attitude_sil.core.plant.disturbance import DISTURBANCE_MODELS
 from attitude_sil.core.plant.magnetorquers import rod_axes
 from attitude_sil.core.plant.wheels import HST_MOTOR
+from attitude_sil.core.sim.faults import faults_rule
 from attitude_sil.core.sim.lockstep import COMMAND_TIMINGS
 from attitude_sil.errors import ScenarioError
 
@@ -180,6 +181,8 @@ NODE_PARAMS: dict[str, list[ParamSpec]] = {
         _d("motor.speed_max_rpm", HST_MOTOR["motor.speed_max_rpm"], "wheel speed limit, rpm",
            min=0.0, min_exclusive=True),
         _da("initial_speed_rpm", [], "initial wheel speeds, rpm (empty: all zero)"),
+        ParamSpec("faults", "string_array", [], "faults of the run, one a line: TARGET MODE [VALUE] [at T] "
+                  "[for D], e.g. 'wheel1 stuck at 2' (docs/faults.md); set under /**", rule=faults_rule),
         ParamSpec("failure.wheel", "integer", 0, "wheel that fails at failure.time: 0 none, 1..n that wheel of "
                   "the geometry (reaction_wheels only)", min=0),
         _d("failure.time", 0.0, "sim time the wheel fails (the first step at or after it), s", min=0.0),

@@ -34,7 +34,9 @@ from attitude_sil.core.control.laws.bdot import detumble_gain
 from attitude_sil.core.control.momentum import BDOT
 from attitude_sil.core.environment.ephemeris import Ephemeris
 from attitude_sil.core.plant.rigid_body import inertia_matrix
+from attitude_sil.core.plant.wheels import GEOMETRIES
 from attitude_sil.core.sensing.models import SensorSuite
+from attitude_sil.core.sim.faults import parse_faults, wheel_failure_values
 from attitude_sil.core.sim.paramfile import node_key, section_node
 from attitude_sil.core.sim.params import GLOBAL_NODE, NODE_PARAMS, SCENARIO_NODE
 from attitude_sil.errors import ScenarioError
@@ -277,6 +279,17 @@ def _check_torque_actuator(scn: Scenario) -> None:
                             "controller command torque")
 
 
+def _check_faults(scn: Scenario) -> None:
+    """The ``faults`` list flies in this run: targets it has, times within it, one wheel fault at most."""
+    w = scn.values["wheels"]
+    n_wheels = GEOMETRIES[w["geometry"]]().shape[1] if w["actuator"] == "reaction_wheels" else None
+    try:
+        parse_faults(w["faults"], scn.duration, n_wheels)
+        wheel_failure_values(w)
+    except ScenarioError as exc:
+        raise ScenarioError(f"{scn.source}: {exc}") from None
+
+
 def _check_consistency(scn: Scenario) -> None:
     periods = {n: scn.values[n]["control_period"] for n in ALL_NODES}
     if len(set(periods.values())) > 1:
@@ -290,6 +303,7 @@ def _check_consistency(scn: Scenario) -> None:
                                     f"set it under {src} (the {node} follows)")
     _check_one_orbit(scn)
     _check_torque_actuator(scn)
+    _check_faults(scn)
     if scn.has_magnetorquers and scn.values["plant"]["environment.magnetic_field.model"] == "none":
         c = scn.values["controller"]
         why = f"controller.momentum.mode {c['momentum.mode']}" if c["momentum.mode"] != "none" else \

@@ -1,0 +1,203 @@
+"""The fault model: what a scenario's ``faults`` list says, checked in one place for every driver.
+
+A fault is one line, the words of ``attitude-sil fault`` with a time::
+
+    TARGET MODE [VALUE] [at T] [for D]
+
+e.g. ``wheel1 stuck at 2``, ``wheel3 lost at 5.5``. ``at`` is the sim time
+(s) the fault becomes active (the first step at or after it; default 0),
+``for`` how long it lasts (s; default: to the end of the run). The list is
+a ROS ``string[]`` parameter, ``faults``, so a scenario stays a ROS 2
+parameter file that ``ros2 launch`` hands to the nodes unchanged (a
+parameter cannot be a list of mappings); set it under ``/**`` and each node
+takes the faults of its own targets.
+
+:data:`CATALOGUE` lists every target and the modes it can take (issue 43's
+table); :data:`FLOWN` the ones the drivers fly today. A mode a target cannot
+take, or one not flown yet, is refused in one line, never accepted in
+silence. Today's ``wheels.failure.*`` keys are the fault
+``wheel<n> <mode> at <time>`` (:func:`legacy_wheel_fault`), flown the same.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+from dataclasses import dataclass
+
+from attitude_sil.errors import ScenarioError
+
+#: target kind -> the modes it can take (a VALUE is needed where the mode names a size)
+CATALOGUE: dict[str, tuple[str, ...]] = {
+    "wheel": ("lost", "stuck", "friction", "torque_limit", "speed_limit"),
+    "gyro": ("off", "stuck", "bias_jump", "scale", "spike"),
+    "star_tracker": ("off", "stuck", "latency"),
+    "magnetometer": ("off", "stuck"),
+    "magnetorquers": ("off", "stuck"),
+    "controller": ("gain", "delay"),
+}
+#: (target kind, mode) pairs the drivers fly today
+FLOWN: frozenset[tuple[str, str]] = frozenset({("wheel", "lost"), ("wheel", "stuck")})
+#: modes that last once they happen (a wheel that seized stays seized): no ``for``
+PERMANENT = frozenset({("wheel", "lost"), ("wheel", "stuck")})
+#: modes whose VALUE is a size (a gain, a factor, a limit, a time)
+VALUED = frozenset({"friction", "torque_limit", "speed_limit", "bias_jump", "scale", "spike", "latency", "gain",
+                    "delay"})
+
+_TARGET = re.compile(r"^(wheel)([1-9][0-9]*)$|^(gyro)\.([xyz])$|^(star_tracker|magnetometer|magnetorquers|controller)$")
+
+
+@dataclass(frozen=True)
+class Fault:
+    """One fault of a scenario's ``faults`` list.
+
+    Attributes
+    ----------
+    kind : str
+        Target kind, a key of :data:`CATALOGUE` (``wheel``, ``gyro``, ...).
+    index : int or str or None
+        Which one: the wheel number (1-based), the gyro axis (``x``, ``y``,
+        ``z``), None for a target of its own.
+    mode : str
+        What goes wrong (:data:`CATALOGUE`).
+    value : float or None
+        Its size, where the mode has one (:data:`VALUED`).
+    time_s : float
+        Sim time it becomes active, s.
+    duration_s : float or None
+        How long it lasts, s (None: to the end).
+    """
+
+    kind: str
+    index: int | str | None
+    mode: str
+    value: float | None
+    time_s: float
+    duration_s: float | None = None
+
+    @property
+    def target(self) -> str:
+        """The target as written: ``wheel1``, ``gyro.x``, ``star_tracker``."""
+        if self.kind == "wheel":
+            return f"wheel{self.index}"
+        return f"gyro.{self.index}" if self.kind == "gyro" else self.kind
+
+    def __str__(self) -> str:
+        words = [self.target, self.mode] + ([] if self.value is None else [f"{self.value:g}"])
+        words += ["at", f"{self.time_s:g}"] + ([] if self.duration_s is None else ["for", f"{self.duration_s:g}"])
+        return " ".join(words)
+
+
+def parse_fault(text: str) -> Fault:
+    """A :class:`Fault` from its line ``TARGET MODE [VALUE] [at T] [for D]``.
+
+    Raises
+    ------
+    ScenarioError
+        One line naming what is wrong: an unknown target, a mode the target
+        cannot take or that is not flown yet, a missing or needless value,
+        a negative or non-finite time.
+    """
+    words = str(text).split()
+    where = f"fault {text!r}"
+    if len(words) < 2:
+        raise ScenarioError(f"{where}: expected TARGET MODE [VALUE] [at T] [for D], e.g. 'wheel1 stuck at 2'")
+    m = _TARGET.match(words[0])
+    if m is None:
+        raise ScenarioError(f"{where}: unknown target {words[0]!r} (targets: wheel<n>, gyro.x|y|z, star_tracker, "
+                            "magnetometer, magnetorquers, controller)")
+    kind = m.group(1) or m.group(3) or m.group(5)
+    index = int(m.group(2)) if m.group(2) else m.group(4)
+    mode = words[1]
+    if mode not in CATALOGUE[kind]:
+        raise ScenarioError(f"{where}: a {kind} cannot be {mode!r} (its modes: {', '.join(CATALOGUE[kind])})")
+    rest = words[2:]
+    value = None
+    if mode in VALUED:
+        if not rest or rest[0] in ("at", "for"):
+            raise ScenarioError(f"{where}: {mode} needs a value, e.g. '{words[0]} {mode} 2 at 5'")
+        value = _number(rest.pop(0), where, "value")
+    times = {"at": 0.0, "for": None}
+    while rest:
+        word = rest.pop(0)
+        if word not in times or not rest:
+            raise ScenarioError(f"{where}: unexpected {word!r}; expected 'at T' or 'for D' after the mode")
+        times[word] = _number(rest.pop(0), where, word)
+        if times[word] < 0.0:
+            raise ScenarioError(f"{where}: '{word}' must be >= 0 s, got {times[word]:g}")
+    if (kind, mode) not in FLOWN:
+        flown = ", ".join(f"{k}<n> {m}" if k == "wheel" else f"{k} {m}" for k, m in sorted(FLOWN))
+        raise ScenarioError(f"{where}: {kind} {mode} is not flown yet (flown today: {flown})")
+    if times["for"] is not None and (kind, mode) in PERMANENT:
+        raise ScenarioError(f"{where}: a {kind} {mode} lasts to the end of the run; drop 'for'")
+    return Fault(kind, index, mode, value, times["at"], times["for"])
+
+
+def _number(word: str, where: str, what: str) -> float:
+    try:
+        x = float(word)
+    except ValueError:
+        raise ScenarioError(f"{where}: {what} {word!r} is not a number") from None
+    if not math.isfinite(x):
+        raise ScenarioError(f"{where}: {what} must be finite, got {word}")
+    return x
+
+
+def parse_faults(lines, duration_s: float, n_wheels: int | None) -> list[Fault]:
+    """Every fault of a ``faults`` list, checked against the run: each starts within it (0 <= T <= the
+    duration, when the run has one: ``duration_s`` > 0), a wheel is one of the geometry's (``n_wheels``;
+    None: no reaction wheels to fail) and at most one wheel fails in a run (the drivers' failure record
+    holds one).
+
+    Raises
+    ------
+    ScenarioError
+        One line for the first fault that cannot fly.
+    """
+    faults = [parse_fault(line) for line in lines]
+    for f in faults:
+        if duration_s > 0.0 and f.time_s > duration_s:
+            raise ScenarioError(f"fault '{f}': at {f.time_s:g} s is after the run's end ({duration_s:g} s)")
+        if f.kind == "wheel":
+            if n_wheels is None:
+                raise ScenarioError(f"fault '{f}': a wheel fault needs wheels.actuator reaction_wheels")
+            if not 1 <= f.index <= n_wheels:
+                raise ScenarioError(f"fault '{f}': the geometry has wheels 1..{n_wheels}")
+    wheel_faults = [f for f in faults if f.kind == "wheel"]
+    if len(wheel_faults) > 1:
+        raise ScenarioError(f"faults: '{wheel_faults[0]}' and '{wheel_faults[1]}': one wheel fault per run for now")
+    return faults
+
+
+def faults_rule(lines) -> str:
+    """The ``faults`` parameter's rule: '' if every line parses, else the first line's problem."""
+    try:
+        for line in lines:
+            parse_fault(line)
+    except ScenarioError as exc:
+        return f"holds {exc}"
+    return ""
+
+
+def legacy_wheel_fault(wheel: int, time_s: float, mode: str) -> Fault | None:
+    """Today's ``wheels.failure.*`` keys as the fault they are (None: ``failure.wheel`` 0, no failure)."""
+    return None if wheel == 0 else Fault("wheel", int(wheel), str(mode), None, float(time_s))
+
+
+def wheel_failure_values(w: dict) -> dict:
+    """The ``failure.*`` values of the ``wheels`` parameters ``w`` with its ``faults`` list's wheel fault laid
+    over them: the drivers' one failure record (:class:`~attitude_sil.core.plant.kernels.WheelFailure`).
+
+    Raises
+    ------
+    ScenarioError
+        The list has a wheel fault and ``failure.wheel`` names one too.
+    """
+    fault = next((f for f in map(parse_fault, w["faults"]) if f.kind == "wheel"), None)
+    if fault is None:
+        return {}
+    legacy = legacy_wheel_fault(w["failure.wheel"], w["failure.time"], w["failure.mode"])
+    if legacy is not None:
+        raise ScenarioError(f"fault '{fault}' and wheels.failure ('{legacy}'): one wheel fault per run; "
+                            "say it in faults")
+    return {"failure.wheel": fault.index, "failure.time": fault.time_s, "failure.mode": fault.mode}
