@@ -37,6 +37,8 @@ def format_table(metrics: dict) -> str:
              ("steps with a stale cmd", "command_stale_steps", ""),
              ("missed periods", "command_missed_periods", "")]
     rows += [(label, metrics[key], unit) for label, key, unit in extra if key in metrics]
+    if metrics.get("faults"):
+        rows.append(("faults", "; ".join(metrics["faults"]), ""))
     lines = [f"scenario {metrics['scenario']}"]
     for label, value, unit in rows:
         if value is None:

@@ -26,6 +26,7 @@ from rclpy.serialization import serialize_message
 from attitude_sil.core.plant.quaternion import euler_from_quat, quat_conjugate, quat_error
 from attitude_sil.core.plant.scene import BODY
 from attitude_sil.core.sim.build import build_environment, build_scene
+from attitude_sil.core.sim.faults import OWNER, changes_at, faults_of
 from attitude_sil.core.sim.scenario import Scenario
 from attitude_sil.core.trajectory import Trajectory
 from attitude_sil.errors import RunError
@@ -38,6 +39,7 @@ from attitude_sil.ros.contract import (
     BODY_RATE,
     CLOCK,
     COMMAND_TOPIC,
+    DIAGNOSTICS,
     DIPOLE_CMD,
     DISTURBANCE_TORQUE,
     MAGNETIC_FIELD,
@@ -52,7 +54,7 @@ from attitude_sil.ros.contract import (
     WHEEL_TORQUE,
     recorded_topics,
 )
-from attitude_sil.ros.convert import magnetic_field_msg, ns_to_stamp, odometry_msg
+from attitude_sil.ros.convert import fault_diagnostics_msg, magnetic_field_msg, ns_to_stamp, odometry_msg
 from attitude_sil.ros.qos import offered_qos_yaml
 from attitude_sil.storage.cdr import (
     TfLayout,
@@ -120,6 +122,18 @@ def _series(scn: Scenario, tr: Trajectory, p: int, stamps: np.ndarray) -> dict:
         series[DIPOLE_CMD] = encode_stamped_vectors(stamps, "body", tr.dipole_cmd_B[p])
         series[MAGNETIC_TORQUE] = encode_stamped_vectors(stamps, "body", tr.magnetic_torque_B[p])
     return series
+
+
+def _write_faults(writer: BagWriter, scn: Scenario, stamps: np.ndarray) -> None:
+    """Each fault's ``/diagnostics`` at the step it becomes active or ends, as the node that flies it publishes
+    it."""
+    dt_ns = int(round(scn.dt * 1e9))
+    for node in dict.fromkeys(OWNER.values()):
+        faults = faults_of(scn.values[node], node)
+        for k, t in enumerate(stamps.tolist()):
+            changes = changes_at(faults, k, dt_ns)
+            if changes:
+                writer.write(DIAGNOSTICS, serialize_message(fault_diagnostics_msg(changes, t, node)), t)
 
 
 def _orbit(scn: Scenario, stamps: np.ndarray) -> list[bytes]:
@@ -192,6 +206,7 @@ def record_episode(scn: Scenario, tr: Trajectory, run_dir: str | Path, *, episod
         writer.write_many([(commands[k] if name == "command" else topics[name], data[k], t)
                            for k, t in enumerate(stamps.tolist())  # step by step, as the graph publishes
                            for name, data in series.items()])
+        _write_faults(writer, scn, stamps)
         t0 = int(stamps[0])  # the body model goes with the first attitude, as the recorder writes it
         writer.write(_absolute(BODY_MODEL), marker_array_cdr(t0, BODY, build_scene(scn.values).markers), t0)
     finally:

@@ -360,6 +360,7 @@ class GraphSession:
             traj = None
             metrics = assembler.accumulator.report(self.scn.name, self.duration, wall)
         metrics.update(self._timing_summary())
+        metrics["faults"] = list(self.recorder.faults)  # what became active, as /diagnostics said
         bag = None if writer is None else writer.run_dir
         metrics["bag"] = None if bag is None else str(bag)
         return RunResult(metrics=metrics, bag=bag, counts=dict(self.recorder.counts), trajectory=traj)

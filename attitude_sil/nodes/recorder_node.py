@@ -51,12 +51,14 @@ from attitude_sil.ros.contract import (
     BODY_MODEL,
     CLOCK,
     COMMAND_TOPICS,
+    DIAGNOSTICS,
     PARAMETER_EVENTS,
     RECORDED_TOPICS,
     TF,
     VIEW_TOPICS,
     message_class,
 )
+from attitude_sil.ros.convert import fault_lines
 from attitude_sil.ros.qos import (
     INPUT_QOS,
     LOCKSTEP_QOS,
@@ -146,6 +148,7 @@ class Recorder(Node):
         self.kept: dict[str, list[tuple[int, bytes]]] = {name: [] for name in keep}
         self.keeping = True  # False: the kept topics go to ``sink`` only, nothing stays in memory
         self.across_episodes = False  # see start_episode
+        self.faults: list[str] = []
         self.sink: Callable[[str, int, bytes], None] | None = None  # (topic, stamp ns, CDR) of kept topics
         self.subs = {}
         for name, type_name in (topics or RECORDED_TOPICS).items():
@@ -190,6 +193,7 @@ class Recorder(Node):
         self.keeping = keeping
         self.sink = sink
         self.counts.clear()
+        self.faults: list[str] = []  # the faults that became active, as /diagnostics said (fault_lines)
         self.last_stamp.clear()
         self.newest_stamp.clear()
         self.refused.clear()
@@ -249,7 +253,7 @@ class Recorder(Node):
 
     def _on_message(self, name: str, data: bytes) -> None:
         t = stamp_from_cdr(data)
-        if t is not None and name != PARAMETER_EVENTS and t == self.last_stamp.get(name):
+        if t is not None and name not in (PARAMETER_EVENTS, DIAGNOSTICS) and t == self.last_stamp.get(name):
             # a repeat of the step taken last (an episode restarted at its first step): taken once, and the
             # controller timed from the repeat
             if self.latency is not None and name == self.latency_from:
@@ -292,6 +296,8 @@ class Recorder(Node):
             self.bad_command = None  # its step got a finite command: a stray (a foreign node's), not the law's
         self.counts[name] += 1
         self.last_stamp[name] = t
+        if name == DIAGNOSTICS:
+            self.faults += fault_lines(data)
         if t > self.newest_stamp.get(name, -1):
             self.newest_stamp[name] = t
         if self.latency is not None:

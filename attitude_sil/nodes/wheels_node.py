@@ -21,18 +21,20 @@ import numpy as np
 
 from attitude_sil.core.plant.wheels import allocation_over
 from attitude_sil.core.sim.build import available_wheels, build_wheels
+from attitude_sil.core.sim.faults import changes_at, faults_of
 from attitude_sil.core.sim.lockstep import CommandHold, StepSequencer, tick_period_ns
 from attitude_sil.errors import ScenarioError
 from attitude_sil.ros.contract import (
     APPLIED_COMMAND_TOPIC,
     CLOCK,
+    DIAGNOSTICS,
     TORQUE_CMD,
     VOLTAGE_CMD,
     WHEEL_MOMENTUM,
     WHEEL_STATE,
     WHEEL_TORQUE,
 )
-from attitude_sil.ros.convert import stamp_to_ns, vector_to_array
+from attitude_sil.ros.convert import fault_diagnostics_msg, stamp_to_ns, vector_to_array
 from attitude_sil.ros.node import LockstepNode, run_node
 from attitude_sil.storage.cdr import joint_state_cdr, stamped_vector_cdr
 
@@ -48,6 +50,7 @@ class WheelsNode(LockstepNode):
         self.pub_torque = self.step_publisher(WHEEL_TORQUE)
         self.pub_momentum = self.step_publisher(WHEEL_MOMENTUM)
         self.pub_state = self.step_publisher(WHEEL_STATE)
+        self.pub_diagnostics = self.step_publisher(DIAGNOSTICS)
         self.step_subscription(VOLTAGE_CMD, lambda m: self._on_command(m, False))
         self.step_subscription(TORQUE_CMD, lambda m: self._on_command(m, True))
         self.hold: CommandHold | None = None  # a controller on a timer of its own: the command held
@@ -62,6 +65,7 @@ class WheelsNode(LockstepNode):
     def rebuild(self) -> None:
         scn = self.scenario()
         self.core = build_wheels(scn, 1)
+        self.faults = faults_of(self.values(), "wheels")  # each on /diagnostics as it becomes active
         timing = self.param("command_timing")
         if timing != "stamped":
             zero = (np.zeros((1, 3)), self.param("actuator") in ("torque", "none"))
@@ -143,6 +147,9 @@ class WheelsNode(LockstepNode):
         self.pub_torque.publish(stamped_vector_cdr(out.tau_c_B[0], t, "body"))
         self.pub_momentum.publish(stamped_vector_cdr(out.h_wheels_B[0], t, "body"))
         self.pub_state.publish(joint_state_cdr(self.core.names, out.position[0], out.velocity[0], out.effort[0], t))
+        changes = changes_at(self.faults, t // self.dt_ns, self.dt_ns)
+        if changes:
+            self.pub_diagnostics.publish(fault_diagnostics_msg(changes, t, self.get_name()))
 
 
 def main(args: list[str] | None = None) -> int:

@@ -19,7 +19,8 @@ __all__ = ["CLOCK", "ATTITUDE", "BODY_RATE", "ATTITUDE_SETPOINT", "RATE_SETPOINT
            "PLANT_INPUTS", "clock_remap",
            "STEP_TOPICS", "COMMAND_TOPICS", "COMMAND_TOPIC", "APPLIED_COMMAND_TOPIC", "APPLIED_TOPICS",
            "CONTROLLER_INPUTS", "MODEL_TOPICS", "RECORDED_TOPICS",
-           "graph_subscribers", "PRODUCERS", "PARAMETER_EVENTS", "message_class", "check_namespace", "check_node_name",
+           "graph_subscribers", "PRODUCERS", "PARAMETER_EVENTS", "DIAGNOSTICS", "message_class", "check_namespace",
+           "check_node_name",
            "check_parameter_name", "ROLE_OUTPUTS", "OPTIONAL_TOPICS", "ROLE_INPUTS", "episode_topics", "EXTERNAL",
            "UNKNOWN_NODE", "IMU", "STAR_TRACKER", "WHEEL_SPEED", "ESTIMATE_ATTITUDE", "ESTIMATE_BODY_RATE",
            "ESTIMATE_GYRO_BIAS", "ESTIMATE_ATTITUDE_SIGMA", "SENSING_TOPICS", "SENSING_STEP_TOPICS", "FEEDBACK_REMAP",
@@ -265,9 +266,15 @@ TF = "tf"
 BODY_MODEL = "body_model"
 VIEW_TOPICS: dict[str, str] = {TF: "tf2_msgs/msg/TFMessage", BODY_MODEL: "visualization_msgs/msg/MarkerArray"}
 
+#: faults as they become active and end (the ROS convention for health, absolute as ``diagnostic_updater``
+#: publishes it): a ``DiagnosticArray`` stamped at the step, one status per fault, published by the node whose
+#: target it is (docs/faults.md, :func:`attitude_sil.ros.convert.fault_diagnostics_msg`)
+DIAGNOSTICS = "/diagnostics"
+
 #: everything a run records
 RECORDED_TOPICS: dict[str, str] = {**STEP_TOPICS, **MODEL_TOPICS, **SENSING_TOPICS, **APPLIED_TOPICS,
                                    **ENVIRONMENT_TOPICS, **MAGNETIC_TOPICS,
+                                   DIAGNOSTICS: "diagnostic_msgs/msg/DiagnosticArray",
                                    PARAMETER_EVENTS: "rcl_interfaces/msg/ParameterEvent"}
 
 

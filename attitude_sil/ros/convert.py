@@ -19,6 +19,7 @@ from collections.abc import Iterable
 
 import numpy as np
 from builtin_interfaces.msg import Time
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from geometry_msgs.msg import QuaternionStamped, Vector3Stamped
 from nav_msgs.msg import Odometry
 from rclpy.serialization import deserialize_message
@@ -168,6 +169,40 @@ def odometry_msg(r_N: Iterable[float], v_N: Iterable[float], t_ns: int, frame_id
     v.x, v.y, v.z = (float(x) for x in v_N)
     m.pose.pose.orientation.w = 1.0
     return m
+
+
+#: how a fault's status message begins while it is active
+FAULT_PREFIX = "fault: "
+
+
+def fault_diagnostics_msg(changes, t_ns: int, node: str) -> DiagnosticArray:
+    """The faults of ``node`` (its name, e.g. ``wheels``) that became active or ended at step ``t_ns`` as a
+    ``diagnostic_msgs/DiagnosticArray``: ``changes`` is ``[(Fault, active), ...]``
+    (:func:`attitude_sil.core.sim.faults.changes_at`). Each status is named ``node: target``, its level ERROR
+    while the fault is active and OK once it ended, its hardware_id the target, its values the fault's mode,
+    value (where it has one), start and duration (s; ``end`` where it lasts)."""
+    m = DiagnosticArray()
+    m.header.stamp = ns_to_stamp(t_ns)
+    for fault, active in changes:
+        s = DiagnosticStatus()
+        s.level = DiagnosticStatus.ERROR if active else DiagnosticStatus.OK
+        s.name = f"{node}: {fault.target}"
+        s.hardware_id = fault.target
+        s.message = f"{FAULT_PREFIX if active else 'fault ended: '}{fault}"
+        pairs = [("mode", fault.mode)] + ([] if fault.value is None else [("value", f"{fault.value:g}")])
+        pairs += [("at_s", f"{fault.time_s:g}"),
+                  ("for_s", "end" if fault.duration_s is None else f"{fault.duration_s:g}")]
+        s.values = [KeyValue(key=k, value=v) for k, v in pairs]
+        m.status.append(s)
+    return m
+
+
+def fault_lines(data: bytes) -> list[str]:
+    """The faults a ``/diagnostics`` message (CDR) says became active: the line of each ERROR status of
+    :func:`fault_diagnostics_msg` (``wheel1 stuck at 2``); other nodes' statuses are not faults of ours."""
+    m = deserialize_message(data, DiagnosticArray)
+    return [s.message.removeprefix(FAULT_PREFIX) for s in m.status
+            if s.level == DiagnosticStatus.ERROR and s.message.startswith(FAULT_PREFIX)]
 
 
 def magnetic_field_msg(b_B: Iterable[float], variance: Iterable[float], t_ns: int,

@@ -59,6 +59,7 @@ from attitude_sil.nodes.recorder_node import Recorder
 from attitude_sil.ros.contract import (
     CLOCK,
     COMMAND_TOPICS,
+    DIAGNOSTICS,
     EXTERNAL,
     MAGNETIC_TOPICS,
     MAGNETIC_TORQUE,
@@ -70,6 +71,7 @@ from attitude_sil.ros.contract import (
     check_namespace,
     episode_topics,
 )
+from attitude_sil.ros.convert import fault_lines
 from attitude_sil.ros.environment import localhost_environment
 from attitude_sil.ros.services import PlantReset, get_remote_parameters
 from attitude_sil.ros.signals import StopSignals
@@ -334,6 +336,7 @@ def play_episode(namespace: str | None = None, scenario: str | Path | None = Non
         ros.close()
     law = EXTERNAL if "controller" in external else scn.param("controller", "controller_type")
     metrics = episode_report(scn, traj, law, scn.duration, wall)
+    metrics["faults"] = list(rec.faults)
     metrics["bag"] = None
     return metrics
 
@@ -564,6 +567,9 @@ def bag_metrics(bag: str | Path, scenario: str | Path | None = None) -> tuple[di
     if duration + 0.5 * scn.dt < scn.duration:
         notes.append(f"{bag} holds {duration:g} s of a {scn.duration:g} s episode; metrics over what it holds")
     metrics = episode_report(scn, traj, law or scn.param("controller", "controller_type"), duration, 0.0)
+    diagnostics = reader.find_topic(DIAGNOSTICS)
+    metrics["faults"] = [] if diagnostics is None else \
+        [line for m in reader.iter_raw(topics=[diagnostics]) for line in fault_lines(m.data)]
     metrics["wall_time_s"] = None
     metrics["real_time_factor"] = None
     metrics["bag"] = str(bag)

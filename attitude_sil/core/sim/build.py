@@ -32,7 +32,7 @@ from attitude_sil.core.plant.scene import BodyScene, body_scene
 from attitude_sil.core.plant.wheels import GEOMETRIES, MotorParams, WheelAssembly
 from attitude_sil.core.sensing.mekf import Mekf, MekfSettings
 from attitude_sil.core.sensing.models import SensorSuite
-from attitude_sil.core.sim.faults import wheel_failure_values
+from attitude_sil.core.sim.faults import first_step, wheel_failure_values
 from attitude_sil.core.sim.models import Guidance, MagneticLoop, Plant, Sensing, Wheels, per_episode
 from attitude_sil.core.sim.params import NODE_PARAMS, spec_for
 from attitude_sil.core.sim.scenario import Scenario, effective_values
@@ -216,8 +216,7 @@ def build_wheels(scn: Scenario, n_episodes: int = 1, per_episode: dict | None = 
                                 f"{w['geometry']}, got {wheel[(wheel < 0) | (wheel > assembly.n_wheels)][0]}")
         t = np.atleast_1d(np.asarray(per_episode.get("failure.time", w["failure.time"]), dtype=float))
         dt_ns = int(round(w["control_period"] * 1e9))
-        t_ns = np.round(t * 1e9).astype(np.int64)
-        step = t_ns // dt_ns + (t_ns % dt_ns > 0)  # the first step at or after the time
+        step = np.array([first_step(float(x), dt_ns) for x in t], dtype=np.int64)  # the first step at or after
         mode = np.atleast_1d(np.asarray(per_episode.get("failure.mode", w["failure.mode"])))
         failure = (wheel - 1, step, mode == "stuck")
     return Wheels(assembly, n_episodes, speed0, failure)

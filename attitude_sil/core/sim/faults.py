@@ -36,6 +36,9 @@ CATALOGUE: dict[str, tuple[str, ...]] = {
     "magnetorquers": ("off", "stuck"),
     "controller": ("gain", "delay"),
 }
+#: target kind -> the node that flies its faults and publishes them on /diagnostics
+OWNER: dict[str, str] = {"wheel": "wheels", "gyro": "sensors", "star_tracker": "sensors", "magnetometer": "sensors",
+                         "magnetorquers": "magnetorquers", "controller": "controller"}
 #: (target kind, mode) pairs the drivers fly today
 FLOWN: frozenset[tuple[str, str]] = frozenset({("wheel", "lost"), ("wheel", "stuck")})
 #: modes that last once they happen (a wheel that seized stays seized): no ``for``
@@ -201,3 +204,31 @@ def wheel_failure_values(w: dict) -> dict:
         raise ScenarioError(f"fault '{fault}' and wheels.failure ('{legacy}'): one wheel fault per run; "
                             "say it in faults")
     return {"failure.wheel": fault.index, "failure.time": fault.time_s, "failure.mode": fault.mode}
+
+
+def faults_of(values: dict, node: str) -> list[Fault]:
+    """The faults ``node`` flies (its targets', :data:`OWNER`) from its parameters ``values``, in list order:
+    its ``faults`` list's, and the wheel fault of the ``failure.*`` keys where it has them."""
+    out = [f for f in map(parse_fault, values.get("faults", ())) if OWNER[f.kind] == node]
+    if "failure.wheel" in values:
+        legacy = legacy_wheel_fault(values["failure.wheel"], values["failure.time"], values["failure.mode"])
+        out += [] if legacy is None else [legacy]
+    return out
+
+
+def first_step(time_s: float, dt_ns: int) -> int:
+    """The first step (index) at or after sim time ``time_s`` (s) for steps of ``dt_ns`` (ns): where a fault
+    starts or ends."""
+    t_ns = int(round(time_s * 1e9))
+    return t_ns // dt_ns + (t_ns % dt_ns > 0)
+
+
+def changes_at(faults: list[Fault], k: int, dt_ns: int) -> list[tuple[Fault, bool]]:
+    """The faults that become active (True) or end (False) at step ``k`` (steps of ``dt_ns`` ns)."""
+    out = []
+    for f in faults:
+        if first_step(f.time_s, dt_ns) == k:
+            out.append((f, True))
+        elif f.duration_s is not None and first_step(f.time_s + f.duration_s, dt_ns) == k:
+            out.append((f, False))
+    return out

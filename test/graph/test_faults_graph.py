@@ -1,0 +1,60 @@
+"""A scenario's faults on the node graph: flown as the batch engine flies them, said on /diagnostics.
+
+A wheel that seizes its drive half a second into HST's roll step: the graph's
+episode equals the compiled driver's to 1e-9 (the same fault, the same
+trajectory); the wheels node says the fault on ``/diagnostics`` once, at the
+step it becomes active, which the bag keeps and the run, ``metrics`` and an
+engine-written bag of the same episode all list alike.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from diagnostic_msgs.msg import DiagnosticStatus
+
+from attitude_sil.cli import main
+from attitude_sil.core.sim.engine import simulate
+from attitude_sil.core.sim.scenario import load_scenario
+from attitude_sil.graph.engine_bag import record_episode
+from attitude_sil.graph.session import run_graph
+from attitude_sil.storage.reader import open_bag
+from conftest import CONFIG
+
+FAULT = "wheel2 stuck at 0.5"
+
+
+def test_a_wheel_fault_flies_on_the_graph_as_in_the_engine_and_is_said_on_diagnostics(tmp_path, capfd):
+    scn = load_scenario(CONFIG / "hst_roll_step.yaml").with_values("wheels", faults=[FAULT])
+    graph = run_graph(scn, duration=1.5, record_dir=tmp_path / "graph", keep_trajectory=True, progress=False)
+    engine = simulate(scn, 1, duration=1.5, driver="compiled")
+    nominal = simulate(load_scenario(CONFIG / "hst_roll_step.yaml"), 1, duration=1.5, driver="compiled")
+    g = graph.trajectory
+    for name in ("q_BN", "omega_BN_B", "wheel_speed"):
+        assert np.max(np.abs(getattr(g, name) - getattr(engine, name))) <= 1e-9, name
+    assert np.max(np.abs(engine.wheel_speed[0, -1] - nominal.wheel_speed[0, -1])) > 1e-3  # the fault acts
+    assert graph.metrics["faults"] == [FAULT]
+
+    bag = open_bag(tmp_path / "graph")
+    said = list(bag.iter_decoded(["/diagnostics"]))
+    assert len(said) == 1  # once, as it becomes active
+    raw, msg = said[0]
+    assert raw.log_time_ns == 500_000_000 and msg.header.stamp.sec == 0 and msg.header.stamp.nanosec == 500_000_000
+    (status,) = msg.status
+    assert status.level == ord(DiagnosticStatus.ERROR) and status.name == "wheels: wheel2"
+    assert status.hardware_id == "wheel2" and status.message == f"fault: {FAULT}"
+    assert {kv.key: kv.value for kv in status.values} == {"mode": "stuck", "at_s": "0.5", "for_s": "end"}
+
+    capfd.readouterr()
+    assert main(["metrics", str(tmp_path / "graph")]) == 0
+    assert f"faults                   {FAULT}" in capfd.readouterr().out
+
+    record_episode(scn, engine, tmp_path / "engine", duration=1.5)
+    written = [(r.log_time_ns, _said(m)) for r, m in open_bag(tmp_path / "engine").iter_decoded(["/diagnostics"])]
+    assert written == [(raw.log_time_ns, _said(msg))]  # what the wheels node published (CDR padding aside)
+
+
+def _said(msg) -> tuple:
+    """A DiagnosticArray's stamp and statuses, field by field."""
+    return ((msg.header.stamp.sec, msg.header.stamp.nanosec),
+            [(s.level, s.name, s.message, s.hardware_id, [(kv.key, kv.value) for kv in s.values])
+             for s in msg.status])
