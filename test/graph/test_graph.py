@@ -203,5 +203,5 @@ def test_three_runs_at_once_with_default_settings_do_not_see_each_other(tmp_path
     for name in ("run0", "run1", "run2", "solo"):
         reader = open_bag(tmp_path / name)
         counts = {t: info.count for t, info in reader.topics.items() if t not in (
-            "/parameter_events", "/flexible_mode", "/torque_cmd", "/body_model")}  # the body model: once
+            "/parameter_events", "/flexible_mode", "/torque_cmd", "/body_model", "/diagnostics")}  # the model: once
         assert set(counts.values()) == {301}, counts  # exactly one message per step on every topic
