@@ -18,6 +18,7 @@ from attitude_sil.cli import (
     bag,
     engine,
     episode,
+    fault,
     fidelity,
     linearize,
     metrics,
@@ -35,8 +36,8 @@ from attitude_sil.errors import AttitudeSilError
 __all__ = ["build_parser", "main", "VERBS"]
 
 #: the verbs in the order ``--help`` lists them
-VERBS = (run, record, episode, metrics, linearize, robustness, fidelity, param, bag, plot, replay, tune, montecarlo,
-         engine)
+VERBS = (run, record, episode, metrics, linearize, robustness, fidelity, param, fault, bag, plot, replay, tune,
+         montecarlo, engine)
 
 #: the tuner's dependencies (the ``tune`` extra): a node-only install lacks them
 _TUNE_EXTRA = ("pymoo", "control", "matplotlib")

@@ -17,11 +17,20 @@ and the command applied goes out on ``applied/voltage_cmd`` (or
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 
 from attitude_sil.core.plant.wheels import allocation_over
 from attitude_sil.core.sim.build import available_wheels, build_wheels
-from attitude_sil.core.sim.faults import changes_at, faults_of
+from attitude_sil.core.sim.faults import (
+    added_faults,
+    changes_at,
+    faults_of,
+    first_step,
+    parse_faults,
+    wheel_failure_values,
+)
 from attitude_sil.core.sim.lockstep import CommandHold, StepSequencer, tick_period_ns
 from attitude_sil.errors import ScenarioError
 from attitude_sil.ros.contract import (
@@ -66,6 +75,7 @@ class WheelsNode(LockstepNode):
         scn = self.scenario()
         self.core = build_wheels(scn, 1)
         self.faults = faults_of(self.values(), "wheels")  # each on /diagnostics as it becomes active
+        self._fault_lines = list(self.param("faults"))  # the list as the episode started or was last added to
         timing = self.param("command_timing")
         if timing != "stamped":
             zero = (np.zeros((1, 3)), self.param("actuator") in ("torque", "none"))
@@ -73,10 +83,18 @@ class WheelsNode(LockstepNode):
             self.step_ns = None
 
     def check_parameters(self, pending: dict) -> str:
-        """The available wheels must span the three body axes."""
+        """The available wheels must span the three body axes; faults may only be added, and must fly."""
+        values = {**self.values(), **pending}
+        if "faults" in pending:
+            wheels = self.param("actuator") == "reaction_wheels"
+            try:
+                added_faults(self.param("faults"), pending["faults"])
+                parse_faults(values["faults"], 0.0, self.core.assembly.n_wheels if wheels else None)
+                wheel_failure_values(values)
+            except ScenarioError as exc:
+                return str(exc)
         if not {"allocation", "available"} & set(pending) or self.param("actuator") != "reaction_wheels":
             return ""
-        values = {**self.values(), **pending}
         if "available" in pending:  # a set is checked as it is given, whichever allocation flies now
             values["allocation"] = "available"
         try:
@@ -86,11 +104,23 @@ class WheelsNode(LockstepNode):
         return ""
 
     def on_parameters_set(self, names: list[str]) -> None:
+        if "faults" in names:
+            self._inject(added_faults(self._fault_lines, self.param("faults")))
         if {"allocation", "available"} & set(names) and self.param("actuator") == "reaction_wheels":
             # the next command on is shared among the wheels now available (the episode goes on)
             self.core.assembly.set_available(available_wheels(self.values(), self.core.assembly.n_wheels))
             self.get_logger().info(f"allocation {self.param('allocation')} over wheels "
                                    f"{self.param('available') or 'all'}")
+
+    def _inject(self, lines: list[str]) -> None:
+        """Faults added while the graph runs: each from its time, or, if that has passed, from the step after the
+        one in hand (a stuck drive holds the voltage of the step before, which that step records)."""
+        self._fault_lines += lines
+        for fault in faults_of({"faults": lines}, "wheels"):
+            step = max(first_step(fault.time_s, self.dt_ns), self.core.k + 1)
+            self.core.fail(fault.index - 1, step, fault.mode == "stuck")
+            self.faults.append(replace(fault, time_s=step * self.dt_ns * 1e-9))
+            self.get_logger().info(f"fault {fault.target} {fault.mode} from t={step * self.dt_ns * 1e-9:g} s")
 
     def _on_command(self, msg, torque_mode: bool) -> None:
         t = stamp_to_ns(msg.header.stamp)

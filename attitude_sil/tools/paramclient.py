@@ -162,7 +162,9 @@ class _Session:
 
 
 @contextmanager
-def _session(node_name: str, timeout: float) -> Iterator[_Session]:
+def remote_session(node_name: str, timeout: float) -> Iterator[_Session]:
+    """A private rclpy context with a parameter client of ``node_name``, connected (ParamClientError: not within
+    ``timeout`` s)."""
     if not (isinstance(timeout, (int, float)) and math.isfinite(timeout) and timeout > 0):
         raise ParamClientError(f"--timeout must be a finite number of seconds > 0, got {timeout}")
     check_node_name(node_name)
@@ -200,7 +202,7 @@ def param_command(action: str, node_name: str, name: str | None = None, value: s
     """
     if name is not None:
         check_parameter_name(name)
-    with _session(node_name, timeout) as s:
+    with remote_session(node_name, timeout) as s:
         if action == "list":
             names = s.names()
             return "\n".join(f"  {n}" for n in names)
@@ -263,7 +265,7 @@ def param_dump(node_name: str, timeout: float = 10.0) -> str:
     ParamClientError
         Node not found or not answering.
     """
-    with _session(node_name, timeout) as s:
+    with remote_session(node_name, timeout) as s:
         names = s.names()
         pvalues = s.values(names)
     # a parameter declared without a value has nothing to write (ros2 param dump cannot either)
@@ -337,7 +339,7 @@ def param_load(node_name: str, path: str | Path, timeout: float = 10.0) -> LoadR
     """
     values = file_values(path, _fqn(node_name))
     report = LoadReport()
-    with _session(node_name, timeout) as s:
+    with remote_session(node_name, timeout) as s:
         names = list(values)
         descs = s.descriptors(names)
         current = s.values(names)

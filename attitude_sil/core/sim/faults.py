@@ -232,3 +232,20 @@ def changes_at(faults: list[Fault], k: int, dt_ns: int) -> list[tuple[Fault, boo
         elif f.duration_s is not None and first_step(f.time_s + f.duration_s, dt_ns) == k:
             out.append((f, False))
     return out
+
+
+def added_faults(before, after) -> list[str]:
+    """The lines a change of a running node's ``faults`` list adds (``before`` -> ``after``): faults may be
+    added while a graph runs, not taken back or changed (what happened, happened).
+
+    Raises
+    ------
+    ScenarioError
+        A line of ``before`` is not where it was in ``after``.
+    """
+    before, after = list(before), list(after)
+    gone = [line for i, line in enumerate(before) if i >= len(after) or after[i] != line]
+    if gone:
+        raise ScenarioError(f"faults may be added while the graph runs, not taken back or changed: {gone[0]!r} "
+                            "is gone")
+    return after[len(before):]

@@ -119,6 +119,17 @@ class Wheels:
     def names(self) -> list[str]:
         return [f"wheel_{i + 1}" for i in range(self.assembly.n_wheels)]
 
+    def fail(self, wheel: int, step: int, stuck: bool) -> None:
+        """Wheel ``wheel`` (0-based) fails from step ``step`` on, stuck or lost, in every episode: a fault
+        injected while a run goes. ``step`` must be after the step in hand (``step > k``): a stuck drive holds
+        the voltage of the step before, which the steps until then record.
+        """
+        if step <= self.k:
+            raise ValueError(f"a wheel fails from a step to come (> {self.k}), not {step}")
+        f = self.n_episodes
+        self.failure = (np.full(f, wheel, dtype=np.int64), np.full(f, step, dtype=np.int64), np.full(f, stuck))
+        self.e_hold = np.zeros(f)
+
     def failure_arrays(self) -> WheelFailure | None:
         """The kernel's failure record (with the held voltages, state), or None."""
         return None if self.failure is None else WheelFailure(*self.failure, self.e_hold)

@@ -182,7 +182,8 @@ NODE_PARAMS: dict[str, list[ParamSpec]] = {
            min=0.0, min_exclusive=True),
         _da("initial_speed_rpm", [], "initial wheel speeds, rpm (empty: all zero)"),
         ParamSpec("faults", "string_array", [], "faults of the run, one a line: TARGET MODE [VALUE] [at T] "
-                  "[for D], e.g. 'wheel1 stuck at 2' (docs/faults.md); set under /**", rule=faults_rule),
+                  "[for D], e.g. 'wheel1 stuck at 2' (docs/faults.md); set under /**; lines may be added while "
+                  "the graph runs (attitude-sil fault)", rule=faults_rule, runtime=True),
         ParamSpec("failure.wheel", "integer", 0, "wheel that fails at failure.time: 0 none, 1..n that wheel of "
                   "the geometry (reaction_wheels only)", min=0),
         _d("failure.time", 0.0, "sim time the wheel fails (the first step at or after it), s", min=0.0),
