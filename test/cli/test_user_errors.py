@@ -434,6 +434,14 @@ def _flag_cases() -> list:
               _case("param-get-no-name", ["param", "get", "controller"], {}, ("required: name",)),
               _case("param-set-no-value", ["param", "set", "controller", "pid.kp"], {}, ("required: value",)),
               _case("param-name-bad", ["param", "get", "controller", "bad name!"], {}, ("bad name!",))]
+    cases += [_case(f"fault-{label}", ["fault", *args], {}, (needle,))
+              for label, args, needle in [("target", ["whel1", "lost"], "unknown target 'whel1'"),
+                                          ("mode", ["wheel1", "off"], "a wheel cannot be 'off'"),
+                                          ("not-flown", ["gyro.x", "stuck"], "not flown yet"),
+                                          ("no-value", ["wheel1", "friction"], "needs a value"),
+                                          ("value-nan", ["wheel1", "friction", "nan"], "must be finite"),
+                                          ("namespace", ["wheel1", "lost", "--namespace", "a b"], "a b"),
+                                          ("timeout", ["wheel1", "lost", "--timeout", "0"], "timeout")]]
     lin = ["linearize", SCENARIO]
     cases += [_case(f"linearize-angles-{label}", [*lin, "--angles", *v], {}, ("angle",))
               for label, v in {"nan": ["nan"], "inf": ["3", "inf"], "huge": ["1e6"], "negative-zero": ["0"],
