@@ -23,10 +23,10 @@ from rcl_interfaces.msg import ParameterEvent
 from rclpy.parameter import Parameter
 from rclpy.serialization import serialize_message
 
+from attitude_sil.core.faults import OWNER, changes_at, faults_of
 from attitude_sil.core.plant.quaternion import euler_from_quat, quat_conjugate, quat_error
 from attitude_sil.core.plant.scene import BODY
 from attitude_sil.core.sim.build import build_environment, build_scene
-from attitude_sil.core.sim.faults import OWNER, changes_at, faults_of
 from attitude_sil.core.sim.scenario import Scenario
 from attitude_sil.core.trajectory import Trajectory
 from attitude_sil.errors import RunError

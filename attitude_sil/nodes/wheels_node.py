@@ -21,9 +21,7 @@ from dataclasses import replace
 
 import numpy as np
 
-from attitude_sil.core.plant.wheels import allocation_over
-from attitude_sil.core.sim.build import available_wheels, build_wheels
-from attitude_sil.core.sim.faults import (
+from attitude_sil.core.faults import (
     added_faults,
     changes_at,
     faults_of,
@@ -31,6 +29,8 @@ from attitude_sil.core.sim.faults import (
     parse_faults,
     wheel_failure_values,
 )
+from attitude_sil.core.plant.wheels import allocation_over
+from attitude_sil.core.sim.build import available_wheels, build_wheels
 from attitude_sil.core.sim.lockstep import CommandHold, StepSequencer, tick_period_ns
 from attitude_sil.errors import ScenarioError
 from attitude_sil.ros.contract import (

@@ -178,7 +178,7 @@ FAULT_PREFIX = "fault: "
 def fault_diagnostics_msg(changes, t_ns: int, node: str) -> DiagnosticArray:
     """The faults of ``node`` (its name, e.g. ``wheels``) that became active or ended at step ``t_ns`` as a
     ``diagnostic_msgs/DiagnosticArray``: ``changes`` is ``[(Fault, active), ...]``
-    (:func:`attitude_sil.core.sim.faults.changes_at`). Each status is named ``node: target``, its level ERROR
+    (:func:`attitude_sil.core.faults.changes_at`). Each status is named ``node: target``, its level ERROR
     while the fault is active and OK once it ended, its hardware_id the target, its values the fault's mode,
     value (where it has one), start and duration (s; ``end`` where it lasts)."""
     m = DiagnosticArray()

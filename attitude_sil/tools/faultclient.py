@@ -1,7 +1,7 @@
 """``attitude-sil fault``: inject a fault into a running graph.
 
 A fault is a line of the node's ``faults`` parameter
-(:mod:`attitude_sil.core.sim.faults`), so injecting one is adding a line to
+(:mod:`attitude_sil.core.faults`), so injecting one is adding a line to
 the list of the node that flies its target, through its parameter service
 (``ros2 param set`` could do the same). The line carries the sim time the
 fault was given (the graph's latest ``/clock``); the node starts it at the
@@ -20,7 +20,7 @@ from rclpy.parameter import Parameter, parameter_value_to_python
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from rosgraph_msgs.msg import Clock
 
-from attitude_sil.core.sim.faults import OWNER, parse_fault
+from attitude_sil.core.faults import OWNER, parse_fault
 from attitude_sil.errors import ParamClientError
 from attitude_sil.ros.contract import CLOCK, DIAGNOSTICS, check_namespace
 from attitude_sil.ros.convert import FAULT_PREFIX, stamp_to_ns

@@ -107,3 +107,23 @@ def test_a_fault_given_to_a_held_graph_flies_from_the_next_step_as_the_engine_fl
     assert q_graph.shape == engine.q_BN[0].shape and np.max(np.abs(q_graph - engine.q_BN[0])) <= 1e-9
     nominal = simulate(load_scenario(CONFIG / "hst_roll_step.yaml"), 1, duration=2.0, driver="compiled")
     assert np.max(np.abs(engine.wheel_speed[0, -1] - nominal.wheel_speed[0, -1])) > 1e-3  # the fault acted
+
+
+def test_the_sensors_node_takes_an_added_star_tracker_outage_from_its_next_step():
+    from attitude_sil.nodes.sensors_node import SensorsNode
+
+    context = rclpy.Context()
+    rclpy.init(args=[], context=context)
+    try:
+        node = SensorsNode(context=context)
+        node.k = 149  # as if it had sampled step 149 (t = 1.49 s)
+        (result,) = node.set_parameters([Parameter("faults", value=["star_tracker off at 1 for 2"])])
+        assert result.successful, result.reason
+        assert node.core.star_tracker.errors.outages == ((1.5, 3.5),)  # from the next step, for its 2 s
+        assert [str(f) for f in node.faults] == ["star_tracker off at 1.5 for 2"]
+        assert node.core.star_tracker.in_outage(150) and not node.core.star_tracker.in_outage(350)
+        (result,) = node.set_parameters([Parameter("faults", value=["star_tracker stuck at 1"])])
+        assert not result.successful and "not flown yet" in result.reason, result.reason
+        node.destroy_node()
+    finally:
+        rclpy.shutdown(context=context)

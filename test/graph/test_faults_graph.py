@@ -10,6 +10,7 @@ engine-written bag of the same episode all list alike.
 from __future__ import annotations
 
 import numpy as np
+import pytest
 from diagnostic_msgs.msg import DiagnosticStatus
 
 from attitude_sil.cli import main
@@ -58,3 +59,20 @@ def _said(msg) -> tuple:
     return ((msg.header.stamp.sec, msg.header.stamp.nanosec),
             [(s.level, s.name, s.message, s.hardware_id, [(kv.key, kv.value) for kv in s.values])
              for s in msg.status])
+
+
+def test_a_star_tracker_off_flies_on_the_graph_as_stepped_and_says_its_start_and_end(tmp_path):
+    fault = "star_tracker off at 0.5 for 0.5"
+    scn = load_scenario(CONFIG / "hst_roll_step_sensors.yaml").with_values("sensors", faults=[fault])
+    graph = run_graph(scn, duration=1.5, record_dir=tmp_path / "bag", keep_trajectory=True, progress=False)
+    stepped = simulate(scn, 1, duration=1.5)
+    for name in ("q_BN", "q_BN_est", "attitude_sigma"):
+        assert np.max(np.abs(getattr(graph.trajectory, name) - getattr(stepped, name))) <= 1e-9, name
+    assert graph.metrics["faults"] == [fault]
+    said = [(r.log_time_ns, [(s.level, s.name, s.message) for s in m.status])
+            for r, m in open_bag(tmp_path / "bag").iter_decoded(["/diagnostics"])]
+    assert said == [(500_000_000, [(ord(DiagnosticStatus.ERROR), "sensors: star_tracker", f"fault: {fault}")]),
+                    (1_000_000_000, [(ord(DiagnosticStatus.OK), "sensors: star_tracker", f"fault ended: {fault}")])]
+    reports = [m for _, m in open_bag(tmp_path / "bag").iter_decoded(["/star_tracker"])]
+    blind = [m.header.stamp.nanosec * 1e-9 for m in reports if m.orientation_covariance[0] == -1.0]
+    assert blind == pytest.approx([0.5 + 0.1 * j for j in range(5)])  # the exposures at 0.5 ... 0.9 s

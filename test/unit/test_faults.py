@@ -15,8 +15,8 @@ import numpy as np
 import pytest
 
 from attitude_sil.cli import main
+from attitude_sil.core.faults import CATALOGUE, FLOWN, VALUED, Fault, parse_fault, parse_faults
 from attitude_sil.core.sim.engine import simulate
-from attitude_sil.core.sim.faults import CATALOGUE, FLOWN, VALUED, Fault, parse_fault, parse_faults
 from attitude_sil.core.sim.scenario import default_config_dir, load_scenario
 from attitude_sil.errors import ScenarioError
 
@@ -27,6 +27,7 @@ CONFIG = default_config_dir()
     ("wheel1 stuck at 2", Fault("wheel", 1, "stuck", None, 2.0)),
     ("wheel3 lost", Fault("wheel", 3, "lost", None, 0.0)),
     ("  wheel12   lost   at 0.25 ", Fault("wheel", 12, "lost", None, 0.25)),
+    ("star_tracker off at 30 for 60", Fault("star_tracker", None, "off", None, 30.0, 60.0)),
 ])
 def test_a_fault_line_reads_as_written(text, fault):
     assert parse_fault(text) == fault
@@ -42,7 +43,7 @@ def test_a_fault_line_reads_as_written(text, fault):
     ("controller stuck", "a controller cannot be 'stuck'"),
     ("wheel1 friction at 2", "friction needs a value"),
     ("gyro.x stuck at 3", "gyro stuck is not flown yet"),
-    ("star_tracker off at 30 for 60", "star_tracker off is not flown yet"),
+    ("star_tracker stuck at 30 for 60", "star_tracker stuck is not flown yet"),
     ("wheel1 lost at -1", "'at' must be >= 0 s"),
     ("wheel1 lost at nan", "must be finite"),
     ("wheel1 lost at two", "at 'two' is not a number"),
@@ -106,3 +107,17 @@ def test_a_wheel_fault_in_the_list_is_the_failure_keys_run_bit_for_bit_in_both_d
             np.testing.assert_array_equal(getattr(a, name), getattr(b, name), err_msg=f"{driver} {name}")
         assert not np.array_equal(a.wheel_speed[:, :, 1], nominal.wheel_speed[:, :, 1])  # the fault acts
         assert np.array_equal(a.wheel_speed[:, :51], nominal.wheel_speed[:, :51])  # and not before 0.5 s
+
+
+def test_a_star_tracker_off_is_the_outage_of_its_window_bit_for_bit():
+    base = load_scenario(CONFIG / "hst_roll_step_sensors.yaml")
+    listed = base.with_values("sensors", faults=["star_tracker off at 0.5 for 1"])
+    scheduled = base.with_values("sensors", **{"star_tracker.outages_s": [0.5, 1.5]})
+    a, b, nominal = (simulate(s, 2, duration=2.0, driver="stepwise") for s in (listed, scheduled, base))
+    for name in ("q_BN", "q_BN_est", "attitude_sigma"):
+        np.testing.assert_array_equal(getattr(a, name), getattr(b, name), err_msg=name)
+    sigma = np.max(a.attitude_sigma[0], axis=1)
+    grown, nominal_sigma = sigma[149], np.max(nominal.attitude_sigma[0, 149])  # 1.49 s: the filter flew blind
+    assert grown > 1.3 * nominal_sigma  # the outage acts: the filter's attitude sigma grows on the gyro alone
+    with pytest.raises(ScenarioError, match="needs the sensing loop"):  # the list under /**, no sensing loop
+        load_scenario(CONFIG / "hst_roll_step.yaml").with_values("wheels", faults=["star_tracker off at 1"])

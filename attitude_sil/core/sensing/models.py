@@ -45,6 +45,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from attitude_sil.core.faults import outage_windows
 from attitude_sil.core.plant.quaternion import (
     cross_matrix,
     quat_conjugate,
@@ -248,7 +249,7 @@ class StarTrackerErrors:
                    about_boresight=v["star_tracker.about_boresight_arcsec"] * ARCSEC,
                    boresight_axis=int(v["star_tracker.boresight_axis"]),
                    rate_hz=v["star_tracker.rate_hz"], latency=v["star_tracker.latency_s"],
-                   outages=tuple(zip(flat[0::2], flat[1::2], strict=True)))
+                   outages=tuple(zip(flat[0::2], flat[1::2], strict=True)) + tuple(outage_windows(v)))
 
     @property
     def sigma_B(self) -> np.ndarray:

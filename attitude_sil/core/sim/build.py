@@ -21,6 +21,7 @@ from attitude_sil.core.control.bank import ControllerBank
 from attitude_sil.core.control.laws.bdot import BDot
 from attitude_sil.core.control.momentum import CrossProductDumping, DipoleCommand
 from attitude_sil.core.environment.ephemeris import Ephemeris, FieldAlongOrbit
+from attitude_sil.core.faults import first_step, wheel_failure_values
 from attitude_sil.core.plant.actuators import RPM, NoActuator, SpeedLoopWheels, TorqueActuator
 from attitude_sil.core.plant.disturbance import DisturbanceModel, orbit_rate
 from attitude_sil.core.plant.linear import LinearizedPlant
@@ -32,7 +33,6 @@ from attitude_sil.core.plant.scene import BodyScene, body_scene
 from attitude_sil.core.plant.wheels import GEOMETRIES, MotorParams, WheelAssembly
 from attitude_sil.core.sensing.mekf import Mekf, MekfSettings
 from attitude_sil.core.sensing.models import SensorSuite
-from attitude_sil.core.sim.faults import first_step, wheel_failure_values
 from attitude_sil.core.sim.models import Guidance, MagneticLoop, Plant, Sensing, Wheels, per_episode
 from attitude_sil.core.sim.params import NODE_PARAMS, spec_for
 from attitude_sil.core.sim.scenario import Scenario, effective_values

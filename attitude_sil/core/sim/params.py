@@ -21,6 +21,7 @@ from attitude_sil.core.control.shared import AERO, CONTROLLER_SHARED, ORBIT
 from attitude_sil.core.environment.earth_time import epoch_from_text
 from attitude_sil.core.environment.ephemeris import ORBIT_MODELS
 from attitude_sil.core.environment.geomagnetic import FIELD_MODELS
+from attitude_sil.core.faults import faults_rule
 from attitude_sil.core.paramspec import ParamSpec
 from attitude_sil.core.paramspec import double as _d
 from attitude_sil.core.paramspec import double_array as _da
@@ -29,7 +30,6 @@ from attitude_sil.core.paramspec import nonzero as _nonzero
 from attitude_sil.core.plant.disturbance import DISTURBANCE_MODELS
 from attitude_sil.core.plant.magnetorquers import rod_axes
 from attitude_sil.core.plant.wheels import HST_MOTOR
-from attitude_sil.core.sim.faults import faults_rule
 from attitude_sil.core.sim.lockstep import COMMAND_TIMINGS
 from attitude_sil.errors import ScenarioError
 
@@ -59,6 +59,11 @@ def _refusal(check: Callable[[Any], object]) -> Callable[[Any], str]:
         return ""
     return rule
 
+
+#: a node's fault list (the wheels', the sensors'): the same list under /**, each node flying its targets'
+_FAULTS = ParamSpec("faults", "string_array", [], "faults of the run, one a line: TARGET MODE [VALUE] [at T] "
+                    "[for D], e.g. 'wheel1 stuck at 2' (docs/faults.md); set under /**; lines may be added while "
+                    "the graph runs (attitude-sil fault)", rule=faults_rule, runtime=True)
 
 #: an ISO 8601 UTC time
 _epoch_rule = _refusal(epoch_from_text)
@@ -181,9 +186,7 @@ NODE_PARAMS: dict[str, list[ParamSpec]] = {
         _d("motor.speed_max_rpm", HST_MOTOR["motor.speed_max_rpm"], "wheel speed limit, rpm",
            min=0.0, min_exclusive=True),
         _da("initial_speed_rpm", [], "initial wheel speeds, rpm (empty: all zero)"),
-        ParamSpec("faults", "string_array", [], "faults of the run, one a line: TARGET MODE [VALUE] [at T] "
-                  "[for D], e.g. 'wheel1 stuck at 2' (docs/faults.md); set under /**; lines may be added while "
-                  "the graph runs (attitude-sil fault)", rule=faults_rule, runtime=True),
+        _FAULTS,
         ParamSpec("failure.wheel", "integer", 0, "wheel that fails at failure.time: 0 none, 1..n that wheel of "
                   "the geometry (reaction_wheels only)", min=0),
         _d("failure.time", 0.0, "sim time the wheel fails (the first step at or after it), s", min=0.0),
@@ -301,7 +304,8 @@ NODE_PARAMS: dict[str, list[ParamSpec]] = {
         ParamSpec("star_tracker.boresight_axis", "integer", 2, "body axis of the star tracker boresight: 0, 1, 2",
                   min=0, max=2),
         _da("star_tracker.outages_s", [], "scheduled outages: (start, end) pairs of exposure times, s; an "
-            "exposure inside one reports no attitude", min=0.0),
+            "exposure inside one reports no attitude (a fault 'star_tracker off at T for D' is one too)", min=0.0),
+        _FAULTS,
         _d("magnetometer.noise_nt", 50.0, "magnetometer 1-sigma white noise per axis, nT (assumed: a CubeSat-class "
            "magnetoresistive sensor)", min=0.0),
         _da("magnetometer.bias_nt", [0.0, 0.0, 0.0], "magnetometer constant bias per axis, nT", lengths=(3,)),

@@ -33,10 +33,10 @@ from attitude_sil.core import yaml12
 from attitude_sil.core.control.laws.bdot import detumble_gain
 from attitude_sil.core.control.momentum import BDOT
 from attitude_sil.core.environment.ephemeris import Ephemeris
+from attitude_sil.core.faults import FAULT_NODES, parse_faults, wheel_failure_values
 from attitude_sil.core.plant.rigid_body import inertia_matrix
 from attitude_sil.core.plant.wheels import GEOMETRIES
 from attitude_sil.core.sensing.models import SensorSuite
-from attitude_sil.core.sim.faults import parse_faults, wheel_failure_values
 from attitude_sil.core.sim.paramfile import node_key, section_node
 from attitude_sil.core.sim.params import GLOBAL_NODE, NODE_PARAMS, SCENARIO_NODE
 from attitude_sil.errors import ScenarioError
@@ -284,7 +284,8 @@ def _check_faults(scn: Scenario) -> None:
     w = scn.values["wheels"]
     n_wheels = GEOMETRIES[w["geometry"]]().shape[1] if w["actuator"] == "reaction_wheels" else None
     try:
-        parse_faults(w["faults"], scn.duration, n_wheels)
+        for node in FAULT_NODES:  # each node's list (one list under /**, or a section's own)
+            parse_faults(scn.values[node]["faults"], scn.duration, n_wheels, scn.has_sensors)
         wheel_failure_values(w)
     except ScenarioError as exc:
         raise ScenarioError(f"{scn.source}: {exc}") from None

@@ -39,8 +39,12 @@ CATALOGUE: dict[str, tuple[str, ...]] = {
 #: target kind -> the node that flies its faults and publishes them on /diagnostics
 OWNER: dict[str, str] = {"wheel": "wheels", "gyro": "sensors", "star_tracker": "sensors", "magnetometer": "sensors",
                          "magnetorquers": "magnetorquers", "controller": "controller"}
+#: the nodes that declare the ``faults`` list today
+FAULT_NODES = ("wheels", "sensors")
 #: (target kind, mode) pairs the drivers fly today
-FLOWN: frozenset[tuple[str, str]] = frozenset({("wheel", "lost"), ("wheel", "stuck")})
+FLOWN: frozenset[tuple[str, str]] = frozenset({("wheel", "lost"), ("wheel", "stuck"), ("star_tracker", "off")})
+#: target kinds that need the sensing loop (scenario.sensors)
+SENSED = frozenset({"gyro", "star_tracker", "magnetometer"})
 #: modes that last once they happen (a wheel that seized stays seized): no ``for``
 PERMANENT = frozenset({("wheel", "lost"), ("wheel", "stuck")})
 #: modes whose VALUE is a size (a gain, a factor, a limit, a time)
@@ -146,11 +150,18 @@ def _number(word: str, where: str, what: str) -> float:
     return x
 
 
-def parse_faults(lines, duration_s: float, n_wheels: int | None) -> list[Fault]:
+def outage_windows(values: dict) -> list[tuple[float, float]]:
+    """The star tracker's ``off`` faults of the ``sensors`` parameters ``values`` as outage windows
+    [start, end) of exposure time, s (end: infinity for one that lasts)."""
+    return [(f.time_s, math.inf if f.duration_s is None else f.time_s + f.duration_s)
+            for f in faults_of(values, "sensors") if f.kind == "star_tracker" and f.mode == "off"]
+
+
+def parse_faults(lines, duration_s: float, n_wheels: int | None, sensing: bool = True) -> list[Fault]:
     """Every fault of a ``faults`` list, checked against the run: each starts within it (0 <= T <= the
     duration, when the run has one: ``duration_s`` > 0), a wheel is one of the geometry's (``n_wheels``;
-    None: no reaction wheels to fail) and at most one wheel fails in a run (the drivers' failure record
-    holds one).
+    None: no reaction wheels to fail), at most one wheel fails in a run (the drivers' failure record
+    holds one), and a sensor fails only where the sensing loop runs (``sensing``).
 
     Raises
     ------
@@ -161,6 +172,8 @@ def parse_faults(lines, duration_s: float, n_wheels: int | None) -> list[Fault]:
     for f in faults:
         if duration_s > 0.0 and f.time_s > duration_s:
             raise ScenarioError(f"fault '{f}': at {f.time_s:g} s is after the run's end ({duration_s:g} s)")
+        if f.kind in SENSED and not sensing:
+            raise ScenarioError(f"fault '{f}': a {f.kind} fault needs the sensing loop (scenario.sensors true)")
         if f.kind == "wheel":
             if n_wheels is None:
                 raise ScenarioError(f"fault '{f}': a wheel fault needs wheels.actuator reaction_wheels")
