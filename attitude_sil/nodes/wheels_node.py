@@ -29,7 +29,8 @@ from attitude_sil.core.faults import (
     parse_faults,
     wheel_failure_values,
 )
-from attitude_sil.core.plant.wheels import allocation_over
+from attitude_sil.core.plant.actuators import RPM
+from attitude_sil.core.plant.wheels import allocation_over, null_vector
 from attitude_sil.core.sim.build import available_wheels, build_wheels
 from attitude_sil.core.sim.lockstep import CommandHold, StepSequencer, tick_period_ns
 from attitude_sil.errors import ScenarioError
@@ -93,6 +94,17 @@ class WheelsNode(LockstepNode):
                 wheel_failure_values(values)
             except ScenarioError as exc:
                 return str(exc)
+        if {"null_space.time_constant_s", "allocation", "available"} & set(pending) \
+                and values["null_space.time_constant_s"] > 0.0 and self.param("actuator") == "reaction_wheels":
+            try:  # the wheels in use keep a free direction for the speed loop
+                assembly = self.core.assembly
+                allocation = allocation_over(assembly.axes_B, available_wheels(
+                    {**values, "allocation": "available"} if "available" in pending else values, assembly.n_wheels))
+                if not np.any(null_vector(assembly.axes_B, allocation)):
+                    return ("wheels.null_space.time_constant_s: the wheels in use have no null space (one free "
+                            "direction is needed: e.g. four wheels in a pyramid)")
+            except ScenarioError as exc:
+                return str(exc)
         if not {"allocation", "available"} & set(pending) or self.param("actuator") != "reaction_wheels":
             return ""
         if "available" in pending:  # a set is checked as it is given, whichever allocation flies now
@@ -106,6 +118,10 @@ class WheelsNode(LockstepNode):
     def on_parameters_set(self, names: list[str]) -> None:
         if "faults" in names:
             self._inject(added_faults(self._fault_lines, self.param("faults")))
+        if {"null_space.time_constant_s", "null_space.speed_rpm"} & set(names) \
+                and self.param("actuator") == "reaction_wheels":  # from the next step on
+            self.core.assembly.set_null_space(self.param("null_space.time_constant_s"),
+                                              self.param("null_space.speed_rpm") * RPM)
         if {"allocation", "available"} & set(names) and self.param("actuator") == "reaction_wheels":
             # the next command on is shared among the wheels now available (the episode goes on)
             self.core.assembly.set_available(available_wheels(self.values(), self.core.assembly.n_wheels))

@@ -90,6 +90,9 @@ class WheelParams(NamedTuple):
     speed_max: float  # rad/s
     v_max: float  # bus voltage, V
     dt: float  # the held interval, s
+    null: np.ndarray  # (n,) unit null vector of the allocated wheels' axes (zeros: none), for speed management
+    null_tau: float  # time constant of the null-space speed loop, s (0: off)
+    null_target: float  # target of the wheel speeds' component along ``null``, rad/s
 
 
 class WheelFailure(NamedTuple):
@@ -112,7 +115,7 @@ def wheel_params_copy(wp):
     reference count)."""
     return WheelParams(wp.allocation.copy(), wp.axes.copy(), wp.phi_T.copy(), wp.gamma.copy(), wp.k_b.copy(),
                        wp.headroom.copy(), wp.k_i.copy(), wp.r_a.copy(), wp.coast.copy(), wp.j_m, wp.b_m,
-                       wp.speed_max, wp.v_max, wp.dt)
+                       wp.speed_max, wp.v_max, wp.dt, wp.null.copy(), wp.null_tau, wp.null_target)
 
 
 @njit(cache=True, error_model="numpy")

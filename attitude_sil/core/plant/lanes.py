@@ -245,18 +245,35 @@ def rk4_body_lanes(m, b, dt, substeps):
 
 # ---------------------------------------------------------------- the wheels
 @njit(cache=True, inline="always")
+def _null_volts(xw, p, wp, k_b, k_i, r_a):
+    # the null-space speed loop's voltage along the unit null vector n of episode p: the wheel speeds' component
+    # s = n . omega_w is driven to its target s* as a first order of time constant tau (L/R neglected):
+    # J s' = K_i i - B s, R i = e - K_b s, e = (K_b + R B / K_i) s* + k_v (s* - s) gives J s' = (K_i (K_b + k_v)
+    # / R + B) (s* - s), so k_v = R J / (K_i tau) - K_b - R B / K_i. Along n the wheels make no body torque
+    s = 0.0
+    for i in range(xw.shape[0]):
+        s += wp.null[i] * xw[i, SPEED, p]
+    target, friction = wp.null_target, r_a * wp.b_m / k_i
+    k_v = r_a * wp.j_m / (k_i * wp.null_tau) - k_b - friction
+    return (k_b + friction) * target + k_v * (target - s)
+
+
+@njit(cache=True, inline="always")
 def _drive(m, j, xw, b, mot, torque, wp):
     # wheel j's drive voltage per episode into row E of the motor block: the allocation (eq. 14), the inverse
-    # motor model in torque mode, the driver's current headroom around the back-EMF, no drive beyond the speed
-    # limit, the bus voltage
+    # motor model in torque mode, the null-space speed loop, the driver's current headroom around the back-EMF,
+    # no drive beyond the speed limit, the bus voltage
     a0, a1, a2 = wp.allocation[j, 0], wp.allocation[j, 1], wp.allocation[j, 2]
     b_m, speed_max, v_max = wp.b_m, wp.speed_max, wp.v_max
+    n_j, tau_n = wp.null[j], wp.null_tau
     for p in range(m):
         speed = xw[j, SPEED, p]
         v = -(a0 * b[U, p] + a1 * b[U + 1, p] + a2 * b[U + 2, p])
         emf = mot[KB, p] * speed
         if torque[p]:  # wheel torque -> steady current -> volts
             v = mot[RA, p] * (v + b_m * speed) / mot[KI, p] + emf
+        if tau_n > 0.0 and n_j != 0.0:
+            v += n_j * _null_volts(xw, p, wp, mot[KB, p], mot[KI, p], mot[RA, p])
         v = min(max(v, emf - mot[HEAD, p]), emf + mot[HEAD, p])
         v = emf if (abs(speed) >= speed_max and (v - emf) * speed > 0.0) else v
         mot[E, p] = min(max(v, -v_max), v_max)

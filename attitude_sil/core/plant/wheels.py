@@ -189,6 +189,21 @@ def allocation_over(axes_B: np.ndarray, available: list[int] | None = None) -> n
     return out
 
 
+def null_vector(axes_B: np.ndarray, allocation: np.ndarray) -> np.ndarray:
+    """The unit vector (n,) along which the wheels the ``allocation`` (n, 3) uses make no body torque
+    (``axes_B @ n = 0``), signed so its last nonzero entry is positive; zeros where those wheels have no free
+    direction, or more than one. HST's pyramid: (-1/2, 1/2, -1/2, 1/2)."""
+    a = np.asarray(axes_B, dtype=float)
+    used = np.flatnonzero(np.any(allocation != 0.0, axis=1))
+    out = np.zeros(a.shape[1])
+    if used.size - np.linalg.matrix_rank(a[:, used]) != 1:
+        return out
+    n = np.linalg.svd(a[:, used])[2][-1]
+    n[np.abs(n) < 1e-15] = 0.0
+    out[used] = n * np.sign(n[np.flatnonzero(n)[-1]])
+    return out
+
+
 class WheelAssembly:
     """A set of identical PMDC reaction wheels on fixed axes, batch over episodes.
 
@@ -222,9 +237,26 @@ class WheelAssembly:
         self.set_motors(motors)
 
     def set_available(self, available: list[int] | None) -> None:
-        """Share commands from now on among the wheels ``available`` (0-based; None: all), :func:`allocation_over`."""
+        """Share commands from now on among the wheels ``available`` (0-based; None: all), :func:`allocation_over`;
+        the null-space speed loop runs over them (none if they have no free direction)."""
         self.allocation = allocation_over(self.axes_B, available)
-        self.params = self.params._replace(allocation=self.allocation)
+        self.params = self.params._replace(allocation=self.allocation,
+                                           null=null_vector(self.axes_B, self.allocation))
+
+    def set_null_space(self, time_constant: float, target: float) -> None:
+        """Drive the wheel speeds' component along :func:`null_vector` to ``target`` (rad/s) as a first order
+        of ``time_constant`` (s; 0: off), from the next step on: speed management that makes no body torque.
+
+        Raises
+        ------
+        ScenarioError
+            A time constant > 0 where the wheels in use have no free direction.
+        """
+        null = null_vector(self.axes_B, self.allocation)
+        if time_constant > 0.0 and not np.any(null):
+            raise ScenarioError("wheels.null_space.time_constant_s: the wheels in use have no null space (one free "
+                                "direction is needed: e.g. four wheels in a pyramid)")
+        self.params = self.params._replace(null=null, null_tau=float(time_constant), null_target=float(target))
 
     def set_motors(self, motors: list[MotorParams] | None) -> None:
         """Per-episode motor constants (one :class:`MotorParams` per episode), or None for the nominal motor.
@@ -253,9 +285,11 @@ class WheelAssembly:
                                                                mp.back_emf_constant, mp.rotor_inertia,
                                                                mp.viscous_friction, self.dt)
         b = self.motor
+        # the null-space loop as it was (off at first: WheelAssembly.set_null_space)
+        null = self.params[-3:] if hasattr(self, "params") else (np.zeros(self.n_wheels), 0.0, 0.0)
         self.params = WheelParams(self.allocation, self.axes_B, self.phi_e, self.gamma_e, self.k_b_e,
                                   self.headroom_e, self.k_i_e, self.r_a_e, self.coast, float(b.rotor_inertia),
-                                  float(b.viscous_friction), float(b.speed_max), float(b.v_max), self.dt)
+                                  float(b.viscous_friction), float(b.speed_max), float(b.v_max), self.dt, *null)
 
     # -- helpers -------------------------------------------------------------
     def initial_state(self, n_episodes: int, speed0: np.ndarray | None = None) -> np.ndarray:

@@ -187,6 +187,12 @@ NODE_PARAMS: dict[str, list[ParamSpec]] = {
            min=0.0, min_exclusive=True),
         _da("initial_speed_rpm", [], "initial wheel speeds, rpm (empty: all zero)"),
         _FAULTS,
+        _d("null_space.time_constant_s", 0.0, "null-space speed management: the wheel speeds' component along the "
+           "null vector of the wheels in use goes to null_space.speed_rpm as a first order of this time constant, "
+           "s, making no body torque (0: off; needs one free direction, e.g. a four-wheel pyramid)", min=0.0,
+           runtime=True),
+        _d("null_space.speed_rpm", 0.0, "target of the wheel speeds' component along the unit null vector (HST's "
+           "pyramid: (-1/2, 1/2, -1/2, 1/2)), rpm: biases the wheels away from zero speed", runtime=True),
         ParamSpec("failure.wheel", "integer", 0, "wheel that fails at failure.time: 0 none, 1..n that wheel of "
                   "the geometry (reaction_wheels only)", min=0),
         _d("failure.time", 0.0, "sim time the wheel fails (the first step at or after it), s", min=0.0),
