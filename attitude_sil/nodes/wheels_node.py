@@ -94,17 +94,11 @@ class WheelsNode(LockstepNode):
                 wheel_failure_values(values)
             except ScenarioError as exc:
                 return str(exc)
-        if {"null_space.time_constant_s", "allocation", "available"} & set(pending) \
-                and values["null_space.time_constant_s"] > 0.0 and self.param("actuator") == "reaction_wheels":
-            try:  # the wheels in use keep a free direction for the speed loop
-                assembly = self.core.assembly
-                allocation = allocation_over(assembly.axes_B, available_wheels(
-                    {**values, "allocation": "available"} if "available" in pending else values, assembly.n_wheels))
-                if not np.any(null_vector(assembly.axes_B, allocation)):
-                    return ("wheels.null_space.time_constant_s: the wheels in use have no null space (one free "
-                            "direction is needed: e.g. four wheels in a pyramid)")
-            except ScenarioError as exc:
-                return str(exc)
+        if pending.get("null_space.time_constant_s", 0.0) > 0.0 and self.param("actuator") == "reaction_wheels":
+            assembly = self.core.assembly  # the wheels in use keep a free direction for the speed loop
+            if not np.any(null_vector(assembly.axes_B, assembly.allocation)):
+                return ("wheels.null_space.time_constant_s: the wheels in use have no null space (one free "
+                        "direction is needed: e.g. four wheels in a pyramid)")
         if not {"allocation", "available"} & set(pending) or self.param("actuator") != "reaction_wheels":
             return ""
         if "available" in pending:  # a set is checked as it is given, whichever allocation flies now
