@@ -70,7 +70,7 @@ def test_the_knowledge_error_of_a_blinded_tracker_grows_as_gyro_error_propagatio
         rows.append((tau, measured, np.sqrt(_reference(gyro, theta0, beta0, b0, tau)),
                      np.sqrt(_reference(gyro, theta0, beta0, b0, tau, arw=False)),
                      np.sqrt(_reference(gyro, theta0, beta0, b0, tau, bias=False))))
-    for tau, measured, full, no_arw, no_bias in rows:
+    for tau, measured, full, _, _ in rows:
         assert measured == pytest.approx(full, rel=0.10), (tau, measured, full)
     assert max(abs(m / a - 1.0) for _, m, _, a, _ in rows) > 0.10  # the random walk is needed
     assert max(abs(m / b - 1.0) for _, m, _, _, b in rows) > 0.10  # and so are the bias terms
