@@ -76,3 +76,14 @@ def test_a_star_tracker_off_flies_on_the_graph_as_stepped_and_says_its_start_and
     reports = [m for _, m in open_bag(tmp_path / "bag").iter_decoded(["/star_tracker"])]
     blind = [m.header.stamp.nanosec * 1e-9 for m in reports if m.orientation_covariance[0] == -1.0]
     assert blind == pytest.approx([0.5 + 0.1 * j for j in range(5)])  # the exposures at 0.5 ... 0.9 s
+
+
+def test_the_wheel_failure_preset_reallocates_on_the_graph_as_in_the_engine():
+    scn = load_scenario(CONFIG / "hst_wheel_failure.yaml").with_values("wheels", reallocate_on_fault=True)
+    graph = run_graph(scn, duration=3.0, keep_trajectory=True, progress=False)
+    engine = simulate(scn, 1, duration=3.0, driver="compiled")
+    for name in ("q_BN", "omega_BN_B", "wheel_speed"):
+        assert np.max(np.abs(getattr(graph.trajectory, name) - getattr(engine, name))) <= 1e-9, name
+    assert graph.metrics["faults"] == ["wheel1 lost at 2"]
+    kept = simulate(scn.with_values("wheels", reallocate_on_fault=False), 1, duration=3.0, driver="compiled")
+    assert np.max(np.abs(engine.q_BN - kept.q_BN)) > 1e-6  # the reallocation acted

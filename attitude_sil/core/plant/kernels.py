@@ -93,6 +93,8 @@ class WheelParams(NamedTuple):
     null: np.ndarray  # (n,) unit null vector of the allocated wheels' axes (zeros: none), for speed management
     null_tau: float  # time constant of the null-space speed loop, s (0: off)
     null_target: float  # target of the wheel speeds' component along ``null``, rad/s
+    realloc: np.ndarray  # (n, n, 3) the allocation once wheel f failed: over the others (ideal isolation)
+    reallocate: bool  # a failed wheel is dropped from the allocation at its failure's step
 
 
 class WheelFailure(NamedTuple):
@@ -115,7 +117,8 @@ def wheel_params_copy(wp):
     reference count)."""
     return WheelParams(wp.allocation.copy(), wp.axes.copy(), wp.phi_T.copy(), wp.gamma.copy(), wp.k_b.copy(),
                        wp.headroom.copy(), wp.k_i.copy(), wp.r_a.copy(), wp.coast.copy(), wp.j_m, wp.b_m,
-                       wp.speed_max, wp.v_max, wp.dt, wp.null.copy(), wp.null_tau, wp.null_target)
+                       wp.speed_max, wp.v_max, wp.dt, wp.null.copy(), wp.null_tau, wp.null_target,
+                       wp.realloc.copy(), wp.reallocate)
 
 
 @njit(cache=True, error_model="numpy")

@@ -259,20 +259,27 @@ def _null_volts(xw, p, wp, k_b, k_i, r_a):
 
 
 @njit(cache=True, inline="always")
-def _drive(m, j, xw, b, mot, torque, wp):
-    # wheel j's drive voltage per episode into row E of the motor block: the allocation (eq. 14), the inverse
-    # motor model in torque mode, the null-space speed loop, the driver's current headroom around the back-EMF,
-    # no drive beyond the speed limit, the bus voltage
-    a0, a1, a2 = wp.allocation[j, 0], wp.allocation[j, 1], wp.allocation[j, 2]
+def _drive(m, j, xw, b, mot, torque, wp, fail, lo, k, reallocate):
+    # wheel j's drive voltage per episode into row E of the motor block: the allocation (eq. 14; with
+    # ``reallocate``, over the wheels left once a wheel failed: ideal isolation), the inverse motor model in
+    # torque mode, the null-space speed loop (not once a wheel is dropped), the driver's current headroom around
+    # the back-EMF, no drive beyond the speed limit, the bus voltage
     b_m, speed_max, v_max = wp.b_m, wp.speed_max, wp.v_max
     n_j, tau_n = wp.null[j], wp.null_tau
+    one = fail[0].shape[0] == 1
     for p in range(m):
+        f = -1  # the failed wheel the allocation leaves out
+        if reallocate:
+            pf = 0 if one else lo + p
+            if fail[0][pf] >= 0 and k >= fail[1][pf]:
+                f = fail[0][pf]
+        alloc = wp.allocation[j] if f < 0 else wp.realloc[f, j]
         speed = xw[j, SPEED, p]
-        v = -(a0 * b[U, p] + a1 * b[U + 1, p] + a2 * b[U + 2, p])
+        v = -(alloc[0] * b[U, p] + alloc[1] * b[U + 1, p] + alloc[2] * b[U + 2, p])
         emf = mot[KB, p] * speed
         if torque[p]:  # wheel torque -> steady current -> volts
             v = mot[RA, p] * (v + b_m * speed) / mot[KI, p] + emf
-        if tau_n > 0.0 and n_j != 0.0:
+        if tau_n > 0.0 and n_j != 0.0 and f < 0:
             v += n_j * _null_volts(xw, p, wp, mot[KB, p], mot[KI, p], mot[RA, p])
         v = min(max(v, emf - mot[HEAD, p]), emf + mot[HEAD, p])
         v = emf if (abs(speed) >= speed_max and (v - emf) * speed > 0.0) else v
@@ -321,12 +328,13 @@ def wheel_lanes(m, lo, k, xw, xn, b, mot, torque, wp, fail):
     """
     axes, j_m, coast0, coast1 = wp.axes, wp.j_m, wp.coast[0], wp.coast[1]
     failing = fail[0].shape[0] > 1 or fail[0][0] >= 0
+    reallocate = failing and wp.reallocate
     for i in range(3):
         for p in range(m):
             b[TC + i, p] = 0.0
             b[H + i, p] = 0.0
     for j in range(xw.shape[0]):
-        _drive(m, j, xw, b, mot, torque, wp)
+        _drive(m, j, xw, b, mot, torque, wp, fail, lo, k, reallocate)
         if failing:
             _fail(m, j, lo, k, fail, mot)
         for r in range(3):  # the exact motor step, one state at a time (few rows written per loop)

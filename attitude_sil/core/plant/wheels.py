@@ -242,6 +242,22 @@ class WheelAssembly:
         self.allocation = allocation_over(self.axes_B, available)
         self.params = self.params._replace(allocation=self.allocation,
                                            null=null_vector(self.axes_B, self.allocation))
+        self.set_reallocation(self.params.reallocate, available)
+
+    def set_reallocation(self, on: bool, available: list[int] | None = None) -> None:
+        """With ``on``, a wheel that fails is dropped from the allocation at its failure's step (ideal
+        isolation: a perfect, instant detector): the command is shared among the others of ``available``
+        (0-based; None: all), where they span the body axes, else as before."""
+        n = self.n_wheels
+        base = list(range(n)) if available is None else sorted(set(available))
+        realloc = np.zeros((n, n, 3))
+        for f in range(n):
+            rest = [i for i in base if i != f]
+            try:
+                realloc[f] = allocation_over(self.axes_B, rest)
+            except ScenarioError:  # the others do not span the axes: keep sharing as before
+                realloc[f] = self.allocation
+        self.params = self.params._replace(realloc=realloc, reallocate=bool(on))
 
     def set_null_space(self, time_constant: float, target: float) -> None:
         """Drive the wheel speeds' component along :func:`null_vector` to ``target`` (rad/s) as a first order
@@ -285,8 +301,10 @@ class WheelAssembly:
                                                                mp.back_emf_constant, mp.rotor_inertia,
                                                                mp.viscous_friction, self.dt)
         b = self.motor
-        # the null-space loop as it was (off at first: WheelAssembly.set_null_space)
-        null = self.params[-3:] if hasattr(self, "params") else (np.zeros(self.n_wheels), 0.0, 0.0)
+        # the null-space loop and the reallocation as they were (off at first: WheelAssembly.set_null_space,
+        # WheelAssembly.set_reallocation)
+        n = self.n_wheels
+        null = self.params[-5:] if hasattr(self, "params") else (np.zeros(n), 0.0, 0.0, np.zeros((n, n, 3)), False)
         self.params = WheelParams(self.allocation, self.axes_B, self.phi_e, self.gamma_e, self.k_b_e,
                                   self.headroom_e, self.k_i_e, self.r_a_e, self.coast, float(b.rotor_inertia),
                                   float(b.viscous_friction), float(b.speed_max), float(b.v_max), self.dt, *null)

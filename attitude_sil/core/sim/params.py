@@ -193,6 +193,9 @@ NODE_PARAMS: dict[str, list[ParamSpec]] = {
            runtime=True),
         _d("null_space.speed_rpm", 0.0, "target of the wheel speeds' component along the unit null vector (HST's "
            "pyramid: (-1/2, 1/2, -1/2, 1/2)), rpm: biases the wheels away from zero speed", runtime=True),
+        ParamSpec("reallocate_on_fault", "bool", False, "ideal isolation: at the step a wheel fault becomes "
+                  "active the allocation drops that wheel and shares commands among the others (a perfect, instant "
+                  "detector; the bound a real one approaches)"),
         ParamSpec("failure.wheel", "integer", 0, "wheel that fails at failure.time: 0 none, 1..n that wheel of "
                   "the geometry (reaction_wheels only)", min=0),
         _d("failure.time", 0.0, "sim time the wheel fails (the first step at or after it), s", min=0.0),

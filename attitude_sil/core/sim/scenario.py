@@ -121,7 +121,7 @@ class Scenario:
     def has_sensors(self) -> bool:
         """Whether the sensors and the estimator run: ``scenario.sensors``, estimate feedback, or a section of
         either node in the file."""
-        shared = {"control_period"}  # what a /** section gives every node
+        shared = {"control_period", "faults"}  # what a /** section gives every node (a fault list does not start it)
         return bool(self.values[SCENARIO_NODE]["sensors"] or self.feedback == "estimate"
                     or any(set(self.explicit.get(n, {})) - shared for n in SENSOR_NODES))
 
