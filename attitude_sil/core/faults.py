@@ -130,8 +130,9 @@ def parse_fault(text: str) -> Fault:
         if word not in times or not rest:
             raise ScenarioError(f"{where}: unexpected {word!r}; expected 'at T' or 'for D' after the mode")
         times[word] = _number(rest.pop(0), where, word)
-        if times[word] < 0.0:
-            raise ScenarioError(f"{where}: '{word}' must be >= 0 s, got {times[word]:g}")
+        if times[word] < 0.0 or (word == "for" and times[word] == 0.0):
+            raise ScenarioError(f"{where}: '{word}' must be {'>' if word == 'for' else '>='} 0 s, got "
+                                f"{times[word]:g}")
     if (kind, mode) not in FLOWN:
         flown = ", ".join(f"{k}<n> {m}" if k == "wheel" else f"{k} {m}" for k, m in sorted(FLOWN))
         raise ScenarioError(f"{where}: {kind} {mode} is not flown yet (flown today: {flown})")
@@ -183,6 +184,17 @@ def parse_faults(lines, duration_s: float, n_wheels: int | None, sensing: bool =
     if len(wheel_faults) > 1:
         raise ScenarioError(f"faults: '{wheel_faults[0]}' and '{wheel_faults[1]}': one wheel fault per run for now")
     return faults
+
+
+def foreign_line(lines, node: str) -> str:
+    """The first of ``lines`` whose target ``node`` does not fly (:data:`OWNER`), as a refusal; '' if none.
+    A list under ``/**`` reaches every node, each flying its own; one set on a node alone must be its own."""
+    for line in lines:
+        owner = OWNER[parse_fault(line).kind]
+        if owner != node:
+            return (f"fault {line!r} is flown by the {owner} node, not the {node}: set it there "
+                    "(attitude-sil fault does)")
+    return ""
 
 
 def faults_rule(lines) -> str:
@@ -240,9 +252,13 @@ def changes_at(faults: list[Fault], k: int, dt_ns: int) -> list[tuple[Fault, boo
     """The faults that become active (True) or end (False) at step ``k`` (steps of ``dt_ns`` ns)."""
     out = []
     for f in faults:
-        if first_step(f.time_s, dt_ns) == k:
+        start = first_step(f.time_s, dt_ns)
+        end = None if f.duration_s is None else first_step(f.time_s + f.duration_s, dt_ns)
+        if end == start:  # between two steps: no step sees it, so nothing happens and nothing is said
+            continue
+        if start == k:
             out.append((f, True))
-        elif f.duration_s is not None and first_step(f.time_s + f.duration_s, dt_ns) == k:
+        elif end == k:
             out.append((f, False))
     return out
 

@@ -71,7 +71,7 @@ CLOCK_RESEND_S = 0.5
 #: at the episode's first tick, every this many resends is the episode's start (/clock 0) instead: a timer that
 #: missed the jump back to 0 took its phase from a later /clock (rcl: a timer whose clock jumps back by more than
 #: its period next fires one period after the first time it sees) and would tick between the episode's ticks
-REPHASE_EVERY = 3
+REPHASE_EVERY = 8  # 4 s: a node in phase but that slow would tick twice (the wheels say so if it answers twice)
 
 
 class PlantNode(SchemaNode):
@@ -251,7 +251,7 @@ class PlantNode(SchemaNode):
         twice at T (after ``REPHASE_EVERY * CLOCK_RESEND_S`` without an answer).
         """
         self._resends += 1
-        if t_ns == self.tick_ns and self._resends % REPHASE_EVERY == 0:
+        if self.tick_ns > 0 and t_ns == self.tick_ns and self._resends % REPHASE_EVERY == 0:
             self.get_logger().warning(
                 f"no command for the first tick t={t_ns * 1e-9:g} s in {self._resends * CLOCK_RESEND_S:.1f} s: "
                 "sending /clock 0 again (a sim-time timer that missed the jump back to 0 ticks out of phase)")

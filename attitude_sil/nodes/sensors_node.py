@@ -22,7 +22,7 @@ from dataclasses import replace
 
 import numpy as np
 
-from attitude_sil.core.faults import added_faults, changes_at, faults_of, first_step
+from attitude_sil.core.faults import added_faults, changes_at, faults_of, first_step, foreign_line
 from attitude_sil.core.sensing.models import SensorSuite
 from attitude_sil.core.sim.lockstep import StepSequencer
 from attitude_sil.errors import ScenarioError
@@ -83,7 +83,9 @@ class SensorsNode(LockstepNode):
     def check_parameters(self, pending: dict) -> str:
         try:
             if "faults" in pending:
-                added_faults(self.param("faults"), pending["faults"])
+                foreign = foreign_line(added_faults(self.param("faults"), pending["faults"]), "sensors")
+                if foreign:
+                    return foreign
             SensorSuite({**self.values(), **pending}, self.param("control_period"))
         except (ValueError, ScenarioError) as exc:
             return str(exc)

@@ -26,11 +26,12 @@ from attitude_sil.core.faults import (
     changes_at,
     faults_of,
     first_step,
+    foreign_line,
     parse_faults,
     wheel_failure_values,
 )
 from attitude_sil.core.plant.actuators import RPM
-from attitude_sil.core.plant.wheels import allocation_over, null_vector
+from attitude_sil.core.plant.wheels import NO_NULL_SPACE, allocation_over, null_vector
 from attitude_sil.core.sim.build import available_wheels, build_wheels
 from attitude_sil.core.sim.lockstep import CommandHold, StepSequencer, tick_period_ns
 from attitude_sil.errors import ScenarioError
@@ -89,7 +90,9 @@ class WheelsNode(LockstepNode):
         if "faults" in pending:
             wheels = self.param("actuator") == "reaction_wheels"
             try:
-                added_faults(self.param("faults"), pending["faults"])
+                foreign = foreign_line(added_faults(self.param("faults"), pending["faults"]), "wheels")
+                if foreign:
+                    return foreign
                 parse_faults(values["faults"], 0.0, self.core.assembly.n_wheels if wheels else None)
                 wheel_failure_values(values)
             except ScenarioError as exc:
@@ -97,8 +100,7 @@ class WheelsNode(LockstepNode):
         if pending.get("null_space.time_constant_s", 0.0) > 0.0 and self.param("actuator") == "reaction_wheels":
             assembly = self.core.assembly  # the wheels in use keep a free direction for the speed loop
             if not np.any(null_vector(assembly.axes_B, assembly.allocation)):
-                return ("wheels.null_space.time_constant_s: the wheels in use have no null space (one free "
-                        "direction is needed: e.g. four wheels in a pyramid)")
+                return NO_NULL_SPACE
         if not {"allocation", "available"} & set(pending) or self.param("actuator") != "reaction_wheels":
             return ""
         if "available" in pending:  # a set is checked as it is given, whichever allocation flies now
@@ -161,7 +163,7 @@ class WheelsNode(LockstepNode):
         """A held-command step starts on ``/clock``."""
         t = stamp_to_ns(msg.clock)
         previous, self.clock_ns = self.clock_ns, t
-        if self.hold.replays_start(t, self.step_ns, previous):
+        if self.hold.replays_start(t, previous):
             return  # the plant bringing a sim-time timer back in phase: the tick still waits
         kind = self.seq.classify(t, self.dt_ns)
         if kind == StepSequencer.NEW:

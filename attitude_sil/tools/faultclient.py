@@ -23,7 +23,7 @@ from rosgraph_msgs.msg import Clock
 from attitude_sil.core.faults import OWNER, parse_fault
 from attitude_sil.errors import ParamClientError
 from attitude_sil.ros.contract import CLOCK, DIAGNOSTICS, check_namespace
-from attitude_sil.ros.convert import FAULT_PREFIX, stamp_to_ns
+from attitude_sil.ros.convert import fault_lines, stamp_to_ns
 from attitude_sil.tools.paramclient import remote_session
 
 __all__ = ["fault_command"]
@@ -51,8 +51,8 @@ def fault_command(target: str, mode: str, value: str | None = None, namespace: s
         clocks: list[int] = []
         said: list[str] = []
         s.node.create_subscription(Clock, CLOCK, lambda m: clocks.append(stamp_to_ns(m.clock)), _HISTORY)
-        s.node.create_subscription(DiagnosticArray, DIAGNOSTICS,
-                                   lambda m: said.extend(x.message for x in m.status), _HISTORY)
+        s.node.create_subscription(DiagnosticArray, DIAGNOSTICS, lambda data: said.extend(fault_lines(data)),
+                                   _HISTORY, raw=True)
         _spin_until(s, lambda: bool(clocks), min(timeout, 2.0))  # the graph's time now, if it runs: the /clock
         _spin_quiet(s, clocks, 0.25, min(timeout, 2.0))  # history comes as a burst, the newest last
         given = f"{line} at {clocks[-1] * 1e-9:.9g}" if clocks else line
@@ -61,9 +61,13 @@ def fault_command(target: str, mode: str, value: str | None = None, namespace: s
         result = s.wait(s.client.set_parameters([Parameter("faults", value=[*now, given])])).results[0]
         if not result.successful:
             raise ParamClientError(f"{node} refused the fault {line!r}: {result.reason}")
-        prefix = FAULT_PREFIX + line + " at "
-        _spin_until(s, lambda: any(m.startswith(prefix) for m in said), timeout)
-    active = [m.removeprefix(FAULT_PREFIX) for m in said if m.startswith(prefix)]
+        since = clocks[-1] * 1e-9 - 1e-9 if clocks else 0.0  # a status of the history, before it: not this one
+
+        def this_one() -> list[str]:
+            return [x for x in said if x.startswith(line + " at ") and parse_fault(x).time_s >= since]
+
+        _spin_until(s, lambda: bool(this_one()), timeout)
+    active = this_one()
     if active:
         return f"{active[-1]}: active (on {node}, said on {DIAGNOSTICS})"
     return (f"{given}: given to {node}; not active within {timeout:g} s (the graph holds, has ended, or the "

@@ -30,7 +30,8 @@ def test_the_wheels_node_takes_added_faults_and_refuses_what_cannot_fly():
     try:
         node = WheelsNode(context=context)
         for faults, words in ((["gyro.x stuck at 1"], "gyro stuck is not flown yet"),
-                              (["wheel9 lost"], "the geometry has wheels 1..4")):
+                              (["wheel9 lost"], "the geometry has wheels 1..4"),
+                              (["star_tracker off at 1"], "flown by the sensors node, not the wheels")):
             (result,) = node.set_parameters([Parameter("faults", value=faults)])
             assert not result.successful and words in result.reason, result.reason
         assert node.core.failure is None

@@ -15,7 +15,16 @@ import numpy as np
 import pytest
 
 from attitude_sil.cli import main
-from attitude_sil.core.faults import CATALOGUE, FLOWN, VALUED, Fault, parse_fault, parse_faults
+from attitude_sil.core.faults import (
+    CATALOGUE,
+    FLOWN,
+    VALUED,
+    Fault,
+    changes_at,
+    foreign_line,
+    parse_fault,
+    parse_faults,
+)
 from attitude_sil.core.sim.engine import simulate
 from attitude_sil.core.sim.scenario import default_config_dir, load_scenario
 from attitude_sil.errors import ScenarioError
@@ -49,6 +58,7 @@ def test_a_fault_line_reads_as_written(text, fault):
     ("wheel1 lost at two", "at 'two' is not a number"),
     ("wheel1 lost when 2", "unexpected 'when'"),
     ("wheel1 lost for 3", "lasts to the end of the run; drop 'for'"),
+    ("star_tracker off at 1 for 0", "'for' must be > 0 s"),
 ])
 def test_a_fault_that_cannot_fly_is_one_line_naming_it(text, words):
     with pytest.raises(ScenarioError) as err:
@@ -121,3 +131,20 @@ def test_a_star_tracker_off_is_the_outage_of_its_window_bit_for_bit():
     assert grown > 1.3 * nominal_sigma  # the outage acts: the filter's attitude sigma grows on the gyro alone
     with pytest.raises(ScenarioError, match="needs the sensing loop"):  # the list under /**, no sensing loop
         load_scenario(CONFIG / "hst_roll_step.yaml").with_values("wheels", faults=["star_tracker off at 1"])
+
+
+def test_a_fault_between_two_steps_is_neither_flown_nor_said_and_each_lasting_one_ends():
+    blind = parse_fault("star_tracker off at 1.001 for 0.005")  # no step time in [1.001, 1.006)
+    assert all(not changes_at([blind], k, 10_000_000) for k in range(200))
+    window = parse_fault("star_tracker off at 1.001 for 0.01")  # the step at 1.01 is in it
+    assert [(k, active) for k in range(200) for _, active in changes_at([window], k, 10_000_000)] == \
+        [(101, True), (102, False)]
+
+
+def test_a_fault_set_on_a_node_that_does_not_fly_it_is_one_line():
+    scn = load_scenario(CONFIG / "hst_roll_step_sensors.yaml")
+    with pytest.raises(ScenarioError, match="set on the sensors but flown by the wheels node"):
+        scn.with_values("sensors", faults=["wheel1 lost at 1"])
+    assert foreign_line(["wheel1 lost", "star_tracker off"], "wheels") == (
+        "fault 'star_tracker off' is flown by the sensors node, not the wheels: set it there (attitude-sil fault does)")
+    assert foreign_line(["star_tracker off at 2"], "sensors") == ""

@@ -242,17 +242,21 @@ def test_sim_timer_commands_take_effect_one_period_after_their_tick():
 
 def test_a_clock_0_at_the_unanswered_first_tick_replays_the_start_and_two_in_a_row_start_an_episode():
     # the plant sends /clock 0 again among its first tick's own (a timer out of phase); a reset plant sends a new
-    # episode's 0 twice 0.5 s apart: the first 0 after a tick's /clock is a replay, a second 0 in a row is not
+    # episode's 0 twice 0.5 s apart: the first 0 right after the first tick's /clock is a replay, whether these
+    # wheels have the tick's command yet or not (the plant may wait for another input); a second 0 in a row is not
     hold = _hold("sim_timer", period_steps=10)
     tick = 10 * DT
-    assert hold.replays_start(0, tick, previous_ns=tick)
-    assert not hold.replays_start(0, tick, previous_ns=0)  # the second 0 in a row: a new episode
-    assert not hold.replays_start(0, None, previous_ns=tick)  # no step in hand: a new episode
-    assert not hold.replays_start(0, 20 * DT, previous_ns=20 * DT)  # a later tick: the timer ticked in phase
-    assert not hold.replays_start(DT, tick, previous_ns=tick)  # only a 0 is the start
+    assert hold.replays_start(0, previous_ns=tick)
     hold.offer(tick, np.ones((1, 3)), False, tick)
-    assert not hold.replays_start(0, tick, previous_ns=tick)  # answered: a 0 now is a new episode
-    assert not _hold("wall").replays_start(0, tick, previous_ns=tick)
+    assert hold.replays_start(0, previous_ns=tick)  # the tick answered here, another input late: still a replay
+    assert not hold.replays_start(0, previous_ns=0)  # the second 0 in a row: a new episode
+    assert not hold.replays_start(0, previous_ns=None)  # the first /clock these wheels see
+    assert not hold.replays_start(0, previous_ns=20 * DT)  # after a later tick: a reset, the timer ticked in phase
+    assert not hold.replays_start(DT, previous_ns=tick)  # only a 0 is the start
+    assert not _hold("wall").replays_start(0, previous_ns=tick)
+    assert hold.offer(tick, np.ones((1, 3)), False, tick) == ""  # the same command again: a repeat, nothing said
+    why = hold.offer(tick, np.full((1, 3), 2.0), False, tick)  # a node that ticked twice, its law stepped twice
+    assert "second, different command" in why and np.all(hold.applied(2 * tick)[0] == 1.0)  # the first is kept
 
 
 def test_sim_timer_refuses_stamps_off_its_ticks_or_ahead_of_the_clock():

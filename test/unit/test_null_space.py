@@ -6,9 +6,11 @@ speeds along n store no momentum in the body. The loop drives s = n . omega_w
 to its target with the voltage e = n ((K_b + R B / K_i) s* + k_v (s* - s)),
 k_v = R J / (K_i tau) - K_b - R B / K_i, which makes J s' = (K_i (K_b + k_v) /
 R + B) (s* - s): a first order of time constant tau, the motor's inductance
-(L/R = 1 ms) aside. Checked on HST holding its attitude (no step, so no drive
-limit clips the loop): the body torque with and without the loop agrees to
-1e-12 N m in both drivers, and s reaches 63.2 % of its target at tau within
+(L/R = 1 ms) aside; under a torque command (the geometric law) the loop adds
+J (s* - s) / tau of wheel torque before the inverse motor model, the same
+first order. Checked on HST holding its attitude (no step, so no drive limit
+clips the loop), under both: the body torque with and without the loop
+agrees to 1e-12 N m in both drivers, and s reaches 63.2 % of its target at tau within
 5 %, at the control step and at half of it.
 """
 
@@ -28,8 +30,10 @@ PYRAMID = GEOMETRIES["hst_pyramid"]()
 TARGET_RPM = 20.0  # small enough that no drive limit clips the loop (the pyramid's 0.8 N m per wheel)
 
 
-def _holding(**wheels):
+def _holding(law: str = "pid", **wheels):
+    """HST holding its attitude under ``law`` (pid commands volts, geometric torque)."""
     scn = load_scenario(default_config_dir() / "hst_roll_step.yaml").with_values("guidance", setpoint_rpy_deg=[0, 0, 0])
+    scn = scn.with_values("controller", controller_type=law)
     return scn.with_values("wheels", **wheels) if wheels else scn
 
 
@@ -45,10 +49,10 @@ def test_the_pyramids_null_vector_is_the_issues_and_other_sets_have_none():
         build_wheels(scn.with_values("wheels", **{"null_space.time_constant_s": 2.0}), 1)
 
 
-@pytest.mark.parametrize("driver", ["compiled", "stepwise"])
-def test_the_null_space_loop_moves_no_body_torque(driver):
+@pytest.mark.parametrize("driver, law", [("compiled", "pid"), ("stepwise", "pid"), ("stepwise", "geometric")])
+def test_the_null_space_loop_moves_no_body_torque(driver, law):
     loop = {"null_space.time_constant_s": 2.0, "null_space.speed_rpm": TARGET_RPM}
-    off, on = (simulate(s, 1, duration=10.0, driver=driver) for s in (_holding(), _holding(**loop)))
+    off, on = (simulate(s, 1, duration=10.0, driver=driver) for s in (_holding(law), _holding(law, **loop)))
     assert np.max(np.abs(on.tau_c_B - off.tau_c_B)) <= 1e-12
     assert np.max(np.abs(on.h_wheels_B - off.h_wheels_B)) <= 1e-12
     assert np.max(np.abs(on.q_BN - off.q_BN)) <= 1e-12
@@ -63,9 +67,10 @@ def test_both_drivers_fly_the_loop_bit_for_bit():
         np.testing.assert_array_equal(getattr(runs[0], name), getattr(runs[1], name), err_msg=name)
 
 
-@pytest.mark.parametrize("tau, dt", [(1.0, 0.01), (2.0, 0.01), (4.0, 0.01), (2.0, 0.005)])
-def test_the_null_space_speed_reaches_its_target_as_the_designed_first_order(tau, dt):
-    scn = _holding(**{"null_space.time_constant_s": tau, "null_space.speed_rpm": TARGET_RPM})
+@pytest.mark.parametrize("law, tau, dt", [("pid", 1.0, 0.01), ("pid", 2.0, 0.01), ("pid", 4.0, 0.01),
+                                          ("pid", 2.0, 0.005), ("geometric", 2.0, 0.01), ("geometric", 4.0, 0.01)])
+def test_the_null_space_speed_reaches_its_target_as_the_designed_first_order(law, tau, dt):
+    scn = _holding(law, **{"null_space.time_constant_s": tau, "null_space.speed_rpm": TARGET_RPM})
     scn = scn.with_values("/**", control_period=dt)
     tr = simulate(scn, 1, duration=3.0 * tau, driver="stepwise")
     s = tr.wheel_speed[0] @ null_vector(PYRAMID, allocation_over(PYRAMID))

@@ -245,14 +245,21 @@ def rk4_body_lanes(m, b, dt, substeps):
 
 # ---------------------------------------------------------------- the wheels
 @njit(cache=True, inline="always")
-def _null_volts(xw, p, wp, k_b, k_i, r_a):
-    # the null-space speed loop's voltage along the unit null vector n of episode p: the wheel speeds' component
-    # s = n . omega_w is driven to its target s* as a first order of time constant tau (L/R neglected):
-    # J s' = K_i i - B s, R i = e - K_b s, e = (K_b + R B / K_i) s* + k_v (s* - s) gives J s' = (K_i (K_b + k_v)
-    # / R + B) (s* - s), so k_v = R J / (K_i tau) - K_b - R B / K_i. Along n the wheels make no body torque
+def _null_speed(xw, p, wp):
+    # the wheel speeds' component along the unit null vector n of episode p, s = n . omega_w, rad/s
     s = 0.0
     for i in range(xw.shape[0]):
         s += wp.null[i] * xw[i, SPEED, p]
+    return s
+
+
+@njit(cache=True, inline="always")
+def _null_volts(s, wp, k_b, k_i, r_a):
+    # the null-space speed loop's voltage along n for a voltage command: s is driven to its target s* as a first
+    # order of time constant tau (L/R neglected): J s' = K_i i - B s, R i = e - K_b s, e = (K_b + R B / K_i) s*
+    # + k_v (s* - s) gives J s' = (K_i (K_b + k_v) / R + B) (s* - s), so k_v = R J / (K_i tau) - K_b - R B / K_i.
+    # (A torque command adds J (s* - s) / tau as wheel torque instead: the inverse motor model compensates the
+    # back-EMF and the friction.) Along n the wheels make no body torque
     target, friction = wp.null_target, r_a * wp.b_m / k_i
     k_v = r_a * wp.j_m / (k_i * wp.null_tau) - k_b - friction
     return (k_b + friction) * target + k_v * (target - s)
@@ -277,10 +284,13 @@ def _drive(m, j, xw, b, mot, torque, wp, fail, lo, k, reallocate):
         speed = xw[j, SPEED, p]
         v = -(alloc[0] * b[U, p] + alloc[1] * b[U + 1, p] + alloc[2] * b[U + 2, p])
         emf = mot[KB, p] * speed
-        if torque[p]:  # wheel torque -> steady current -> volts
+        null = tau_n > 0.0 and n_j != 0.0 and f < 0
+        if torque[p]:  # wheel torque (and the null-space loop's) -> steady current -> volts
+            if null:
+                v += n_j * wp.j_m * (wp.null_target - _null_speed(xw, p, wp)) / tau_n
             v = mot[RA, p] * (v + b_m * speed) / mot[KI, p] + emf
-        if tau_n > 0.0 and n_j != 0.0 and f < 0:
-            v += n_j * _null_volts(xw, p, wp, mot[KB, p], mot[KI, p], mot[RA, p])
+        elif null:
+            v += n_j * _null_volts(_null_speed(xw, p, wp), wp, mot[KB, p], mot[KI, p], mot[RA, p])
         v = min(max(v, emf - mot[HEAD, p]), emf + mot[HEAD, p])
         v = emf if (abs(speed) >= speed_max and (v - emf) * speed > 0.0) else v
         mot[E, p] = min(max(v, -v_max), v_max)

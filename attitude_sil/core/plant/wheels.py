@@ -189,6 +189,11 @@ def allocation_over(axes_B: np.ndarray, available: list[int] | None = None) -> n
     return out
 
 
+#: why the null-space speed loop cannot run (the wheels in use have no free direction)
+NO_NULL_SPACE = ("wheels.null_space.time_constant_s: the wheels in use have no null space (one free direction is "
+                 "needed: e.g. four wheels in a pyramid)")
+
+
 def null_vector(axes_B: np.ndarray, allocation: np.ndarray) -> np.ndarray:
     """The unit vector (n,) along which the wheels the ``allocation`` (n, 3) uses make no body torque
     (``axes_B @ n = 0``), signed so its last nonzero entry is positive; zeros where those wheels have no free
@@ -270,8 +275,7 @@ class WheelAssembly:
         """
         null = null_vector(self.axes_B, self.allocation)
         if time_constant > 0.0 and not np.any(null):
-            raise ScenarioError("wheels.null_space.time_constant_s: the wheels in use have no null space (one free "
-                                "direction is needed: e.g. four wheels in a pyramid)")
+            raise ScenarioError(NO_NULL_SPACE)
         self.params = self.params._replace(null=null, null_tau=float(time_constant), null_target=float(target))
 
     def set_motors(self, motors: list[MotorParams] | None) -> None:

@@ -341,17 +341,17 @@ class CommandHold:
         """The step at ``t_ns`` (ns) is a tick whose command has not come yet: the wheels wait for it."""
         return self.is_tick(t_ns) and t_ns not in self.ticks
 
-    def replays_start(self, clock_ns: int, step_ns: int | None, previous_ns: int | None) -> bool:
+    def replays_start(self, clock_ns: int, previous_ns: int | None) -> bool:
         """``/clock`` ``clock_ns`` (ns) is the plant sending the episode's start again, not a new episode.
 
-        A plant whose first tick ``step_ns`` (ns, the step in hand) stays unanswered sends ``/clock`` 0 again
-        among the tick's own (``PlantNode._resend_clock``): a timer that missed the jump back to 0 took its phase
-        from a later time. That 0 comes after a ``/clock`` of the tick (``previous_ns``, the ``/clock`` before it);
-        a new episode's 0 while the tick waits (its plant was reset) is sent again by the plant 0.5 s later, and the
+        A plant whose first tick stays unanswered sends ``/clock`` 0 again among the tick's own
+        (``PlantNode._resend_clock``): a timer that missed the jump back to 0 took its phase from a later time.
+        That 0 comes right after a ``/clock`` of the first tick (``previous_ns``, the ``/clock`` before it),
+        whether these wheels have the tick's command or not (the plant may wait for another input). A new
+        episode's 0 after the first tick (its plant reset there) is sent again by the plant 0.5 s later, and the
         second 0 in a row is taken as one.
         """
-        return (clock_ns == 0 and step_ns is not None and step_ns == self.period_ns and self.waits_at(step_ns)
-                and previous_ns is not None and previous_ns > 0)
+        return self.timing == "sim_timer" and clock_ns == 0 and previous_ns == self.period_ns
 
     def offer(self, t_ns: int, value: np.ndarray, torque_mode: bool, latest_ns: int | None) -> str:
         """A command stamped ``t_ns`` (ns) came; ``latest_ns`` is the latest stamp one may carry (the step whose
@@ -365,7 +365,10 @@ class CommandHold:
             return f"not a tick of the controller's period {self.period_ns * 1e-9:g} s"
         if latest_ns is not None and t_ns > latest_ns:
             return "ahead of the clock"
-        self.ticks.setdefault(t_ns, (value, torque_mode))  # a repeat of a tick answered changes nothing
+        held = self.ticks.setdefault(t_ns, (value, torque_mode))  # a repeat of a tick answered changes nothing
+        if held[0] is not value and not np.array_equal(held[0], value):
+            return ("a second, different command for a tick already answered (the first is kept): the node ticked "
+                    "twice there, its law stepped twice, and the run is not reproducible")
         return ""
 
     def applied(self, t_ns: int) -> tuple[np.ndarray, bool]:

@@ -33,7 +33,7 @@ from attitude_sil.core import yaml12
 from attitude_sil.core.control.laws.bdot import detumble_gain
 from attitude_sil.core.control.momentum import BDOT
 from attitude_sil.core.environment.ephemeris import Ephemeris
-from attitude_sil.core.faults import FAULT_NODES, parse_faults, wheel_failure_values
+from attitude_sil.core.faults import FAULT_NODES, OWNER, faults_of, parse_faults, wheel_failure_values
 from attitude_sil.core.plant.rigid_body import inertia_matrix
 from attitude_sil.core.plant.wheels import GEOMETRIES
 from attitude_sil.core.sensing.models import SensorSuite
@@ -285,7 +285,11 @@ def _check_faults(scn: Scenario) -> None:
     n_wheels = GEOMETRIES[w["geometry"]]().shape[1] if w["actuator"] == "reaction_wheels" else None
     try:
         for node in FAULT_NODES:  # each node's list (one list under /**, or a section's own)
-            parse_faults(scn.values[node]["faults"], scn.duration, n_wheels, scn.has_sensors)
+            for fault in parse_faults(scn.values[node]["faults"], scn.duration, n_wheels, scn.has_sensors):
+                owner = OWNER[fault.kind]  # set on a node alone, a fault must reach the node that flies it
+                if owner in FAULT_NODES and str(fault) not in map(str, faults_of(scn.values[owner], owner)):
+                    raise ScenarioError(f"fault '{fault}' is set on the {node} but flown by the {owner} node: set "
+                                        f"it under /** or /**/{owner}")
         wheel_failure_values(w)
     except ScenarioError as exc:
         raise ScenarioError(f"{scn.source}: {exc}") from None
