@@ -27,7 +27,10 @@ would:
   law, with the timer's period as its step) and publishes ``voltage_cmd``
   stamped with its clock's ``now()``;
 * an ``attitude`` stamped earlier than the one before means the simulation
-  started a new episode: the law's state is reset.
+  started a new episode: the law's state is reset;
+* a tick at a time it has computed already (the plant sent ``/clock`` 0
+  and the tick's time again, to bring a timer that missed the jump back
+  to 0 into phase) sends the same command again: the law steps once a tick.
 """
 
 from __future__ import annotations
@@ -53,6 +56,7 @@ class TimerController(Node):
         self.q_BN: tuple | None = None
         self.q_RN: tuple | None = None
         self.last_stamp = -1
+        self.last_tick: tuple[int, Vector3Stamped] | None = None  # (sim time ns, command) of the latest tick
         self.law = Pid()
         self.period = 1.0 / self.get_parameter("rate").value
         self.create_timer(self.period, self.tick)
@@ -72,12 +76,17 @@ class TimerController(Node):
     def tick(self) -> None:
         if self.q_BN is None or self.q_RN is None:
             return  # nothing to fly yet
+        now = self.get_clock().now()
+        if self.last_tick is not None and self.last_tick[0] == now.nanoseconds:
+            self.pub.publish(self.last_tick[1])  # this tick again: its command, the law not stepped twice
+            return
         gains = {name: self.get_parameter(name).value for name in HST_GA_GAINS}
         u = self.law.step(self.q_BN, self.q_RN, gains, self.get_parameter("output_limit").value, self.period)
         out = Vector3Stamped()
-        out.header.stamp = self.get_clock().now().to_msg()
+        out.header.stamp = now.to_msg()
         out.header.frame_id = "body"
         out.vector.x, out.vector.y, out.vector.z = u
+        self.last_tick = (now.nanoseconds, out)
         self.pub.publish(out)
 
 

@@ -279,3 +279,40 @@ def test_a_timer_that_missed_the_jump_back_to_0_is_brought_back_in_phase(tmp_pat
     bag = open_bag(tmp_path / "bag")
     assert [stamp_from_cdr(m.data) for m in bag.iter_raw("/clock")] == [k * 10_000_000 for k in range(101)]
     assert sorted(t for t, _ in vectors(bag, "/voltage_cmd")) == [j * 100_000_000 for j in range(1, 11)]
+
+
+def test_the_example_computes_a_tick_once_and_sends_its_command_again():
+    # after the plant's /clock 0 of an unanswered first tick, a node in phase ticks at that time again: the
+    # example sends the command it computed, its law stepped once (the run stays reproducible)
+    import sys
+
+    import rclpy
+    from rclpy.time import Time
+
+    sys.path.insert(0, str(EXAMPLES))  # the example imports its sibling pid_controller
+    try:
+        timer = _example("timer_controller")
+    finally:
+        sys.path.remove(str(EXAMPLES))
+    started = not rclpy.ok()  # the example's node takes the default context, as the example's main() does
+    if started:
+        rclpy.init(args=[])
+    try:
+        node = timer.TimerController()
+        sent, steps = [], []
+        node.pub.publish = sent.append
+        law_step = node.law.step
+        node.law.step = lambda *a: steps.append(a) or law_step(*a)
+        node.q_BN, node.q_RN = (0.0, 0.0, 0.0, 1.0), (0.00872654, 0.0, 0.0, 0.99996192)
+        clock = [Time(nanoseconds=100_000_000)]
+        node.get_clock = lambda: type("Clock", (), {"now": lambda self: clock[0]})()
+        node.tick()
+        node.tick()  # the same tick again
+        assert len(steps) == 1 and len(sent) == 2 and sent[0] is sent[1]
+        clock[0] = Time(nanoseconds=200_000_000)
+        node.tick()
+        assert len(steps) == 2 and sent[2] is not sent[1]
+        node.destroy_node()
+    finally:
+        if started:
+            rclpy.shutdown()
