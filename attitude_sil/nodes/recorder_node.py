@@ -148,7 +148,7 @@ class Recorder(Node):
         self.kept: dict[str, list[tuple[int, bytes]]] = {name: [] for name in keep}
         self.keeping = True  # False: the kept topics go to ``sink`` only, nothing stays in memory
         self.across_episodes = False  # see start_episode
-        self.faults: list[str] = []
+        self.faults: list[str] = []  # see start_episode
         self.sink: Callable[[str, int, bytes], None] | None = None  # (topic, stamp ns, CDR) of kept topics
         self.subs = {}
         for name, type_name in (topics or RECORDED_TOPICS).items():
@@ -193,7 +193,7 @@ class Recorder(Node):
         self.keeping = keeping
         self.sink = sink
         self.counts.clear()
-        self.faults: list[str] = []  # the faults that became active, as /diagnostics said (fault_lines)
+        self.faults = []  # the faults that became active, as /diagnostics said (fault_lines)
         self.last_stamp.clear()
         self.newest_stamp.clear()
         self.refused.clear()

@@ -22,14 +22,13 @@ from dataclasses import replace
 
 import numpy as np
 
-from attitude_sil.core.faults import added_faults, changes_at, faults_of, first_step, foreign_line
+from attitude_sil.core.faults import Fault, first_step
 from attitude_sil.core.sensing.models import SensorSuite
 from attitude_sil.core.sim.lockstep import StepSequencer
 from attitude_sil.errors import ScenarioError
 from attitude_sil.ros.contract import (
     ATTITUDE,
     BODY_RATE,
-    DIAGNOSTICS,
     IMU,
     MAGNETIC_FIELD,
     MAGNETOMETER,
@@ -38,7 +37,6 @@ from attitude_sil.ros.contract import (
     WHEEL_STATE,
 )
 from attitude_sil.ros.convert import (
-    fault_diagnostics_msg,
     imu_msg,
     joint_state_msg,
     magnetic_field_msg,
@@ -46,7 +44,7 @@ from attitude_sil.ros.convert import (
     stamp_to_ns,
     star_tracker_msg,
 )
-from attitude_sil.ros.node import LockstepNode, run_node
+from attitude_sil.ros.node import LockstepNode, NodeFaults, run_node
 
 INPUTS = (ATTITUDE, BODY_RATE)
 
@@ -62,7 +60,6 @@ class SensorsNode(LockstepNode):
         self.pub_imu = self.step_publisher(IMU)
         self.pub_star = self.step_publisher(STAR_TRACKER)
         self.pub_speed = self.step_publisher(WHEEL_SPEED)
-        self.pub_diagnostics = self.step_publisher(DIAGNOSTICS)
         for name in INPUTS:
             self.step_subscription(name, lambda m, n=name: self._on_input(n, m))
         self.step_subscription(WHEEL_STATE, self._on_wheel_state)
@@ -70,20 +67,20 @@ class SensorsNode(LockstepNode):
         self.pub_magnetometer = self.step_publisher(MAGNETOMETER)
         self.step_subscription(MAGNETIC_FIELD, self._on_field)
         self.field_seq = StepSequencer()
+        self.faults = NodeFaults(self, "sensors")  # rebuild() resets it
         self.new_episode()
 
     def rebuild(self) -> None:
         self.core = SensorSuite(self.values(), self.param("control_period"))
         self.gyro_variance = np.full(3, self.core.gyro.errors.white_std(self.core.gyro.dt) ** 2)
         self.star_variance = self.core.star_tracker.errors.sigma_B ** 2
-        self.faults = faults_of(self.values(), "sensors")  # each on /diagnostics as it becomes active and ends
-        self._fault_lines = list(self.param("faults"))
+        self.faults.reset()  # the list as it stands, each fault said on /diagnostics as it becomes active
         self.k = -1  # the latest step sampled
 
     def check_parameters(self, pending: dict) -> str:
         try:
             if "faults" in pending:
-                foreign = foreign_line(added_faults(self.param("faults"), pending["faults"]), "sensors")
+                foreign = self.faults.refusal(pending["faults"])
                 if foreign:
                     return foreign
             SensorSuite({**self.values(), **pending}, self.param("control_period"))
@@ -93,19 +90,18 @@ class SensorsNode(LockstepNode):
 
     def on_parameters_set(self, names: list[str]) -> None:
         if "faults" in names:
-            self._inject(added_faults(self._fault_lines, self.param("faults")))
+            self._inject(self.faults.added())
 
-    def _inject(self, lines: list[str]) -> None:
+    def _inject(self, faults: list[Fault]) -> None:
         """Faults added while the graph runs: a star tracker off from its time, or, if that has passed, from the
         step after the one sampled last, for its duration."""
-        self._fault_lines += lines
         errors = self.core.star_tracker.errors
-        for fault in faults_of({"faults": lines}, "sensors"):
-            start = max(first_step(fault.time_s, self.dt_ns), self.k + 1) * self.dt_ns * 1e-9
+        for fault in faults:
+            step = max(first_step(fault.time_s, self.dt_ns), self.k + 1)
+            start = step * self.dt_ns * 1e-9
             end = math.inf if fault.duration_s is None else start + fault.duration_s
             errors = replace(errors, outages=errors.outages + ((start, end),))
-            self.faults.append(replace(fault, time_s=start))
-            self.get_logger().info(f"fault {fault.target} {fault.mode} from t={start:g} s")
+            self.faults.started(fault, step, self.dt_ns)
         self.core.star_tracker.errors = errors
 
     def _on_input(self, name: str, msg) -> None:
@@ -121,9 +117,7 @@ class SensorsNode(LockstepNode):
             self.pub_star.publish(star_tracker_msg(report.q_BN[0], self.star_variance if report.valid else None,
                                                    t_exp))
         self.pub_imu.publish(imu_msg(sample.omega_meas_B[0], self.gyro_variance, t))
-        changes = changes_at(self.faults, self.k, self.dt_ns)
-        if changes:
-            self.pub_diagnostics.publish(fault_diagnostics_msg(changes, t, self.get_name()))
+        self.faults.say(t, self.dt_ns)
 
     def _on_wheel_state(self, msg) -> None:
         t = stamp_to_ns(msg.header.stamp)

@@ -17,19 +17,9 @@ and the command applied goes out on ``applied/voltage_cmd`` (or
 
 from __future__ import annotations
 
-from dataclasses import replace
-
 import numpy as np
 
-from attitude_sil.core.faults import (
-    added_faults,
-    changes_at,
-    faults_of,
-    first_step,
-    foreign_line,
-    parse_faults,
-    wheel_failure_values,
-)
+from attitude_sil.core.faults import Fault, first_step, parse_faults, wheel_failure_values
 from attitude_sil.core.plant.actuators import RPM
 from attitude_sil.core.plant.wheels import NO_NULL_SPACE, allocation_over, null_vector
 from attitude_sil.core.sim.build import available_wheels, build_wheels
@@ -38,15 +28,14 @@ from attitude_sil.errors import ScenarioError
 from attitude_sil.ros.contract import (
     APPLIED_COMMAND_TOPIC,
     CLOCK,
-    DIAGNOSTICS,
     TORQUE_CMD,
     VOLTAGE_CMD,
     WHEEL_MOMENTUM,
     WHEEL_STATE,
     WHEEL_TORQUE,
 )
-from attitude_sil.ros.convert import fault_diagnostics_msg, stamp_to_ns, vector_to_array
-from attitude_sil.ros.node import LockstepNode, run_node
+from attitude_sil.ros.convert import stamp_to_ns, vector_to_array
+from attitude_sil.ros.node import LockstepNode, NodeFaults, run_node
 from attitude_sil.storage.cdr import joint_state_cdr, stamped_vector_cdr
 
 
@@ -61,7 +50,6 @@ class WheelsNode(LockstepNode):
         self.pub_torque = self.step_publisher(WHEEL_TORQUE)
         self.pub_momentum = self.step_publisher(WHEEL_MOMENTUM)
         self.pub_state = self.step_publisher(WHEEL_STATE)
-        self.pub_diagnostics = self.step_publisher(DIAGNOSTICS)
         self.step_subscription(VOLTAGE_CMD, lambda m: self._on_command(m, False))
         self.step_subscription(TORQUE_CMD, lambda m: self._on_command(m, True))
         self.hold: CommandHold | None = None  # a controller on a timer of its own: the command held
@@ -71,13 +59,13 @@ class WheelsNode(LockstepNode):
             self.step_subscription(CLOCK, self._on_clock)
         self.step_ns: int | None = None  # held commands: the step started on /clock, not yet taken
         self.clock_ns: int | None = None  # held commands: the latest /clock
+        self.faults = NodeFaults(self, "wheels")  # rebuild() resets it
         self.new_episode()
 
     def rebuild(self) -> None:
         scn = self.scenario()
         self.core = build_wheels(scn, 1)
-        self.faults = faults_of(self.values(), "wheels")  # each on /diagnostics as it becomes active
-        self._fault_lines = list(self.param("faults"))  # the list as the episode started or was last added to
+        self.faults.reset()  # the list as it stands, each fault said on /diagnostics as it becomes active
         timing = self.param("command_timing")
         if timing != "stamped":
             zero = (np.zeros((1, 3)), self.param("actuator") in ("torque", "none"))
@@ -90,7 +78,7 @@ class WheelsNode(LockstepNode):
         if "faults" in pending:
             wheels = self.param("actuator") == "reaction_wheels"
             try:
-                foreign = foreign_line(added_faults(self.param("faults"), pending["faults"]), "wheels")
+                foreign = self.faults.refusal(pending["faults"])
                 if foreign:
                     return foreign
                 parse_faults(values["faults"], 0.0, self.core.assembly.n_wheels if wheels else None)
@@ -113,7 +101,7 @@ class WheelsNode(LockstepNode):
 
     def on_parameters_set(self, names: list[str]) -> None:
         if "faults" in names:
-            self._inject(added_faults(self._fault_lines, self.param("faults")))
+            self._inject(self.faults.added())
         if {"null_space.time_constant_s", "null_space.speed_rpm"} & set(names) \
                 and self.param("actuator") == "reaction_wheels":  # from the next step on
             self.core.assembly.set_null_space(self.param("null_space.time_constant_s"),
@@ -124,15 +112,13 @@ class WheelsNode(LockstepNode):
             self.get_logger().info(f"allocation {self.param('allocation')} over wheels "
                                    f"{self.param('available') or 'all'}")
 
-    def _inject(self, lines: list[str]) -> None:
+    def _inject(self, faults: list[Fault]) -> None:
         """Faults added while the graph runs: each from its time, or, if that has passed, from the step after the
         one in hand (a stuck drive holds the voltage of the step before, which that step records)."""
-        self._fault_lines += lines
-        for fault in faults_of({"faults": lines}, "wheels"):
+        for fault in faults:
             step = max(first_step(fault.time_s, self.dt_ns), self.core.k + 1)
             self.core.fail(fault.index - 1, step, fault.mode == "stuck")
-            self.faults.append(replace(fault, time_s=step * self.dt_ns * 1e-9))
-            self.get_logger().info(f"fault {fault.target} {fault.mode} from t={step * self.dt_ns * 1e-9:g} s")
+            self.faults.started(fault, step, self.dt_ns)
 
     def _on_command(self, msg, torque_mode: bool) -> None:
         t = stamp_to_ns(msg.header.stamp)
@@ -189,9 +175,7 @@ class WheelsNode(LockstepNode):
         self.pub_torque.publish(stamped_vector_cdr(out.tau_c_B[0], t, "body"))
         self.pub_momentum.publish(stamped_vector_cdr(out.h_wheels_B[0], t, "body"))
         self.pub_state.publish(joint_state_cdr(self.core.names, out.position[0], out.velocity[0], out.effort[0], t))
-        changes = changes_at(self.faults, t // self.dt_ns, self.dt_ns)
-        if changes:
-            self.pub_diagnostics.publish(fault_diagnostics_msg(changes, t, self.get_name()))
+        self.faults.say(t, self.dt_ns)
 
 
 def main(args: list[str] | None = None) -> int:

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import sys
 from collections.abc import Callable, Sequence
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -27,14 +28,16 @@ from rclpy.parameter import Parameter
 from rclpy.signals import SignalHandlerOptions
 
 from attitude_sil.core import yaml12
+from attitude_sil.core.faults import Fault, added_faults, changes_at, faults_of, foreign_line
 from attitude_sil.core.plant.quaternion import unit_or_none
 from attitude_sil.core.sim.lockstep import StepInputs, StepSequencer
 from attitude_sil.core.sim.paramfile import node_key, sections_for
 from attitude_sil.core.sim.params import NODE_PARAMS
 from attitude_sil.core.sim.scenario import Scenario, scenario_from_dict
 from attitude_sil.errors import AttitudeSilError, ScenarioError
+from attitude_sil.ros.contract import DIAGNOSTICS, message_class
 from attitude_sil.ros.contract import RECORDED_TOPICS as TOPIC_TYPES
-from attitude_sil.ros.contract import message_class
+from attitude_sil.ros.convert import fault_diagnostics_msg
 from attitude_sil.ros.environment import discovery_profile
 from attitude_sil.ros.parameters import PARAMETER_TYPES, descriptor
 from attitude_sil.ros.qos import INPUT_QOS, LOCKSTEP_QOS, qos_event_callbacks
@@ -380,3 +383,42 @@ def run_node(factory: Callable[[], Node], args: list[str] | None = None) -> int:
         rclpy.try_shutdown()
         stop.__exit__()
     return 0
+
+
+class NodeFaults:
+    """The faults a node flies (its targets' of its ``faults`` list, :func:`~attitude_sil.core.faults.faults_of`),
+    each said on ``/diagnostics`` at the step it becomes active and at the step it ends; lines may be added to
+    the list while the graph runs (:meth:`refusal`, :meth:`added`, :meth:`started`)."""
+
+    def __init__(self, node: SchemaNode, name: str) -> None:
+        self.node, self.name = node, name
+        self.publisher = node.step_publisher(DIAGNOSTICS)
+        self.reset()
+
+    def reset(self) -> None:
+        """The faults of the node's list as it stands (a new episode)."""
+        self.faults = faults_of(self.node.values(), self.name)
+        self.lines = list(self.node.param("faults"))  # the list as the episode started or was last added to
+
+    def refusal(self, pending: list[str]) -> str:
+        """Why the list ``pending`` cannot replace the node's ('' if it can): a line taken back or changed
+        (ScenarioError), or one this node does not fly."""
+        return foreign_line(added_faults(self.node.param("faults"), pending), self.name)
+
+    def added(self) -> list[Fault]:
+        """The faults of the lines the node's list gained since :meth:`reset` or the last call."""
+        new = added_faults(self.lines, self.node.param("faults"))
+        self.lines += new
+        return faults_of({"faults": new}, self.name)
+
+    def started(self, fault: Fault, step: int, dt_ns: int) -> None:
+        """An added ``fault`` flies from ``step`` (steps of ``dt_ns`` ns): said then, at that time."""
+        t_s = step * dt_ns * 1e-9
+        self.faults.append(replace(fault, time_s=t_s))
+        self.node.get_logger().info(f"fault {fault.target} {fault.mode} from t={t_s:g} s")
+
+    def say(self, t_ns: int, dt_ns: int) -> None:
+        """``/diagnostics`` for the faults that become active or end at step time ``t_ns`` (ns)."""
+        changes = changes_at(self.faults, t_ns // dt_ns, dt_ns)
+        if changes:
+            self.publisher.publish(fault_diagnostics_msg(changes, t_ns, self.node.get_name()))

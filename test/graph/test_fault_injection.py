@@ -39,7 +39,7 @@ def test_the_wheels_node_takes_added_faults_and_refuses_what_cannot_fly():
         assert result.successful, result.reason
         wheel, step, stuck = node.core.failure
         assert (wheel[0], step[0], stuck[0]) == (1, 1, True)  # from the step after the one in hand (k = 0)
-        assert [str(f) for f in node.faults] == ["wheel2 stuck at 0.01"]
+        assert [str(f) for f in node.faults.faults] == ["wheel2 stuck at 0.01"]
         for faults, words in (([], "not taken back or changed: 'wheel2 stuck' is gone"),
                               (["wheel2 stuck", "wheel3 lost at 1"], "one wheel fault per run")):
             (result,) = node.set_parameters([Parameter("faults", Parameter.Type.STRING_ARRAY, faults)])
@@ -121,7 +121,7 @@ def test_the_sensors_node_takes_an_added_star_tracker_outage_from_its_next_step(
         (result,) = node.set_parameters([Parameter("faults", value=["star_tracker off at 1 for 2"])])
         assert result.successful, result.reason
         assert node.core.star_tracker.errors.outages == ((1.5, 3.5),)  # from the next step, for its 2 s
-        assert [str(f) for f in node.faults] == ["star_tracker off at 1.5 for 2"]
+        assert [str(f) for f in node.faults.faults] == ["star_tracker off at 1.5 for 2"]
         assert node.core.star_tracker.in_outage(150) and not node.core.star_tracker.in_outage(350)
         (result,) = node.set_parameters([Parameter("faults", value=["star_tracker stuck at 1"])])
         assert not result.successful and "not flown yet" in result.reason, result.reason

@@ -308,10 +308,10 @@ class WheelAssembly:
         # the null-space loop and the reallocation as they were (off at first: WheelAssembly.set_null_space,
         # WheelAssembly.set_reallocation)
         n = self.n_wheels
-        null = self.params[-5:] if hasattr(self, "params") else (np.zeros(n), 0.0, 0.0, np.zeros((n, n, 3)), False)
+        kept = self.params[-5:] if hasattr(self, "params") else (np.zeros(n), 0.0, 0.0, np.zeros((n, n, 3)), False)
         self.params = WheelParams(self.allocation, self.axes_B, self.phi_e, self.gamma_e, self.k_b_e,
                                   self.headroom_e, self.k_i_e, self.r_a_e, self.coast, float(b.rotor_inertia),
-                                  float(b.viscous_friction), float(b.speed_max), float(b.v_max), self.dt, *null)
+                                  float(b.viscous_friction), float(b.speed_max), float(b.v_max), self.dt, *kept)
 
     # -- helpers -------------------------------------------------------------
     def initial_state(self, n_episodes: int, speed0: np.ndarray | None = None) -> np.ndarray:

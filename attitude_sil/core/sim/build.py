@@ -200,9 +200,10 @@ def build_wheels(scn: Scenario, n_episodes: int = 1, per_episode: dict | None = 
         cols = {k: np.broadcast_to(np.asarray(per_episode.get(k, w[k]), dtype=float), (n_episodes,))
                 for k in EPISODE_MOTOR}
         motors = [motor_params({**w, **{k: float(cols[k][p]) for k in EPISODE_MOTOR}}) for p in range(n_episodes)]
-    assembly = WheelAssembly(axes, motor_params(w), w["control_period"], motors, available_wheels(w, axes.shape[1]))
+    available = available_wheels(w, axes.shape[1])
+    assembly = WheelAssembly(axes, motor_params(w), w["control_period"], motors, available)
     assembly.set_null_space(w["null_space.time_constant_s"], w["null_space.speed_rpm"] * RPM)
-    assembly.set_reallocation(w["reallocate_on_fault"], available_wheels(w, axes.shape[1]))
+    assembly.set_reallocation(w["reallocate_on_fault"], available)
     speed0 = None
     if w["initial_speed_rpm"]:
         if len(w["initial_speed_rpm"]) != assembly.n_wheels:
