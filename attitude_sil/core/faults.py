@@ -38,11 +38,12 @@ CATALOGUE: dict[str, tuple[str, ...]] = {
 }
 #: target kind -> the node that flies its faults and publishes them on /diagnostics
 OWNER: dict[str, str] = {"wheel": "wheels", "gyro": "sensors", "star_tracker": "sensors", "magnetometer": "sensors",
-                         "magnetorquers": "magnetorquers", "controller": "controller"}
+                         "magnetorquers": "magnetorquers", "controller": "wheels"}
 #: the nodes that declare the ``faults`` list today
 FAULT_NODES = ("wheels", "sensors")
 #: (target kind, mode) pairs the drivers fly today
-FLOWN: frozenset[tuple[str, str]] = frozenset({("wheel", "lost"), ("wheel", "stuck"), ("star_tracker", "off")})
+FLOWN: frozenset[tuple[str, str]] = frozenset({("wheel", "lost"), ("wheel", "stuck"), ("star_tracker", "off"),
+                                              ("controller", "gain"), ("controller", "delay")})
 #: target kinds that need the sensing loop (scenario.sensors)
 SENSED = frozenset({"gyro", "star_tracker", "magnetometer"})
 #: modes that last once they happen (a wheel that seized stays seized): no ``for``
@@ -50,6 +51,9 @@ PERMANENT = frozenset({("wheel", "lost"), ("wheel", "stuck")})
 #: modes whose VALUE is a size (a gain, a factor, a limit, a time)
 VALUED = frozenset({"friction", "torque_limit", "speed_limit", "bias_jump", "scale", "spike", "latency", "gain",
                     "delay"})
+#: modes whose VALUE must be positive (a time or a limit), or at least 0 (a gain: 0 opens the loop)
+POSITIVE = frozenset({"delay", "latency", "torque_limit", "speed_limit"})
+NON_NEGATIVE = frozenset({"gain", "friction"})
 
 _TARGET = re.compile(r"^(wheel)([1-9][0-9]*)$|^(gyro)\.([xyz])$|^(star_tracker|magnetometer|magnetorquers|controller)$")
 
@@ -124,6 +128,8 @@ def parse_fault(text: str) -> Fault:
         if not rest or rest[0] in ("at", "for"):
             raise ScenarioError(f"{where}: {mode} needs a value, e.g. '{words[0]} {mode} 2 at 5'")
         value = _number(rest.pop(0), where, "value")
+        if (mode in POSITIVE and value <= 0.0) or (mode in NON_NEGATIVE and value < 0.0):
+            raise ScenarioError(f"{where}: a {mode} must be {'>' if mode in POSITIVE else '>='} 0, got {value:g}")
     times = {"at": 0.0, "for": None}
     while rest:
         word = rest.pop(0)
@@ -180,9 +186,15 @@ def parse_faults(lines, duration_s: float, n_wheels: int | None, sensing: bool =
                 raise ScenarioError(f"fault '{f}': a wheel fault needs wheels.actuator reaction_wheels")
             if not 1 <= f.index <= n_wheels:
                 raise ScenarioError(f"fault '{f}': the geometry has wheels 1..{n_wheels}")
-    wheel_faults = [f for f in faults if f.kind == "wheel"]
-    if len(wheel_faults) > 1:
-        raise ScenarioError(f"faults: '{wheel_faults[0]}' and '{wheel_faults[1]}': one wheel fault per run for now")
+        if f.kind == "controller" and n_wheels is None:
+            raise ScenarioError(f"fault '{f}': a controller output fault acts on the reaction wheels' command "
+                                "(wheels.actuator reaction_wheels)")
+    for what, same in (("one wheel fault", lambda f: f.kind == "wheel"),
+                       ("one controller gain", lambda f: (f.kind, f.mode) == ("controller", "gain")),
+                       ("one controller delay", lambda f: (f.kind, f.mode) == ("controller", "delay"))):
+        twice = [f for f in faults if same(f)]
+        if len(twice) > 1:
+            raise ScenarioError(f"faults: '{twice[0]}' and '{twice[1]}': {what} per run for now")
     return faults
 
 

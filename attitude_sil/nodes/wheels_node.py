@@ -22,7 +22,7 @@ import numpy as np
 from attitude_sil.core.faults import Fault, first_step, parse_faults, wheel_failure_values
 from attitude_sil.core.plant.actuators import RPM
 from attitude_sil.core.plant.wheels import NO_NULL_SPACE, allocation_over, null_vector
-from attitude_sil.core.sim.build import available_wheels, build_wheels
+from attitude_sil.core.sim.build import available_wheels, build_wheels, command_faults_of
 from attitude_sil.core.sim.lockstep import CommandHold, StepSequencer, tick_period_ns
 from attitude_sil.errors import ScenarioError
 from attitude_sil.ros.contract import (
@@ -83,6 +83,7 @@ class WheelsNode(LockstepNode):
                     return foreign
                 parse_faults(values["faults"], 0.0, self.core.assembly.n_wheels if wheels else None)
                 wheel_failure_values(values)
+                command_faults_of(values)
             except ScenarioError as exc:
                 return str(exc)
         if pending.get("null_space.time_constant_s", 0.0) > 0.0 and self.param("actuator") == "reaction_wheels":
@@ -117,7 +118,10 @@ class WheelsNode(LockstepNode):
         one in hand (a stuck drive holds the voltage of the step before, which that step records)."""
         for fault in faults:
             step = max(first_step(fault.time_s, self.dt_ns), self.core.k + 1)
-            self.core.fail(fault.index - 1, step, fault.mode == "stuck")
+            if fault.kind == "controller":
+                self.core.add_command_fault(fault, step)
+            else:
+                self.core.fail(fault.index - 1, step, fault.mode == "stuck")
             self.faults.started(fault, step, self.dt_ns)
 
     def _on_command(self, msg, torque_mode: bool) -> None:

@@ -44,6 +44,7 @@ from attitude_sil.core.cache import numba_cache_in
 from attitude_sil.core.control import registry
 from attitude_sil.core.control.compiled import law_addresses
 from attitude_sil.core.control.momentum import BDOT
+from attitude_sil.core.plant.command_faults import CommandFault, no_command_fault
 from attitude_sil.core.plant.kernels import WheelFailure, WheelParams
 from attitude_sil.core.plant.wheels import no_failure
 from attitude_sil.core.sim import batch_loop
@@ -84,6 +85,7 @@ class SimArrays(NamedTuple):
     decay: float  # bumpless offset decay per step
     wheel: WheelParams
     failure: WheelFailure
+    cmd_fault: CommandFault  # the controller output's gain and delay (command_faults), the rings per episode
     noisy: bool
     s_seeds: np.ndarray
     s_att: np.ndarray
@@ -396,7 +398,9 @@ def _sim_arrays(models: tuple, n_steps: int, stride: int, dt: float, law0: np.nd
         np.array([registry.output_of(n) == "torque" for n in ctrl.names]),
         swaps[0], swaps[1],
         ctrl.command == "torque", float(ctrl.decay), WheelParams(*(_writable(a) for a in asm.params)),
-        WheelFailure(*(_writable(a) for a in failure)), ctrl.noisy, ctrl.sensor_seeds,
+        WheelFailure(*(_writable(a) for a in failure)),
+        CommandFault(*(_writable(a) for a in (wheels.command_fault or no_command_fault(P)))), ctrl.noisy,
+        ctrl.sensor_seeds,
         ctrl.sensor_att_std, ctrl.sensor_rate_std,
         _c(v["constant.torque"]) if "constant" in models else np.zeros(3),
         _c(v["step.torque"]) if "step" in models else np.zeros(3),

@@ -29,6 +29,7 @@ from attitude_sil.core.control.dispatch import command_stage, enter_at, reset_ro
 from attitude_sil.core.control.laws.bdot import bdot_row
 from attitude_sil.core.control.momentum import dumping_row, torque_dipole_row
 from attitude_sil.core.environment.ephemeris import body_field
+from attitude_sil.core.plant.command_faults import NEVER, CommandFault, command_fault_row
 from attitude_sil.core.plant.disturbance import orbit_torques
 from attitude_sil.core.plant.kernels import WheelFailure, measure_row, wheel_params_copy
 from attitude_sil.core.plant.lanes import (
@@ -201,6 +202,7 @@ def _chunk(lo, hi, m, sim, recs, noise, noise_lo, out, sums, at):
     # private copies of the shared read-only arrays: threads sharing one array would fight over its reference count
     wp, f = wheel_params_copy(sim.wheel), sim.failure
     fail = WheelFailure(f.wheel.copy(), f.step.copy(), f.stuck.copy(), f.e_hold.copy())  # e_hold: rows lo..hi-1
+    cf, cf_on, u_out = _command_fault_start(sim.cmd_fault, lo, hi, m)
     tau_constant, tau_step = sim.tau_constant.copy(), sim.tau_step.copy()
     s_seeds, s_att, s_rate = sim.s_seeds.copy(), sim.s_att.copy(), sim.s_rate.copy()
     sw_k, sw_law = sim.sw_k.copy(), sim.sw_law.copy()
@@ -238,7 +240,7 @@ def _chunk(lo, hi, m, sim, recs, noise, noise_lo, out, sums, at):
             torque[p] = sim.command_torque or sim.law_torque[law[p]]
             for i in range(3):
                 u_last[p, i] = u[p, i]
-        rows_to_lanes(u, 0, b, U, m)
+        rows_to_lanes(_command_faults(cf, cf_on, u, u_out, m, lo, k), 0, b, U, m)
         wheel_lanes(m, lo, k, xw, xn, b, mot, torque, wp, fail)
         if sim.mag:  # the rods, from the wheels' momentum at t_k
             lanes_to_rows(b, H, h0)
@@ -261,6 +263,29 @@ def _chunk(lo, hi, m, sim, recs, noise, noise_lo, out, sums, at):
         copy_wheels(xn, xw)  # copied, not swapped: a loop over a swapped pair of arrays stays scalar (bench/README.md)
     if with_sums:
         _sums_end(sums_state, n_after, sums_out, lo)
+
+
+@njit(cache=True, inline="always")
+def _command_fault_start(c, lo, hi, m):
+    # the controller output's faults of episodes lo..hi-1: private copies (the rings rows lo..hi-1), whether any
+    # flies, and the applied command's rows (column-major, as the law's)
+    one = c.gain.shape[0] == 1
+    a, z = (0, 1) if one else (lo, hi)
+    cf = CommandFault(c.gain[a:z].copy(), c.gain_from[a:z].copy(), c.gain_to[a:z].copy(), c.delay[a:z].copy(),
+                      c.delay_from[a:z].copy(), c.delay_to[a:z].copy(), c.ring[lo:hi].copy(), c.held[lo:hi].copy())
+    on = not one or c.gain_from[0] != NEVER or c.delay_from[0] != NEVER
+    return cf, on, np.empty((3, m)).T
+
+
+@njit(cache=True, inline="always")
+def _command_faults(cf, on, u, u_out, m, lo, k):
+    # the command the wheels take at step k: the law's, or with the output faults of cf (command_faults) applied
+    if not on:
+        return u
+    one = cf.gain.shape[0] == 1
+    for p in range(m):
+        command_fault_row(u, p, 0 if one else p, k, cf, u_out)
+    return u_out
 
 
 @njit(cache=True, inline="always")

@@ -21,7 +21,8 @@ from attitude_sil.core.control.bank import ControllerBank
 from attitude_sil.core.control.laws.bdot import BDot
 from attitude_sil.core.control.momentum import CrossProductDumping, DipoleCommand
 from attitude_sil.core.environment.ephemeris import Ephemeris, FieldAlongOrbit
-from attitude_sil.core.faults import first_step, wheel_failure_values
+from attitude_sil.core.faults import faults_of, first_step, wheel_failure_values
+from attitude_sil.core.plant.command_faults import delay_steps
 from attitude_sil.core.plant.actuators import RPM, NoActuator, SpeedLoopWheels, TorqueActuator
 from attitude_sil.core.plant.disturbance import DisturbanceModel, orbit_rate
 from attitude_sil.core.plant.linear import LinearizedPlant
@@ -41,7 +42,7 @@ from attitude_sil.errors import ScenarioError
 __all__ = ["build_plant", "build_wheels", "build_disturbance", "build_guidance", "build_controller", "build_sensing",
            "build_environment", "build_scene", "build_dipole_command", "build_magnetorquers", "build_magnetic_loop",
            "law_bank", "check_episode", "schedule_from_scenario", "flexible_states", "flexible_settling",
-           "initial_attitude", "motor_params", "available_wheels", "EPISODE_VALUES", "EPISODE_MOTOR", "EPISODE_FAILURE",
+           "initial_attitude", "motor_params", "available_wheels", "command_faults_of", "EPISODE_VALUES", "EPISODE_MOTOR", "EPISODE_FAILURE",
            "split_episode_values", "episode_laws", "check_episode_parameters",
            "episode_parameter_faults"]
 
@@ -185,6 +186,7 @@ def build_wheels(scn: Scenario, n_episodes: int = 1, per_episode: dict | None = 
     fails = w["failure.wheel"] != 0 or np.any(np.asarray(per_episode.get("failure.wheel", 0)) != 0)
     if w["actuator"] != "reaction_wheels" and (fails or per_episode):
         raise ScenarioError(f"wheels.failure and per-episode motors need actuator reaction_wheels, not {w['actuator']}")
+    output_faults = command_faults_of(w)
     if w["actuator"] == "torque":
         return TorqueActuator(w["torque_limit"], n_episodes)
     if w["actuator"] == "none":
@@ -222,7 +224,30 @@ def build_wheels(scn: Scenario, n_episodes: int = 1, per_episode: dict | None = 
         step = np.array([first_step(float(x), dt_ns) for x in t], dtype=np.int64)  # the first step at or after
         mode = np.atleast_1d(np.asarray(per_episode.get("failure.mode", w["failure.mode"])))
         failure = (wheel - 1, step, mode == "stuck")
-    return Wheels(assembly, n_episodes, speed0, failure)
+    return Wheels(assembly, n_episodes, speed0, failure, output_faults)
+
+
+def command_faults_of(w: dict) -> list:
+    """The ``controller`` faults (gain, delay) of the ``wheels`` parameters ``w``, checked: they act on the
+    reaction wheels' command, and a delay is a whole number of control steps.
+
+    Raises
+    ------
+    ScenarioError
+        One line naming the fault that cannot fly.
+    """
+    out = [f for f in faults_of(w, "wheels") if f.kind == "controller"]
+    dt_ns = int(round(w["control_period"] * 1e9))
+    for f in out:
+        if w["actuator"] != "reaction_wheels":
+            raise ScenarioError(f"fault '{f}': a controller output fault acts on the reaction wheels' command "
+                                f"(wheels.actuator reaction_wheels), not {w['actuator']}")
+        if f.mode == "delay":
+            try:
+                delay_steps(f.value, dt_ns)
+            except ValueError as exc:
+                raise ScenarioError(f"fault '{f}': {exc}") from None
+    return out
 
 
 def build_disturbance(scn: Scenario, n_episodes: int = 1, seeds=None, inertia=None,

@@ -19,10 +19,13 @@ builds them from a scenario.
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 
 from attitude_sil.core.control.momentum import DipoleCommand
 from attitude_sil.core.environment.ephemeris import FieldAlongOrbit
+from attitude_sil.core.plant.command_faults import command_fault_record, command_fault_rows
 from attitude_sil.core.plant.disturbance import lvlh_attitude
 from attitude_sil.core.plant.kernels import WheelFailure
 from attitude_sil.core.plant.lanes import ANGLE, SPEED
@@ -94,13 +97,17 @@ class Wheels:
     ``failure`` is ``(wheel (P,) int, -1 none; step (P,) int; stuck (P,) bool)``:
     from that step on the wheel is lost (open circuit) or its drive is stuck at
     the voltage of the step before (:func:`attitude_sil.core.plant.kernels.wheel_step`).
+    ``command_faults`` are the ``controller`` faults (gain, delay) on the command it takes
+    (:mod:`attitude_sil.core.plant.command_faults`).
     """
 
     def __init__(self, assembly: WheelAssembly, n_episodes: int, speed0: np.ndarray | None,
-                 failure: tuple | None = None) -> None:
+                 failure: tuple | None = None, command_faults: list | None = None) -> None:
         self.assembly = assembly
         self.n_episodes = n_episodes
         self.speed0 = speed0
+        self.command_faults = list(command_faults or [])
+        self.dt_ns = int(round(assembly.dt * 1e9))
         if failure is None or not np.any(np.asarray(failure[0]) >= 0):
             self.failure = None
         else:
@@ -114,6 +121,8 @@ class Wheels:
         self.x = self.assembly.initial_state(self.n_episodes, self.speed0)
         self.k = 0
         self.e_hold = None if self.failure is None else np.zeros(len(self.failure[0]))
+        self.command_fault = command_fault_record(self.command_faults, self.dt_ns, self.n_episodes)
+        self.last_cmd = np.zeros((self.n_episodes, 3))  # the command applied at the step before
 
     @property
     def names(self) -> list[str]:
@@ -130,6 +139,18 @@ class Wheels:
         self.failure = (np.full(f, wheel, dtype=np.int64), np.full(f, step, dtype=np.int64), np.full(f, stuck))
         self.e_hold = np.zeros(f)
 
+    def add_command_fault(self, fault, step: int) -> None:
+        """A ``controller`` fault injected while a run goes, from step ``step`` (> k) for its duration; a delay
+        reads the command applied before it for the steps it did not record."""
+        if step <= self.k:
+            raise ValueError(f"a fault starts at a step to come (> {self.k}), not {step}")
+        old = self.command_fault
+        self.command_faults.append(replace(fault, time_s=step * self.dt_ns * 1e-9))
+        self.command_fault = command_fault_record(self.command_faults, self.dt_ns, self.n_episodes, self.last_cmd)
+        if old is not None and old.ring.shape == self.command_fault.ring.shape:  # a gain after a delay
+            self.command_fault.ring[:] = old.ring
+            self.command_fault.held[:] = old.held
+
     def failure_arrays(self) -> WheelFailure | None:
         """The kernel's failure record (with the held voltages, state), or None."""
         return None if self.failure is None else WheelFailure(*self.failure, self.e_hold)
@@ -141,8 +162,13 @@ class Wheels:
         that the inverse motor model turns into voltages.
         """
         x = self.x
-        self.x, tau_c, h = self.assembly.advance(x, np.ascontiguousarray(cmd_B, dtype=float), torque_mode,
-                                                 self.k, self.failure_arrays())
+        cmd_B = np.ascontiguousarray(cmd_B, dtype=float)
+        if self.command_fault is not None:  # the controller output's gain and delay
+            applied = np.empty_like(cmd_B)
+            command_fault_rows(cmd_B, self.k, self.command_fault, applied)
+            cmd_B = applied
+        self.last_cmd = cmd_B
+        self.x, tau_c, h = self.assembly.advance(x, cmd_B, torque_mode, self.k, self.failure_arrays())
         self.k += 1
         return WheelStep(h, tau_c, x[:, :, ANGLE], x[:, :, SPEED], self.assembly.motor_torque(x))
 
