@@ -25,6 +25,8 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit
 
+from attitude_sil.core.faults import first_step
+
 __all__ = ["CommandFault", "no_command_fault", "command_fault_rows", "command_fault_row", "delay_steps"]
 
 #: a step index no run reaches: a fault without an end
@@ -62,7 +64,7 @@ def delay_steps(delay_s: float, dt_ns: int) -> int:
     Raises
     ------
     ValueError
-        The delay is not a whole number of steps (to 1 ns per step).
+        The delay is not a whole number of steps (to a nanosecond a step).
     """
     t_ns = int(round(delay_s * 1e9))
     d = int(round(t_ns / dt_ns))
@@ -114,8 +116,6 @@ def command_fault_record(faults, dt_ns: int, n_episodes: int, held: np.ndarray |
     ValueError
         A delay that is not a whole number of steps of ``dt_ns``.
     """
-    from attitude_sil.core.faults import first_step
-
     ours = {f.mode: f for f in faults if f.kind == "controller"}
     if not ours:
         return None

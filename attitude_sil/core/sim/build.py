@@ -22,8 +22,8 @@ from attitude_sil.core.control.laws.bdot import BDot
 from attitude_sil.core.control.momentum import CrossProductDumping, DipoleCommand
 from attitude_sil.core.environment.ephemeris import Ephemeris, FieldAlongOrbit
 from attitude_sil.core.faults import faults_of, first_step, wheel_failure_values
-from attitude_sil.core.plant.command_faults import delay_steps
 from attitude_sil.core.plant.actuators import RPM, NoActuator, SpeedLoopWheels, TorqueActuator
+from attitude_sil.core.plant.command_faults import delay_steps
 from attitude_sil.core.plant.disturbance import DisturbanceModel, orbit_rate
 from attitude_sil.core.plant.linear import LinearizedPlant
 from attitude_sil.core.plant.magnetorquers import Magnetorquers, rod_axes
@@ -42,7 +42,8 @@ from attitude_sil.errors import ScenarioError
 __all__ = ["build_plant", "build_wheels", "build_disturbance", "build_guidance", "build_controller", "build_sensing",
            "build_environment", "build_scene", "build_dipole_command", "build_magnetorquers", "build_magnetic_loop",
            "law_bank", "check_episode", "schedule_from_scenario", "flexible_states", "flexible_settling",
-           "initial_attitude", "motor_params", "available_wheels", "command_faults_of", "EPISODE_VALUES", "EPISODE_MOTOR", "EPISODE_FAILURE",
+           "initial_attitude", "motor_params", "available_wheels", "command_faults_of",
+           "EPISODE_VALUES", "EPISODE_MOTOR", "EPISODE_FAILURE",
            "split_episode_values", "episode_laws", "check_episode_parameters",
            "episode_parameter_faults"]
 
