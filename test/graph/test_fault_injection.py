@@ -49,6 +49,31 @@ def test_the_wheels_node_takes_added_faults_and_refuses_what_cannot_fly():
         rclpy.shutdown(context=context)
 
 
+def test_the_wheels_node_takes_an_added_output_delay_reading_the_last_command_before_it():
+    from attitude_sil.nodes.wheels_node import WheelsNode
+
+    context = rclpy.Context()
+    rclpy.init(args=[], context=context)
+    try:
+        node = WheelsNode(context=context)
+        for k in range(3):  # three steps flown, the last with the command (3, 2, 3) V
+            node.core.advance(np.array([[k + 1.0, 2.0, 3.0]]))
+        (result,) = node.set_parameters([Parameter("faults", value=["controller delay 0.015"])])
+        assert not result.successful and "not a whole number of 0.01 s control steps" in result.reason
+        (result,) = node.set_parameters([Parameter("faults", value=["controller delay 0.05"])])
+        assert result.successful, result.reason
+        cf = node.core.command_fault
+        assert (cf.delay[0], cf.delay_from[0]) == (5, 4)  # from the step after the one in hand (k = 3)
+        assert [str(f) for f in node.faults.faults] == ["controller delay 0.05 at 0.04"]
+        (result,) = node.set_parameters([Parameter("faults", value=["controller delay 0.05", "controller gain 2"])])
+        assert result.successful, result.reason
+        assert node.core.command_fault.gain_from[0] == 4 and node.core.command_fault is not cf
+        np.testing.assert_array_equal(node.core.command_fault.held, [[3.0, 2.0, 3.0]])  # the last one applied
+        node.destroy_node()
+    finally:
+        rclpy.shutdown(context=context)
+
+
 def _wait_for_clock(t_ns: int, timeout: float) -> None:
     """Until the graph's /clock has reached ``t_ns`` (its transient-local history read by a node of our own)."""
     context = rclpy.Context()

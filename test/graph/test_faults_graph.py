@@ -87,3 +87,18 @@ def test_the_wheel_failure_preset_reallocates_on_the_graph_as_in_the_engine():
     assert graph.metrics["faults"] == ["wheel1 lost at 2"]
     kept = simulate(scn.with_values("wheels", reallocate_on_fault=False), 1, duration=3.0, driver="compiled")
     assert np.max(np.abs(engine.q_BN - kept.q_BN)) > 1e-6  # the reallocation acted
+
+
+def test_controller_output_faults_fly_on_the_graph_as_in_the_engine(tmp_path):
+    faults = ["controller delay 0.2 at 0.3", "controller gain 1.5 at 0.6 for 0.5"]
+    scn = load_scenario(CONFIG / "hst_roll_step.yaml").with_values("wheels", faults=faults)
+    graph = run_graph(scn, duration=1.5, record_dir=tmp_path / "bag", keep_trajectory=True, progress=False)
+    engine = simulate(scn, 1, duration=1.5, driver="compiled")
+    for name in ("q_BN", "omega_BN_B", "wheel_speed"):
+        assert np.max(np.abs(getattr(graph.trajectory, name) - getattr(engine, name))) <= 1e-9, name
+    assert graph.metrics["faults"] == faults
+    said = [(r.log_time_ns, [(s.name, s.message) for s in m.status])
+            for r, m in open_bag(tmp_path / "bag").iter_decoded(["/diagnostics"])]
+    assert said == [(300_000_000, [("wheels: controller", f"fault: {faults[0]}")]),
+                    (600_000_000, [("wheels: controller", f"fault: {faults[1]}")]),
+                    (1_100_000_000, [("wheels: controller", f"fault ended: {faults[1]}")])]
