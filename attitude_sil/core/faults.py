@@ -42,12 +42,13 @@ OWNER: dict[str, str] = {"wheel": "wheels", "gyro": "sensors", "star_tracker": "
 #: the nodes that declare the ``faults`` list today
 FAULT_NODES = ("wheels", "sensors")
 #: (target kind, mode) pairs the drivers fly today
-FLOWN: frozenset[tuple[str, str]] = frozenset({("wheel", "lost"), ("wheel", "stuck"), ("star_tracker", "off"),
+FLOWN: frozenset[tuple[str, str]] = frozenset({("wheel", "lost"), ("wheel", "stuck"), ("wheel", "torque_limit"),
+                                              ("wheel", "speed_limit"), ("star_tracker", "off"),
                                               ("controller", "gain"), ("controller", "delay")})
 #: target kinds that need the sensing loop (scenario.sensors)
 SENSED = frozenset({"gyro", "star_tracker", "magnetometer"})
 #: modes that last once they happen (a wheel that seized stays seized): no ``for``
-PERMANENT = frozenset({("wheel", "lost"), ("wheel", "stuck")})
+PERMANENT = frozenset({("wheel", "lost"), ("wheel", "stuck"), ("wheel", "torque_limit"), ("wheel", "speed_limit")})
 #: modes whose VALUE is a size (a gain, a factor, a limit, a time)
 VALUED = frozenset({"friction", "torque_limit", "speed_limit", "bias_jump", "scale", "spike", "latency", "gain",
                     "delay"})
@@ -219,9 +220,10 @@ def faults_rule(lines) -> str:
     return ""
 
 
-def legacy_wheel_fault(wheel: int, time_s: float, mode: str) -> Fault | None:
+def legacy_wheel_fault(wheel: int, time_s: float, mode: str, limit: float = 0.0) -> Fault | None:
     """Today's ``wheels.failure.*`` keys as the fault they are (None: ``failure.wheel`` 0, no failure)."""
-    return None if wheel == 0 else Fault("wheel", int(wheel), str(mode), None, float(time_s))
+    return None if wheel == 0 else Fault("wheel", int(wheel), str(mode), None if mode in ("lost", "stuck") else
+                                         float(limit), float(time_s))
 
 
 def wheel_failure_values(w: dict) -> dict:
@@ -236,11 +238,12 @@ def wheel_failure_values(w: dict) -> dict:
     fault = next((f for f in map(parse_fault, w["faults"]) if f.kind == "wheel"), None)
     if fault is None:
         return {}
-    legacy = legacy_wheel_fault(w["failure.wheel"], w["failure.time"], w["failure.mode"])
+    legacy = legacy_wheel_fault(w["failure.wheel"], w["failure.time"], w["failure.mode"], w["failure.limit"])
     if legacy is not None:
         raise ScenarioError(f"fault '{fault}' and wheels.failure ('{legacy}'): one wheel fault per run; "
                             "say it in faults")
-    return {"failure.wheel": fault.index, "failure.time": fault.time_s, "failure.mode": fault.mode}
+    return {"failure.wheel": fault.index, "failure.time": fault.time_s, "failure.mode": fault.mode,
+            "failure.limit": 0.0 if fault.value is None else fault.value}
 
 
 def faults_of(values: dict, node: str) -> list[Fault]:
@@ -248,7 +251,8 @@ def faults_of(values: dict, node: str) -> list[Fault]:
     its ``faults`` list's, and the wheel fault of the ``failure.*`` keys where it has them."""
     out = [f for f in map(parse_fault, values.get("faults", ())) if OWNER[f.kind] == node]
     if "failure.wheel" in values:
-        legacy = legacy_wheel_fault(values["failure.wheel"], values["failure.time"], values["failure.mode"])
+        legacy = legacy_wheel_fault(values["failure.wheel"], values["failure.time"], values["failure.mode"],
+                                    values["failure.limit"])
         out += [] if legacy is None else [legacy]
     return out
 

@@ -93,6 +93,10 @@ class Trajectory:
     #: the rods' torque on the body (P, K+1, 3) N m, held over [t_k, t_k+1]; else None
     dipole_cmd_B: np.ndarray | None = None
     magnetic_torque_B: np.ndarray | None = None
+    #: where the wheels' FDIR runs (docs/faults.md): each wheel's tachometer residual at t_k (P, K+1, n) rad,
+    #: and the wheel it has isolated by then (P, K+1), 1..n (0: none); else None
+    fdir_residual: np.ndarray | None = None
+    fdir_isolated: np.ndarray | None = None
 
     @property
     def tau_actuators_B(self) -> np.ndarray | None:

@@ -21,6 +21,7 @@ import numpy as np
 
 from attitude_sil.core.faults import Fault, first_step, parse_faults, wheel_failure_values
 from attitude_sil.core.plant.actuators import RPM
+from attitude_sil.core.plant.lanes import WHEEL_FAILURE_MODES
 from attitude_sil.core.plant.wheels import NO_NULL_SPACE, allocation_over, null_vector
 from attitude_sil.core.sim.build import available_wheels, build_wheels, command_faults_of
 from attitude_sil.core.sim.lockstep import CommandHold, StepSequencer, tick_period_ns
@@ -121,7 +122,8 @@ class WheelsNode(LockstepNode):
             if fault.kind == "controller":
                 self.core.add_command_fault(fault, step)
             else:
-                self.core.fail(fault.index - 1, step, fault.mode == "stuck")
+                limit = (fault.value or 0.0) * (RPM if fault.mode == "speed_limit" else 1.0)
+                self.core.fail(fault.index - 1, step, WHEEL_FAILURE_MODES.index(fault.mode), limit)
             self.faults.started(fault, step, self.dt_ns)
 
     def _on_command(self, msg, torque_mode: bool) -> None:

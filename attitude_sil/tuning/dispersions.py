@@ -11,6 +11,8 @@ A ``dispersions`` mapping (in a Monte Carlo spec, or a tuning spec's
     noise_level_pct:      {dist: uniform, scale: 50}           # disturbance noise.power x (1 + d / 100)
     noise_seeds: true                                          # noise.seed + run (default when noise is on)
     wheel_failure: {probability: 0.1, modes: [lost, stuck], time: [0, 20]}
+    # (modes may add torque_limit with torque_limit_Nm: [low, high] and speed_limit with speed_limit_rpm: [low, high],
+    #  each run's limit uniform in its range)
     sensor_noise: {attitude_std_deg: 0.001, rate_std_deg_s: 0.0005}   # seed: sensor_noise.seed + run
     gyro_bias_deg_h:      {dist: normal, scale: 1.0}           # added to sensors.gyro.bias_deg_h per axis
     sensor_seeds: true                                         # sensors.seed + run (default with the sensors on)
@@ -56,9 +58,11 @@ _SLOTS = {"inertia_pct": slice(0, 3), "initial_attitude_deg": slice(3, 6), "init
           "setpoint_deg": slice(9, 12), "motor_constant_pct": slice(12, 13), "noise_level_pct": slice(13, 14),
           "failure_happens": 14, "failure_wheel": 15, "failure_time": 16, "failure_mode": 17,
           "gyro_bias_deg_h": slice(18, 21), "residual_dipole_Am2": slice(21, 24),
-          "magnetometer_bias_nt": slice(24, 27), "epoch_s": 27}
+          "magnetometer_bias_nt": slice(24, 27), "epoch_s": 27, "failure_limit": 28}
 #: (slots are drawn in order from each run's stream: a slot added at the end leaves the others' values as they were)
-_N_SLOTS = 28
+_N_SLOTS = 29
+#: a wheel failure's modes, and the range key of each that has a size
+_FAILURE_MODES = {"lost": None, "stuck": None, "torque_limit": "torque_limit_Nm", "speed_limit": "speed_limit_rpm"}
 
 
 def _number(v: Any) -> bool:
@@ -102,21 +106,32 @@ def check_dispersions(where: str, raw: Any, scn: Scenario) -> dict:
                 raise SpecError(f"{at} must be true or false, got {value!r}")
             out[key] = value
         elif key == "wheel_failure":
-            if not isinstance(value, dict) or set(value) - {"probability", "modes", "time"}:
-                raise SpecError(f"{at} must be a mapping of probability, modes, time, got {value!r}")
+            if not isinstance(value, dict) or set(value) - {"probability", "modes", "time", "torque_limit_Nm",
+                                                            "speed_limit_rpm"}:
+                raise SpecError(f"{at} must be a mapping of probability, modes, time, torque_limit_Nm, "
+                                f"speed_limit_rpm, got {value!r}")
             p = value.get("probability", 1.0)
             if not (_number(p) and 0.0 <= p <= 1.0):
                 raise SpecError(f"{at}.probability must be a number in 0..1, got {p!r}")
             modes = value.get("modes", ["lost", "stuck"])
-            if not isinstance(modes, list) or not modes or not all(m in ("lost", "stuck") for m in modes):
-                raise SpecError(f"{at}.modes must be a non-empty list of lost, stuck, got {modes!r}")
+            if not isinstance(modes, list) or not modes or not all(m in _FAILURE_MODES for m in modes):
+                raise SpecError(f"{at}.modes must be a non-empty list of {', '.join(_FAILURE_MODES)}, got {modes!r}")
+            ranges = {}
+            for m in modes:
+                size = _FAILURE_MODES[m]
+                r = value.get(size) if size else None
+                if size and not (isinstance(r, list) and len(r) == 2 and all(_number(v) and v >= 0 for v in r)
+                                 and r[0] <= r[1]):
+                    raise SpecError(f"{at}.{size} must be [low, high], 0 <= low <= high, for mode {m}, got {r!r}")
+                if size:
+                    ranges[m] = [float(v) for v in r]
             t = value.get("time", [0.0, scn.duration])
             if not (isinstance(t, list) and len(t) == 2 and all(_number(v) and v >= 0 for v in t) and t[0] <= t[1]):
                 raise SpecError(f"{at}.time must be [earliest, latest] s, 0 <= earliest <= latest, got {t!r}")
             if scn.param("wheels", "actuator") != "reaction_wheels":
                 raise SpecError(f"{at}: the scenario's actuator is {scn.param('wheels', 'actuator')}; wheel failures "
                                 "need reaction_wheels")
-            out[key] = {"probability": float(p), "modes": list(modes), "time": [float(v) for v in t]}
+            out[key] = {"probability": float(p), "modes": list(modes), "time": [float(v) for v in t], "limits": ranges}
         elif key == "sensor_noise":
             if not isinstance(value, dict) or set(value) - {"attitude_std_deg", "rate_std_deg_s"}:
                 raise SpecError(f"{at} must be a mapping of attitude_std_deg, rate_std_deg_s, got {value!r}")
@@ -223,6 +238,12 @@ def episode_values(scn: Scenario, dispersions: dict, seed: int, runs) -> dict[st
         modes = np.asarray(wf["modes"])
         out["wheels.failure.mode"] = np.where(happens, modes[np.minimum((u[:, 17] * len(modes)).astype(np.int64),
                                                                          len(modes) - 1)], "lost")
+        if wf.get("limits"):  # the size of a limited drive, per run (whole thousandths, as a file states it)
+            limit = np.zeros(len(runs))
+            for mode, (lo, hi) in wf["limits"].items():
+                chosen = out["wheels.failure.mode"] == mode
+                limit[chosen] = np.round(lo + (hi - lo) * u[chosen, _SLOTS["failure_limit"]], 3)
+            out["wheels.failure.limit"] = limit
     if "gyro_bias_deg_h" in dispersions:
         out["sensors.gyro.bias_deg_h"] = (np.asarray(v["sensors"]["gyro.bias_deg_h"], dtype=float)
                                           + _offsets(dispersions["gyro_bias_deg_h"], u[:, _SLOTS["gyro_bias_deg_h"]]))

@@ -45,6 +45,8 @@ import numpy as np
 from attitude_sil.core import yaml12
 from attitude_sil.core.analysis.pointing import POINTING_COLUMNS
 from attitude_sil.core.control import registry
+from attitude_sil.core.faults import wheel_failure_values
+from attitude_sil.core.plant.fdir import fdir_report
 from attitude_sil.core.sim.build import check_episode
 from attitude_sil.core.sim.engine import simulate_summary
 from attitude_sil.core.sim.params import NODE_PARAMS
@@ -434,6 +436,10 @@ def summarize_campaign(spec: MonteCarloSpec, table: dict[str, np.ndarray], inter
         summary["diverged_run_ids"] = [int(r) for r in table["run"][diverged][:20]]
     summary["worst"] = [{"run": int(table["run"][i]), spec.worst["metric"]: float(table[spec.worst["metric"]][i])}
                         for i in worst_runs(spec, table)] if spec.worst["metric"] in table else []
+    if "fdir_wheel" in table:  # the wheels' FDIR flew: its detections against the failures the runs flew
+        w = {**spec.scenario.values["wheels"], **wheel_failure_values(spec.scenario.values["wheels"])}
+        failure = [table.get(f"wheels.failure.{k}", np.full(n, w[f"failure.{k}"])) for k in ("wheel", "time", "mode")]
+        summary["fdir"] = fdir_report(*failure, table["fdir_wheel"], table["fdir_time_s"], spec.scenario.duration)
     return summary
 
 

@@ -13,6 +13,7 @@ import numpy as np
 from attitude_sil.core.analysis.magnetic import MagneticFigures, magnetic_columns, magnetic_figures
 from attitude_sil.core.analysis.metric_rows import Sums
 from attitude_sil.core.analysis.pointing import pointing_columns, pointing_errors, pointing_metrics, pointing_start
+from attitude_sil.core.plant.fdir import fdir_columns
 from attitude_sil.core.plant.quaternion import euler_from_quat, quat_error, quat_multiply
 from attitude_sil.core.trajectory import EpisodeSummary, Trajectory, all_finite
 
@@ -271,6 +272,8 @@ def summarize(tr: Trajectory, scenario_values: dict, step_time: float = 0.0) -> 
     if tr.omega_BN_B is not None and tr.h_wheels_B is not None:  # detumbling, and the magnetorquers' figures
         m.update(magnetic_columns(tr.t, tr.omega_BN_B, tr.h_wheels_B, tr.dipole_cmd_B,
                                   scenario_values["metrics.detumble_rate_deg_s"]))
+    if tr.fdir_isolated is not None:  # the wheels' FDIR ran: what it isolated, when
+        m.update(fdir_columns(tr.t, tr.fdir_isolated))
     finite = all_finite(tr.omega_BN_B, tr.u_cmd)  # the running sums' rule (Sums.finite): rate and command
     no_wheels = tr.wheel_speed is None or tr.wheel_speed.shape[-1] == 0
     peak_ws = None if no_wheels else np.max(np.abs(np.nan_to_num(tr.wheel_speed, nan=np.inf)), axis=(1, 2))

@@ -98,17 +98,25 @@ class WheelParams(NamedTuple):
 
 
 class WheelFailure(NamedTuple):
-    """Wheel failures per episode (F = 1 for all, or P rows): which wheel (-1: none), from which step, how.
+    """Wheel failures per episode (F = 1 for all, or P rows): which wheel (-1: none), from which step, how;
+    and which wheel the allocation leaves out (``WheelParams.reallocate``), from which step.
 
     A stuck drive holds the voltage of the step before the failure, which
     ``e_hold`` keeps (state, updated until the failure); a lost wheel (open
-    circuit) coasts.
+    circuit) coasts; a torque-limited drive makes at most ``limit`` N m (its
+    current limit lowered), a speed-limited one no longer drives beyond
+    ``limit`` rad/s. The wheel isolated is the failed one from its failure's
+    step under ideal isolation, or the one the drive's FDIR isolates, from the
+    step it does (:mod:`attitude_sil.core.plant.fdir`, which writes it: state).
     """
 
     wheel: np.ndarray  # (F,) int64
     step: np.ndarray  # (F,) int64
-    stuck: np.ndarray  # (F,) bool
+    mode: np.ndarray  # (F,) int64, WHEEL_FAILURE_MODES' code
+    limit: np.ndarray  # (F,) N m (torque_limit) or rad/s (speed_limit)
     e_hold: np.ndarray  # (F,) V
+    isolated: np.ndarray  # (F,) int64, -1: none
+    isolated_step: np.ndarray  # (F,) int64
 
 
 @njit(cache=True)

@@ -63,6 +63,10 @@ ANGLE, CURRENT, SPEED = 0, 1, 2
 #: a lost wheel (1.0)
 PHI, GAMMA, KB, KI, HEAD, RA, E, LOST = 0, 9, 12, 13, 14, 15, 16, 17
 MOTOR_ROWS = 18
+#: the modes of a wheel failure (:data:`attitude_sil.core.faults.CATALOGUE`'s wheel modes but friction), by code
+#: (``WheelFailure.mode``)
+WHEEL_FAILURE_MODES = ("lost", "stuck", "torque_limit", "speed_limit")
+FAIL_LOST, FAIL_STUCK, FAIL_TORQUE_LIMIT, FAIL_SPEED_LIMIT = 0, 1, 2, 3
 
 
 # ---------------------------------------------------------------- copies
@@ -273,13 +277,13 @@ def _drive(m, j, xw, b, mot, torque, wp, fail, lo, k, reallocate):
     # the back-EMF, no drive beyond the speed limit, the bus voltage
     b_m, speed_max, v_max = wp.b_m, wp.speed_max, wp.v_max
     n_j, tau_n = wp.null[j], wp.null_tau
-    one = fail[0].shape[0] == 1
+    one = fail.isolated.shape[0] == 1
     for p in range(m):
-        f = -1  # the failed wheel the allocation leaves out
+        f = -1  # the isolated wheel the allocation leaves out
         if reallocate:
             pf = 0 if one else lo + p
-            if fail[0][pf] >= 0 and k >= fail[1][pf]:
-                f = fail[0][pf]
+            if fail.isolated[pf] >= 0 and k >= fail.isolated_step[pf]:
+                f = fail.isolated[pf]
         alloc = wp.allocation[j] if f < 0 else wp.realloc[f, j]
         speed = xw[j, SPEED, p]
         v = -(alloc[0] * b[U, p] + alloc[1] * b[U + 1, p] + alloc[2] * b[U + 2, p])
@@ -297,21 +301,29 @@ def _drive(m, j, xw, b, mot, torque, wp, fail, lo, k, reallocate):
 
 
 @njit(cache=True, inline="always")
-def _fail(m, j, lo, k, fail, mot):
+def _fail(m, j, lo, k, fail, mot, xw):
     # a failed wheel j (rare: a plain loop): a stuck drive holds the voltage of the step before the failure, a
-    # lost one (open circuit) coasts; until the failure, the held voltage follows the drive
-    fail_j, fail_k, stuck, e_hold = fail
+    # lost one (open circuit) coasts, a torque-limited one keeps its voltage within R_a limit / K_i of the
+    # back-EMF (its current limit lowered), a speed-limited one no longer drives beyond its limit; until the
+    # failure, the held voltage follows the drive
+    fail_j, fail_k, mode, e_hold = fail.wheel, fail.step, fail.mode, fail.e_hold
     one = fail_j.shape[0] == 1
     for p in range(m):
         pf = 0 if one else lo + p
         mot[LOST, p] = 0.0
         if j == fail_j[pf]:
+            emf = mot[KB, p] * xw[j, SPEED, p]
             if k < fail_k[pf]:
                 e_hold[pf] = mot[E, p]
-            elif stuck[pf]:
+            elif mode[pf] == FAIL_STUCK:
                 mot[E, p] = e_hold[pf]
-            else:
+            elif mode[pf] == FAIL_LOST:
                 mot[LOST, p] = 1.0
+            elif mode[pf] == FAIL_TORQUE_LIMIT:
+                head = mot[RA, p] * fail.limit[pf] / mot[KI, p]
+                mot[E, p] = min(max(mot[E, p], emf - head), emf + head)
+            elif abs(xw[j, SPEED, p]) >= fail.limit[pf] and (mot[E, p] - emf) * xw[j, SPEED, p] > 0.0:
+                mot[E, p] = emf
 
 
 @njit(cache=True, inline="always")
@@ -337,8 +349,8 @@ def wheel_lanes(m, lo, k, xw, xn, b, mot, torque, wp, fail):
         The assembly and the failures (F = 1 or P; ``e_hold`` is updated in place).
     """
     axes, j_m, coast0, coast1 = wp.axes, wp.j_m, wp.coast[0], wp.coast[1]
-    failing = fail[0].shape[0] > 1 or fail[0][0] >= 0
-    reallocate = failing and wp.reallocate
+    failing = fail.wheel.shape[0] > 1 or fail.wheel[0] >= 0
+    reallocate = wp.reallocate and (fail.isolated.shape[0] > 1 or fail.isolated[0] >= 0)
     for i in range(3):
         for p in range(m):
             b[TC + i, p] = 0.0
@@ -346,7 +358,7 @@ def wheel_lanes(m, lo, k, xw, xn, b, mot, torque, wp, fail):
     for j in range(xw.shape[0]):
         _drive(m, j, xw, b, mot, torque, wp, fail, lo, k, reallocate)
         if failing:
-            _fail(m, j, lo, k, fail, mot)
+            _fail(m, j, lo, k, fail, mot, xw)
         for r in range(3):  # the exact motor step, one state at a time (few rows written per loop)
             for p in range(m):
                 xn[j, r, p] = (xw[j, ANGLE, p] * mot[PHI + r, p] + xw[j, CURRENT, p] * mot[PHI + 3 + r, p]

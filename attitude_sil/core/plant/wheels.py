@@ -27,6 +27,7 @@ torque on the body about that axis; the wheels are driven the other way
 
 from __future__ import annotations
 
+import copy
 import functools
 import math
 from dataclasses import dataclass
@@ -264,6 +265,13 @@ class WheelAssembly:
                 realloc[f] = self.allocation
         self.params = self.params._replace(realloc=realloc, reallocate=bool(on))
 
+    def nominal(self) -> WheelAssembly:
+        """A copy of the assembly as it stands (allocation, null-space loop, reallocation) flying the nominal
+        motor in every episode: the drive's model of its motors (:mod:`attitude_sil.core.plant.fdir`)."""
+        twin = copy.copy(self)
+        twin.set_motors(None)
+        return twin
+
     def set_null_space(self, time_constant: float, target: float) -> None:
         """Drive the wheel speeds' component along :func:`null_vector` to ``target`` (rad/s) as a first order
         of ``time_constant`` (s; 0: off), from the next step on: speed management that makes no body torque.
@@ -393,8 +401,8 @@ class WheelAssembly:
 
 def no_failure() -> WheelFailure:
     """The failure record of :meth:`WheelAssembly.advance` for "no wheel fails" (F = 1)."""
-    return WheelFailure(np.full(1, -1, dtype=np.int64), np.zeros(1, dtype=np.int64), np.zeros(1, dtype=np.bool_),
-                        np.zeros(1))
+    return WheelFailure(np.full(1, -1, dtype=np.int64), np.zeros(1, dtype=np.int64), np.zeros(1, dtype=np.int64),
+                        np.zeros(1), np.zeros(1), np.full(1, -1, dtype=np.int64), np.zeros(1, dtype=np.int64))
 
 
 NO_FAILURE = no_failure()  # read-only in use: e_hold is written only for the failed wheel, and there is none

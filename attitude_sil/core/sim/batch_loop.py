@@ -201,7 +201,8 @@ def _chunk(lo, hi, m, sim, recs, noise, noise_lo, out, sums, at):
     xfer = (u_last, offset, has_off)  # the bumpless transfer's arrays
     # private copies of the shared read-only arrays: threads sharing one array would fight over its reference count
     wp, f = wheel_params_copy(sim.wheel), sim.failure
-    fail = WheelFailure(f.wheel.copy(), f.step.copy(), f.stuck.copy(), f.e_hold.copy())  # e_hold: rows lo..hi-1
+    fail = WheelFailure(f.wheel.copy(), f.step.copy(), f.mode.copy(), f.limit.copy(), f.e_hold.copy(),
+                        f.isolated.copy(), f.isolated_step.copy())
     cf, cf_on, u_out = _command_fault_start(sim.cmd_fault, lo, hi, m)
     tau_constant, tau_step = sim.tau_constant.copy(), sim.tau_step.copy()
     s_seeds, s_att, s_rate = sim.s_seeds.copy(), sim.s_att.copy(), sim.s_rate.copy()

@@ -24,6 +24,8 @@ from attitude_sil.core.environment.ephemeris import Ephemeris, FieldAlongOrbit
 from attitude_sil.core.faults import faults_of, first_step, wheel_failure_values
 from attitude_sil.core.plant.actuators import RPM, NoActuator, SpeedLoopWheels, TorqueActuator
 from attitude_sil.core.plant.command_faults import delay_steps
+from attitude_sil.core.plant.fdir import WheelFdir
+from attitude_sil.core.plant.lanes import FAIL_SPEED_LIMIT, WHEEL_FAILURE_MODES
 from attitude_sil.core.plant.disturbance import DisturbanceModel, orbit_rate
 from attitude_sil.core.plant.linear import LinearizedPlant
 from attitude_sil.core.plant.magnetorquers import Magnetorquers, rod_axes
@@ -157,7 +159,7 @@ def motor_params(values: dict) -> MotorParams:
 EPISODE_MOTOR = ("motor.resistance", "motor.inductance", "motor.torque_constant", "motor.back_emf_constant",
                  "motor.torque_max")
 #: per-episode wheel failure parameters
-EPISODE_FAILURE = ("failure.wheel", "failure.time", "failure.mode")
+EPISODE_FAILURE = ("failure.wheel", "failure.time", "failure.mode", "failure.limit")
 
 
 def available_wheels(w: dict, n: int) -> list[int] | None:
@@ -224,8 +226,14 @@ def build_wheels(scn: Scenario, n_episodes: int = 1, per_episode: dict | None = 
         dt_ns = int(round(w["control_period"] * 1e9))
         step = np.array([first_step(float(x), dt_ns) for x in t], dtype=np.int64)  # the first step at or after
         mode = np.atleast_1d(np.asarray(per_episode.get("failure.mode", w["failure.mode"])))
-        failure = (wheel - 1, step, mode == "stuck")
-    return Wheels(assembly, n_episodes, speed0, failure, output_faults)
+        limit = np.atleast_1d(np.asarray(per_episode.get("failure.limit", w["failure.limit"]), dtype=float))
+        code = np.array([WHEEL_FAILURE_MODES.index(str(x)) for x in mode], dtype=np.int64)
+        failure = (wheel - 1, step, code, np.where(code == FAIL_SPEED_LIMIT, limit * RPM, limit))
+    fdir = None
+    if w["fdir.enabled"]:
+        fdir = WheelFdir(assembly, n_episodes, w["fdir.counts_per_rev"], w["fdir.threshold_rad"],
+                         w["fdir.persistence"], w["fdir.bandwidth_rad_s"])
+    return Wheels(assembly, n_episodes, speed0, failure, output_faults, fdir)
 
 
 def command_faults_of(w: dict) -> list:

@@ -53,6 +53,8 @@ def compiled_plan(plant, wheels, dist: DisturbanceModel, guide: Guidance, ctrl: 
         return f"plant model {type(plant).__name__}"
     if type(wheels) is not Wheels:
         return f"actuator {type(wheels).__name__}"
+    if wheels.fdir is not None:
+        return "the wheels' FDIR runs in the stepwise driver"
     if guide.mode != "step":
         return f"guidance {guide.mode}"
     extra = sorted(set(dist.models) - COMPILED_DISTURBANCES)
@@ -348,6 +350,9 @@ def _simulate_stepwise(plant, wheels, dist, guide, ctrl, swaps: dict, K: int, dt
         for name in ("magnetic_field_B", "dipole_cmd_B", "magnetic_torque_B") + (("magnetometer_B",) if sensing
                                                                                  else ()):
             setattr(tr, name, np.empty((P, K + 1, 3)))
+    fdir = wheels.fdir if isinstance(wheels, Wheels) else None
+    if fdir is not None:
+        tr.fdir_residual, tr.fdir_isolated = np.empty((P, K + 1, nw)), np.empty((P, K + 1), dtype=np.int64)
     estimate = sensing is not None and sensing.feedback == "estimate"
     dt_ns = int(round(dt * 1e9))
     for k in range(K + 1):
@@ -382,6 +387,9 @@ def _simulate_stepwise(plant, wheels, dist, guide, ctrl, swaps: dict, K: int, dt
         tr.wheel_angle[:, k] = ws.position
         tr.wheel_effort[:, k] = ws.effort
         tr.omega_RN_R[:, k] = w_RN
+        if fdir is not None:
+            tr.fdir_residual[:, k] = fdir.residual
+            tr.fdir_isolated[:, k] = fdir.isolated + 1
         if magnetic is not None:
             tau_ext = tau_ext + _magnetic_step(tr, k, k * dt_ns, s.q_BN, ws.h_wheels_B, u, magnetic, sensing,
                                                ctrl.active)

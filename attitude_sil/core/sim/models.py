@@ -27,6 +27,7 @@ from attitude_sil.core.control.momentum import DipoleCommand
 from attitude_sil.core.environment.ephemeris import FieldAlongOrbit
 from attitude_sil.core.plant.command_faults import command_fault_record, command_fault_rows
 from attitude_sil.core.plant.disturbance import lvlh_attitude
+from attitude_sil.core.plant.fdir import WheelFdir
 from attitude_sil.core.plant.kernels import WheelFailure
 from attitude_sil.core.plant.lanes import ANGLE, SPEED
 from attitude_sil.core.plant.magnetorquers import Magnetorquers
@@ -94,27 +95,30 @@ class Plant:
 class Wheels:
     """Reaction-wheel assembly driven by a body-axis voltage command.
 
-    ``failure`` is ``(wheel (P,) int, -1 none; step (P,) int; stuck (P,) bool)``:
-    from that step on the wheel is lost (open circuit) or its drive is stuck at
-    the voltage of the step before (:func:`attitude_sil.core.plant.kernels.wheel_step`).
+    ``failure`` is ``(wheel (P,) int, -1 none; step (P,) int; mode (P,) int; limit (P,))``:
+    from that step on the wheel is lost (open circuit), its drive is stuck at
+    the voltage of the step before, or limited to ``limit`` N m or rad/s
+    (:data:`~attitude_sil.core.plant.lanes.WHEEL_FAILURE_MODES`, :func:`attitude_sil.core.plant.kernels.wheel_step`).
     ``command_faults`` are the ``controller`` faults (gain, delay) on the command it takes
     (:mod:`attitude_sil.core.plant.command_faults`).
     """
 
     def __init__(self, assembly: WheelAssembly, n_episodes: int, speed0: np.ndarray | None,
-                 failure: tuple | None = None, command_faults: list | None = None) -> None:
+                 failure: tuple | None = None, command_faults: list | None = None, fdir: WheelFdir | None = None
+                 ) -> None:
         self.assembly = assembly
         self.n_episodes = n_episodes
         self.speed0 = speed0
         self.command_faults = list(command_faults or [])
+        self.fdir = fdir  # the drive's FDIR (core.plant.fdir), or None
+        self.isolated_now = np.zeros(0, dtype=np.int64)  # the episodes whose FDIR isolated a wheel at this step
         self.dt_ns = int(round(assembly.dt * 1e9))
         if failure is None or not np.any(np.asarray(failure[0]) >= 0):
             self.failure = None
         else:
-            wheel, step, stuck = (np.atleast_1d(np.asarray(a)) for a in failure)
             f = n_episodes  # the held voltage is per episode
-            self.failure = (np.broadcast_to(wheel, (f,)).astype(np.int64), np.broadcast_to(step, (f,)).astype(np.int64),
-                            np.broadcast_to(stuck, (f,)).astype(np.bool_))
+            self.failure = tuple(np.broadcast_to(np.atleast_1d(np.asarray(a)), (f,)).astype(t)
+                                 for a, t in zip(failure, (np.int64, np.int64, np.int64, np.float64), strict=True))
         self.reset()
 
     def reset(self) -> None:
@@ -123,20 +127,24 @@ class Wheels:
         self.e_hold = None if self.failure is None else np.zeros(len(self.failure[0]))
         self.command_fault = command_fault_record(self.command_faults, self.dt_ns, self.n_episodes)
         self.last_cmd = np.zeros((self.n_episodes, 3))  # the command applied at the step before
+        if self.fdir is not None:
+            self.fdir.reset(self.x)
 
     @property
     def names(self) -> list[str]:
         return [f"wheel_{i + 1}" for i in range(self.assembly.n_wheels)]
 
-    def fail(self, wheel: int, step: int, stuck: bool) -> None:
-        """Wheel ``wheel`` (0-based) fails from step ``step`` on, stuck or lost, in every episode: a fault
+    def fail(self, wheel: int, step: int, mode: int, limit: float = 0.0) -> None:
+        """Wheel ``wheel`` (0-based) fails from step ``step`` on in every episode, in ``mode`` (a code of
+        :data:`~attitude_sil.core.plant.lanes.WHEEL_FAILURE_MODES`) with ``limit`` (N m or rad/s): a fault
         injected while a run goes. ``step`` must be after the step in hand (``step > k``): a stuck drive holds
         the voltage of the step before, which the steps until then record.
         """
         if step <= self.k:
             raise ValueError(f"a wheel fails from a step to come (> {self.k}), not {step}")
         f = self.n_episodes
-        self.failure = (np.full(f, wheel, dtype=np.int64), np.full(f, step, dtype=np.int64), np.full(f, stuck))
+        self.failure = (np.full(f, wheel, dtype=np.int64), np.full(f, step, dtype=np.int64),
+                        np.full(f, mode, dtype=np.int64), np.full(f, float(limit)))
         self.e_hold = np.zeros(f)
 
     def add_command_fault(self, fault, step: int) -> None:
@@ -152,8 +160,14 @@ class Wheels:
             self.command_fault.held[:] = old.held
 
     def failure_arrays(self) -> WheelFailure | None:
-        """The kernel's failure record (with the held voltages, state), or None."""
-        return None if self.failure is None else WheelFailure(*self.failure, self.e_hold)
+        """The kernel's failure record (with the held voltages, state), or None: the wheel isolated is the
+        FDIR's, or (ideal isolation) the failed one from its failure's step."""
+        if self.fdir is not None:
+            f = self.fdir
+            if self.failure is None:
+                return f.isolation()
+            return WheelFailure(*self.failure, self.e_hold, f.isolated, f.isolated_step)
+        return None if self.failure is None else WheelFailure(*self.failure, self.e_hold, *self.failure[:2])
 
     def advance(self, cmd_B: np.ndarray, torque_mode: bool = False) -> WheelStep:
         """Hold a body-axis command (P, 3) over one step; return the step's outputs.
@@ -168,7 +182,11 @@ class Wheels:
             command_fault_rows(cmd_B, self.k, self.command_fault, applied)
             cmd_B = applied
         self.last_cmd = cmd_B
+        if self.fdir is not None:  # the tachometer read at t_k, before the step's command is shared
+            self.isolated_now = self.fdir.check(self.k, x)
         self.x, tau_c, h = self.assembly.advance(x, cmd_B, torque_mode, self.k, self.failure_arrays())
+        if self.fdir is not None:
+            self.fdir.predict(cmd_B, torque_mode, self.k)
         self.k += 1
         return WheelStep(h, tau_c, x[:, :, ANGLE], x[:, :, SPEED], self.assembly.motor_torque(x))
 

@@ -196,12 +196,24 @@ NODE_PARAMS: dict[str, list[ParamSpec]] = {
         ParamSpec("reallocate_on_fault", "bool", False, "ideal isolation: at the step a wheel fault becomes "
                   "active the allocation drops that wheel and shares commands among the others (a perfect, instant "
                   "detector; the bound a real one approaches)"),
+        ParamSpec("fdir.enabled", "bool", False, "the drive's FDIR (docs/faults.md): a residual of each wheel's "
+                  "tachometer against the nominal motor model, a threshold and a persistence count; with "
+                  "reallocate_on_fault the allocation drops the wheel it isolates, from the step it does"),
+        ParamSpec("fdir.counts_per_rev", "integer", 4096, "the drive tachometer's counts per revolution, which "
+                  "the FDIR reads (its angle is within half a count)", min=1),
+        _d("fdir.threshold_rad", 0.01, "FDIR residual threshold on a wheel's angle, rad", min=0.0, min_exclusive=True),
+        ParamSpec("fdir.persistence", "integer", 10, "FDIR: control steps in a row over the threshold that "
+                  "isolate a wheel", min=1),
+        _d("fdir.bandwidth_rad_s", 2.0, "FDIR observer's double pole, rad/s: a wheel torque off the model's by "
+           "an acceleration a leaves a residual a / bandwidth^2", min=0.0, min_exclusive=True),
         ParamSpec("failure.wheel", "integer", 0, "wheel that fails at failure.time: 0 none, 1..n that wheel of "
                   "the geometry (reaction_wheels only)", min=0),
         _d("failure.time", 0.0, "sim time the wheel fails (the first step at or after it), s", min=0.0),
         ParamSpec("failure.mode", "string", "lost", "lost: the drive opens, no current, the wheel coasts on "
-                  "its friction; stuck: the drive holds the voltage of the step before the failure",
-                  choices=("lost", "stuck")),
+                  "its friction; stuck: the drive holds the voltage of the step before the failure; torque_limit: "
+                  "the drive makes at most failure.limit N m; speed_limit: it drives to failure.limit rpm at most",
+                  choices=("lost", "stuck", "torque_limit", "speed_limit")),
+        _d("failure.limit", 0.0, "the failed wheel's limit: N m (torque_limit) or rpm (speed_limit)", min=0.0),
         ParamSpec("actuator", "string", "reaction_wheels",
                   "reaction_wheels (PMDC motors, paper 000), speed_loop (identified motor with a wheel-speed "
                   "PID, paper 003), torque (ideal torquer saturated at torque_limit: torque rods, paper 001), "
