@@ -54,7 +54,13 @@ from attitude_sil.ros.contract import (
     WHEEL_TORQUE,
     recorded_topics,
 )
-from attitude_sil.ros.convert import fault_diagnostics_msg, magnetic_field_msg, ns_to_stamp, odometry_msg
+from attitude_sil.ros.convert import (
+    fault_diagnostics_msg,
+    isolation_diagnostics_msg,
+    magnetic_field_msg,
+    ns_to_stamp,
+    odometry_msg,
+)
 from attitude_sil.ros.qos import offered_qos_yaml
 from attitude_sil.storage.cdr import (
     TfLayout,
@@ -136,6 +142,16 @@ def _write_faults(writer: BagWriter, scn: Scenario, stamps: np.ndarray) -> None:
                 writer.write(DIAGNOSTICS, serialize_message(fault_diagnostics_msg(changes, t, node)), t)
 
 
+def _write_isolations(writer: BagWriter, scn: Scenario, tr: Trajectory, p: int, stamps: np.ndarray) -> None:
+    """The wheels' ``/diagnostics`` of the step their FDIR isolated a wheel, as the wheels node publishes it."""
+    if tr.fdir_isolated is None or not np.any(tr.fdir_isolated[p] > 0):
+        return
+    k = int(np.argmax(tr.fdir_isolated[p] > 0))
+    msg = isolation_diagnostics_msg(int(tr.fdir_isolated[p, k]), int(stamps[k]),
+                                    scn.param("wheels", "reallocate_on_fault"))
+    writer.write(DIAGNOSTICS, serialize_message(msg), int(stamps[k]))
+
+
 def _orbit(scn: Scenario, stamps: np.ndarray) -> list[bytes]:
     """The plant's ``orbit`` messages at ``stamps`` (ns), as it publishes them."""
     orbit = build_environment(scn)[0]
@@ -207,6 +223,7 @@ def record_episode(scn: Scenario, tr: Trajectory, run_dir: str | Path, *, episod
                            for k, t in enumerate(stamps.tolist())  # step by step, as the graph publishes
                            for name, data in series.items()])
         _write_faults(writer, scn, stamps)
+        _write_isolations(writer, scn, tr, p, stamps)
         t0 = int(stamps[0])  # the body model goes with the first attitude, as the recorder writes it
         writer.write(_absolute(BODY_MODEL), marker_array_cdr(t0, BODY, build_scene(scn.values).markers), t0)
     finally:

@@ -35,7 +35,7 @@ from attitude_sil.ros.contract import (
     WHEEL_STATE,
     WHEEL_TORQUE,
 )
-from attitude_sil.ros.convert import stamp_to_ns, vector_to_array
+from attitude_sil.ros.convert import isolation_diagnostics_msg, stamp_to_ns, vector_to_array
 from attitude_sil.ros.node import LockstepNode, NodeFaults, run_node
 from attitude_sil.storage.cdr import joint_state_cdr, stamped_vector_cdr
 
@@ -178,6 +178,10 @@ class WheelsNode(LockstepNode):
 
     def _advance(self, t: int, v: np.ndarray, torque_mode: bool) -> None:
         out = self.core.advance(v, torque_mode)
+        if self.core.isolated_now.size:  # the FDIR isolated a wheel at this step (the one episode)
+            wheel = int(self.core.fdir.isolated[0]) + 1
+            self.faults.publisher.publish(isolation_diagnostics_msg(wheel, t, self.param("reallocate_on_fault")))
+            self.get_logger().warning(f"FDIR isolated wheel{wheel} at t={t * 1e-9:g} s")
         self.pub_torque.publish(stamped_vector_cdr(out.tau_c_B[0], t, "body"))
         self.pub_momentum.publish(stamped_vector_cdr(out.h_wheels_B[0], t, "body"))
         self.pub_state.publish(joint_state_cdr(self.core.names, out.position[0], out.velocity[0], out.effort[0], t))

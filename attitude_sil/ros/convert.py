@@ -197,6 +197,24 @@ def fault_diagnostics_msg(changes, t_ns: int, node: str) -> DiagnosticArray:
     return m
 
 
+def isolation_diagnostics_msg(wheel: int, t_ns: int, reallocated: bool, node: str = "wheels") -> DiagnosticArray:
+    """The wheels' FDIR isolating ``wheel`` (1..n) at step ``t_ns`` as a ``diagnostic_msgs/DiagnosticArray``:
+    one WARN status (the assembly runs on, degraded) named ``node: fdir``, its hardware_id the wheel, its values
+    the wheel, the time and whether the allocation dropped it (``wheels.reallocate_on_fault``)."""
+    m = DiagnosticArray()
+    m.header.stamp = ns_to_stamp(t_ns)
+    s = DiagnosticStatus()
+    s.level = DiagnosticStatus.WARN
+    s.name = f"{node}: fdir"
+    s.hardware_id = f"wheel{wheel}"
+    t_s = f"{t_ns * 1e-9:g}"
+    s.message = f"isolated wheel{wheel} at {t_s}" + ("; reallocated over the others" if reallocated else "")
+    s.values = [KeyValue(key=k, value=v) for k, v in (("wheel", str(wheel)), ("at_s", t_s),
+                                                       ("reallocated", "true" if reallocated else "false"))]
+    m.status.append(s)
+    return m
+
+
 def fault_lines(data: bytes) -> list[str]:
     """The faults a ``/diagnostics`` message (CDR) says became active: the line of each ERROR status of
     :func:`fault_diagnostics_msg` (``wheel1 stuck at 2``); other nodes' statuses are not faults of ours."""

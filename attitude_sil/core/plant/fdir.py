@@ -14,11 +14,13 @@ It runs as an observer:
   within ``q / 2`` of the angle, ``q = 2 pi / counts_per_rev``;
 * at each step, before the command, the residual ``r = theta_read - theta_hat``
   (rad) corrects the model's angle and speed with the gains of a double pole
-  at ``exp(-bandwidth dt)``: ``theta_hat += l1 r``, ``omega_hat += l2 r`` with
+  at ``p = exp(-bandwidth dt)``: ``theta_hat += l1 r``, ``omega_hat += l2 r`` with
   ``l1 = 2 (1 - p)`` and ``l2 = (1 - p)^2 / dt``. A wheel whose torque departs
-  from the model's by a constant acceleration ``a`` (lost: no drive; stuck:
-  the wrong voltage) then leaves a steady residual ``a / bandwidth^2``, where a
-  healthy wheel's is the count's quantisation, at most a few ``q``;
+  from the model's by ``J a`` (lost: no drive; stuck: the wrong voltage) then
+  leaves a steady residual ``a / (bandwidth^2 + 2 bandwidth / tau_m)``, with
+  ``tau_m`` the motor's mechanical time constant (``J R / (K_i K_b)``, about
+  1 s on HST's wheels; the back-EMF damps the wheel and the model alike), where
+  a healthy wheel's is the count's quantisation, within a count;
 * a wheel whose ``|r|`` exceeds ``threshold_rad`` for ``persistence`` steps in a
   row is isolated (the largest residual, where several do at once): from that
   step the allocation shares the command among the others, as ideal isolation

@@ -24,9 +24,9 @@ from attitude_sil.core.environment.ephemeris import Ephemeris, FieldAlongOrbit
 from attitude_sil.core.faults import faults_of, first_step, wheel_failure_values
 from attitude_sil.core.plant.actuators import RPM, NoActuator, SpeedLoopWheels, TorqueActuator
 from attitude_sil.core.plant.command_faults import delay_steps
+from attitude_sil.core.plant.disturbance import DisturbanceModel, orbit_rate
 from attitude_sil.core.plant.fdir import WheelFdir
 from attitude_sil.core.plant.lanes import FAIL_SPEED_LIMIT, WHEEL_FAILURE_MODES
-from attitude_sil.core.plant.disturbance import DisturbanceModel, orbit_rate
 from attitude_sil.core.plant.linear import LinearizedPlant
 from attitude_sil.core.plant.magnetorquers import Magnetorquers, rod_axes
 from attitude_sil.core.plant.plants import FLEXIBLE_CASES, FlexibleAxisPlant, PitchNormalizedPlant

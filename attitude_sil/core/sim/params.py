@@ -204,8 +204,9 @@ NODE_PARAMS: dict[str, list[ParamSpec]] = {
         _d("fdir.threshold_rad", 0.01, "FDIR residual threshold on a wheel's angle, rad", min=0.0, min_exclusive=True),
         ParamSpec("fdir.persistence", "integer", 10, "FDIR: control steps in a row over the threshold that "
                   "isolate a wheel", min=1),
-        _d("fdir.bandwidth_rad_s", 2.0, "FDIR observer's double pole, rad/s: a wheel torque off the model's by "
-           "an acceleration a leaves a residual a / bandwidth^2", min=0.0, min_exclusive=True),
+        _d("fdir.bandwidth_rad_s", 2.0, "FDIR observer's double pole w, rad/s: a wheel torque off the model's "
+           "by J a leaves a residual a / (w^2 + 2 w / tau_m), tau_m the motor's time constant",
+           min=0.0, min_exclusive=True),
         ParamSpec("failure.wheel", "integer", 0, "wheel that fails at failure.time: 0 none, 1..n that wheel of "
                   "the geometry (reaction_wheels only)", min=0),
         _d("failure.time", 0.0, "sim time the wheel fails (the first step at or after it), s", min=0.0),
