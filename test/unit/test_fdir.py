@@ -119,13 +119,14 @@ def test_wheel_1_lost_at_2_s_is_isolated_and_the_step_settles_as_nominal():
 
 
 def test_a_torque_limited_drive_holds_its_motor_torque_to_the_limit_in_both_drivers():
-    scn = load_scenario(CONFIG / "hst_roll_step.yaml").with_values("wheels", faults=["wheel2 torque_limit 0.1 at 0.5"])
+    scn = load_scenario(CONFIG / "hst_roll_step.yaml").with_values("wheels",
+                                                                   faults=["wheel2 torque_limit 0.1 at 0.5"])
     a, b = (simulate(scn, 1, duration=3.0, driver=d) for d in ("compiled", "stepwise"))
     np.testing.assert_array_equal(a.q_BN, b.q_BN)
     effort = np.abs(b.wheel_effort[0, :, 1])
     assert effort[:50].max() > 0.79 and effort[52:].max() <= 0.1  # (the current settles within the step)
-    speed_fault = load_scenario(CONFIG / "hst_roll_step.yaml").with_values("wheels", faults=["wheel2 speed_limit 1 at 0.2"])
-    c = simulate(speed_fault, 1, duration=3.0, driver="stepwise")
+    limited = load_scenario(CONFIG / "hst_roll_step.yaml").with_values("wheels", faults=["wheel2 speed_limit 1 at 0.2"])
+    c = simulate(limited, 1, duration=3.0, driver="stepwise")
     s, limit = np.abs(c.wheel_speed[0, :, 1]), 1.0 * 2.0 * math.pi / 60.0
     above = s[21:-1] >= limit  # (the step at 0.2 s ends with the current it began with, L/R = 1 ms)
     assert s[21] > limit and np.all(np.diff(s[21:])[above] <= 1e-12)  # past its limit, no drive makes it faster
