@@ -86,6 +86,19 @@ def format_bar(stats: dict, width: int = 24) -> str:
             f"{stats['evals_per_s']:.0f} evals/s" + ("  (from the saved run)" if stats.get("cached") else ""))
 
 
+def _fdir_lines(f: dict) -> list[str]:
+    """The campaign's FDIR figures (:func:`attitude_sil.core.plant.fdir.fdir_report`), a few lines."""
+    by_mode = ", ".join(f"{m} {f['failed_by_mode'][m] - f['missed_by_mode'][m]}/{f['failed_by_mode'][m]}"
+                        for m in f["failed_by_mode"])
+    lines = [f"  fdir: {f['detected']} of {f['failed_runs']} failures detected ({by_mode or 'none failed'}), "
+             f"{f['missed']} missed, {f['false_alarms']} false alarm(s) in {f['runs']} runs "
+             f"({f['false_alarms_per_hour']:.3g} an hour of healthy flight)"]
+    if "latency_s" in f:
+        lat = f["latency_s"]
+        lines.append(f"  fdir latency: p50 {lat['p50']:.3g} s, p90 {lat['p90']:.3g} s, max {lat['max']:.3g} s")
+    return lines
+
+
 def format_campaign(summary: dict) -> str:
     """The end of ``attitude-sil montecarlo``: runs, rate, percentiles, pass rates, worst runs, outputs."""
     lines = [f"campaign {summary['name']}: {summary['completed_runs']} of {summary['runs']} runs"
@@ -104,6 +117,8 @@ def format_campaign(summary: dict) -> str:
     if "pass_rate" in summary:
         lines.append(f"  all requirements: {100 * summary['pass_rate']:.1f} % pass, "
                      f"{summary.get('diverged_runs', 0)} diverged")
+    if "fdir" in summary:
+        lines += _fdir_lines(summary["fdir"])
     for w in summary.get("worst", []):
         lines.append("  worst: " + ", ".join(f"{k} {v:g}" if isinstance(v, float) else f"{k} {v}"
                                              for k, v in w.items()))

@@ -185,6 +185,28 @@ def _offsets(d: dict, u: np.ndarray) -> np.ndarray:
     return d["scale"] * z
 
 
+def _failure_values(wf: dict, u: np.ndarray, n_wheels: int) -> dict[str, np.ndarray]:
+    """The ``wheels.failure.*`` values of runs with uniform slots ``u`` (n, _N_SLOTS) under the ``wheel_failure``
+    dispersion ``wf``: which wheel (0: none), when (whole milliseconds: a time a scenario file states exactly),
+    how, and a limited drive's size (whole thousandths)."""
+    out = {}
+    happens = u[:, 14] < wf["probability"]
+    out["wheels.failure.wheel"] = np.where(happens, 1 + np.minimum((u[:, 15] * n_wheels).astype(np.int64),
+                                                                   n_wheels - 1), 0)
+    t0, t1 = wf["time"]
+    out["wheels.failure.time"] = np.where(happens, np.round(t0 + (t1 - t0) * u[:, 16], 3), 0.0)
+    modes = np.asarray(wf["modes"])
+    out["wheels.failure.mode"] = np.where(happens, modes[np.minimum((u[:, 17] * len(modes)).astype(np.int64),
+                                                                     len(modes) - 1)], "lost")
+    if wf.get("limits"):
+        limit = np.zeros(u.shape[0])
+        for mode, (lo, hi) in wf["limits"].items():
+            chosen = out["wheels.failure.mode"] == mode
+            limit[chosen] = np.round(lo + (hi - lo) * u[chosen, _SLOTS["failure_limit"]], 3)
+        out["wheels.failure.limit"] = limit
+    return out
+
+
 def episode_values(scn: Scenario, dispersions: dict, seed: int, runs) -> dict[str, np.ndarray]:
     """The dispersed scenario values of runs ``runs`` (n,): ``{"node.param": (n, ...)}`` for ``simulate``.
 
@@ -227,23 +249,7 @@ def episode_values(scn: Scenario, dispersions: dict, seed: int, runs) -> dict[st
     if dispersions.get("noise_seeds"):
         out["disturbance.noise.seed"] = v["disturbance"]["noise.seed"] + runs
     if "wheel_failure" in dispersions:
-        wf = dispersions["wheel_failure"]
-        n_wheels = GEOMETRIES[v["wheels"]["geometry"]]().shape[1]
-        happens = u[:, 14] < wf["probability"]
-        out["wheels.failure.wheel"] = np.where(happens, 1 + np.minimum((u[:, 15] * n_wheels).astype(np.int64),
-                                                                       n_wheels - 1), 0)
-        t0, t1 = wf["time"]
-        # whole milliseconds: a time a scenario file states exactly
-        out["wheels.failure.time"] = np.where(happens, np.round(t0 + (t1 - t0) * u[:, 16], 3), 0.0)
-        modes = np.asarray(wf["modes"])
-        out["wheels.failure.mode"] = np.where(happens, modes[np.minimum((u[:, 17] * len(modes)).astype(np.int64),
-                                                                         len(modes) - 1)], "lost")
-        if wf.get("limits"):  # the size of a limited drive, per run (whole thousandths, as a file states it)
-            limit = np.zeros(len(runs))
-            for mode, (lo, hi) in wf["limits"].items():
-                chosen = out["wheels.failure.mode"] == mode
-                limit[chosen] = np.round(lo + (hi - lo) * u[chosen, _SLOTS["failure_limit"]], 3)
-            out["wheels.failure.limit"] = limit
+        out.update(_failure_values(dispersions["wheel_failure"], u, GEOMETRIES[v["wheels"]["geometry"]]().shape[1]))
     if "gyro_bias_deg_h" in dispersions:
         out["sensors.gyro.bias_deg_h"] = (np.asarray(v["sensors"]["gyro.bias_deg_h"], dtype=float)
                                           + _offsets(dispersions["gyro_bias_deg_h"], u[:, _SLOTS["gyro_bias_deg_h"]]))

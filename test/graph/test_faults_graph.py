@@ -102,3 +102,23 @@ def test_controller_output_faults_fly_on_the_graph_as_in_the_engine(tmp_path):
     assert said == [(300_000_000, [("wheels: controller", f"fault: {faults[0]}")]),
                     (600_000_000, [("wheels: controller", f"fault: {faults[1]}")]),
                     (1_100_000_000, [("wheels: controller", f"fault ended: {faults[1]}")])]
+
+
+def test_the_fdir_isolates_on_the_graph_as_in_the_stepwise_driver_and_says_it(tmp_path):
+    scn = load_scenario(CONFIG / "hst_wheel_failure.yaml").with_values(
+        "wheels", reallocate_on_fault=True, **{"fdir.enabled": True})
+    graph = run_graph(scn, duration=3.0, record_dir=tmp_path / "graph", keep_trajectory=True, progress=False)
+    stepped = simulate(scn, 1, duration=3.0)
+    for name in ("q_BN", "omega_BN_B", "wheel_speed"):
+        assert np.max(np.abs(getattr(graph.trajectory, name) - getattr(stepped, name))) <= 1e-9, name
+    k = int(np.argmax(stepped.fdir_isolated[0] > 0))
+    assert stepped.fdir_isolated[0, -1] == 1 and 2.0 < stepped.t[k] < 3.0
+    said = [(r.log_time_ns, _said(m)) for r, m in open_bag(tmp_path / "graph").iter_decoded(["/diagnostics"])]
+    isolated = f"isolated wheel1 at {stepped.t[k]:g}; reallocated over the others"
+    assert [s[1][1][0][:3] for s in said] == [
+        (ord(DiagnosticStatus.ERROR), "wheels: wheel1", "fault: wheel1 lost at 2"),
+        (ord(DiagnosticStatus.WARN), "wheels: fdir", isolated)]
+    assert said[1][0] == int(round(stepped.t[k] * 1e9))
+    record_episode(scn, stepped, tmp_path / "engine", duration=3.0)
+    written = [(r.log_time_ns, _said(m)) for r, m in open_bag(tmp_path / "engine").iter_decoded(["/diagnostics"])]
+    assert written == said

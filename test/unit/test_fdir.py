@@ -28,6 +28,7 @@ import math
 import numpy as np
 import pytest
 
+from attitude_sil.cli.format import format_campaign
 from attitude_sil.core.analysis.metrics import scenario_metrics
 from attitude_sil.core.plant.fdir import WheelFdir, fdir_report, tachometer_angle
 from attitude_sil.core.plant.lanes import ANGLE, SPEED
@@ -35,6 +36,8 @@ from attitude_sil.core.plant.quaternion import euler_from_quat, quat_conjugate, 
 from attitude_sil.core.sim.build import build_wheels
 from attitude_sil.core.sim.engine import simulate
 from attitude_sil.core.sim.scenario import default_config_dir, load_scenario
+from attitude_sil.tuning.executor import InProcess
+from attitude_sil.tuning.montecarlo import load_mc_spec, run_campaign
 
 CONFIG = default_config_dir()
 FDIR = {"fdir.enabled": True}
@@ -145,3 +148,21 @@ def test_the_campaign_report_counts_detections_misses_and_false_alarms():
     assert r["missed_by_mode"] == {"lost": 0, "stuck": 0, "torque_limit": 1}
     healthy_hours = (2 + 3 + 1 + 10 + 10 + 5 + 4) / 3600.0
     assert r["false_alarms_per_hour"] == pytest.approx(1 / healthy_hours)  # the one in a healthy run
+
+
+def test_a_campaign_reports_its_fdir_figures_against_the_failures_it_drew(tmp_path):
+
+    spec = load_mc_spec(CONFIG / "mc_hst_wheel_fdir.yaml", runs=12, overrides={"output": str(tmp_path / "mc")})
+    with InProcess() as ex:
+        result = run_campaign(spec, ex)
+    t = result.table
+    f = result.summary["fdir"]
+    failed = t["wheels.failure.wheel"] > 0
+    assert f["failed_runs"] == int(failed.sum()) > 0 and f["runs"] == 12
+    detected = failed & (t["fdir_wheel"] == t["wheels.failure.wheel"])
+    assert f["detected"] == int(detected.sum()) > 0 and f["false_alarms"] == 0
+    lost = failed & (t["wheels.failure.mode"] == "lost")
+    assert np.all(detected[lost])  # a lost wheel in the step is always found
+    limited = t["wheels.failure.mode"] == "torque_limit"
+    assert np.all((t["wheels.failure.limit"][limited] >= 0.0) & (t["wheels.failure.limit"][limited] <= 0.2))
+    assert f"fdir: {f['detected']} of {f['failed_runs']} failures detected" in format_campaign(result.summary)
