@@ -37,8 +37,8 @@ def test_the_wheels_node_takes_added_faults_and_refuses_what_cannot_fly():
         assert node.core.failure is None
         (result,) = node.set_parameters([Parameter("faults", value=["wheel2 stuck"])])
         assert result.successful, result.reason
-        wheel, step, stuck = node.core.failure
-        assert (wheel[0], step[0], stuck[0]) == (1, 1, True)  # from the step after the one in hand (k = 0)
+        wheel, step, mode, _ = node.core.failure
+        assert (wheel[0], step[0], mode[0]) == (1, 1, 1)  # stuck (code 1), from the step after the one in hand
         assert [str(f) for f in node.faults.faults] == ["wheel2 stuck at 0.01"]
         for faults, words in (([], "not taken back or changed: 'wheel2 stuck' is gone"),
                               (["wheel2 stuck", "wheel3 lost at 1"], "one wheel fault per run")):
