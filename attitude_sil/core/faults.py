@@ -44,6 +44,8 @@ FAULT_NODES = ("wheels", "sensors")
 #: (target kind, mode) pairs the drivers fly today
 FLOWN: frozenset[tuple[str, str]] = frozenset({("wheel", "lost"), ("wheel", "stuck"), ("wheel", "torque_limit"),
                                               ("wheel", "speed_limit"), ("star_tracker", "off"),
+                                              ("gyro", "off"), ("gyro", "stuck"), ("gyro", "bias_jump"),
+                                              ("gyro", "scale"), ("gyro", "spike"),
                                               ("controller", "gain"), ("controller", "delay")})
 #: target kinds that need the sensing loop (scenario.sensors)
 SENSED = frozenset({"gyro", "star_tracker", "magnetometer"})

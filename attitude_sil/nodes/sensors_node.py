@@ -93,14 +93,17 @@ class SensorsNode(LockstepNode):
             self._inject(self.faults.added())
 
     def _inject(self, faults: list[Fault]) -> None:
-        """Faults added while the graph runs: a star tracker off from its time, or, if that has passed, from the
-        step after the one sampled last, for its duration."""
+        """Faults added while the graph runs: each from its time, or, if that has passed, from the step after the
+        one sampled last, for its duration (a star tracker off: an outage; a gyro axis' fault: on its reading)."""
         errors = self.core.star_tracker.errors
         for fault in faults:
             step = max(first_step(fault.time_s, self.dt_ns), self.k + 1)
-            start = step * self.dt_ns * 1e-9
-            end = math.inf if fault.duration_s is None else start + fault.duration_s
-            errors = replace(errors, outages=errors.outages + ((start, end),))
+            if fault.kind == "gyro":
+                self.core.gyro.add_fault(fault, step)
+            else:
+                start = step * self.dt_ns * 1e-9
+                end = math.inf if fault.duration_s is None else start + fault.duration_s
+                errors = replace(errors, outages=errors.outages + ((start, end),))
             self.faults.started(fault, step, self.dt_ns)
         self.core.star_tracker.errors = errors
 

@@ -191,7 +191,8 @@ def fault_diagnostics_msg(changes, t_ns: int, node: str) -> DiagnosticArray:
         s.message = f"{FAULT_PREFIX if active else 'fault ended: '}{fault}"
         pairs = [("mode", fault.mode)] + ([] if fault.value is None else [("value", f"{fault.value:g}")])
         pairs += [("at_s", f"{fault.time_s:g}"),
-                  ("for_s", "end" if fault.duration_s is None else f"{fault.duration_s:g}")]
+                  ("for_s", f"{fault.duration_s:g}" if fault.duration_s is not None else
+                   "one reading" if fault.mode == "spike" else "end")]
         s.values = [KeyValue(key=k, value=v) for k, v in pairs]
         m.status.append(s)
     return m

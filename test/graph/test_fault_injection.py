@@ -29,7 +29,7 @@ def test_the_wheels_node_takes_added_faults_and_refuses_what_cannot_fly():
     rclpy.init(args=[], context=context)
     try:
         node = WheelsNode(context=context)
-        for faults, words in ((["gyro.x stuck at 1"], "gyro stuck is not flown yet"),
+        for faults, words in ((["magnetometer stuck at 1"], "magnetometer stuck is not flown yet"),
                               (["wheel9 lost"], "the geometry has wheels 1..4"),
                               (["star_tracker off at 1"], "flown by the sensors node, not the wheels")):
             (result,) = node.set_parameters([Parameter("faults", value=faults)])
@@ -150,6 +150,11 @@ def test_the_sensors_node_takes_an_added_star_tracker_outage_from_its_next_step(
         assert node.core.star_tracker.in_outage(150) and not node.core.star_tracker.in_outage(350)
         (result,) = node.set_parameters([Parameter("faults", value=["star_tracker stuck at 1"])])
         assert not result.successful and "not flown yet" in result.reason, result.reason
+        faults = ["star_tracker off at 1 for 2", "gyro.x stuck at 0.2"]
+        (result,) = node.set_parameters([Parameter("faults", value=faults)])
+        assert result.successful, result.reason
+        fault, start, end = node.core.gyro.faults[-1]
+        assert (fault.mode, start, end) == ("stuck", 150, np.iinfo(np.int64).max)  # from the next step on
         node.destroy_node()
     finally:
         rclpy.shutdown(context=context)

@@ -122,3 +122,20 @@ def test_the_fdir_isolates_on_the_graph_as_in_the_stepwise_driver_and_says_it(tm
     record_episode(scn, stepped, tmp_path / "engine", duration=3.0)
     written = [(r.log_time_ns, _said(m)) for r, m in open_bag(tmp_path / "engine").iter_decoded(["/diagnostics"])]
     assert written == said
+
+
+def test_gyro_faults_fly_on_the_graph_as_stepped_with_the_loop_on_the_estimate(tmp_path):
+    faults = ["gyro.x stuck at 0.5", "gyro.y bias_jump 3600 at 0.3 for 0.5", "gyro.z spike 1 at 0.7"]
+    scn = load_scenario(CONFIG / "hst_roll_step_sensors.yaml").with_values("sensors", faults=faults)
+    graph = run_graph(scn, duration=1.5, record_dir=tmp_path / "bag", keep_trajectory=True, progress=False)
+    stepped = simulate(scn, 1, duration=1.5)
+    nominal = simulate(load_scenario(CONFIG / "hst_roll_step_sensors.yaml"), 1, duration=1.5)
+    for name in ("q_BN", "q_BN_est", "attitude_sigma"):
+        assert np.max(np.abs(getattr(graph.trajectory, name) - getattr(stepped, name))) <= 1e-9, name
+    assert np.max(np.abs(stepped.q_BN - nominal.q_BN)) > 1e-7  # the faults reach the loop through the filter
+    said = [(r.log_time_ns, [(s.name, s.message) for s in m.status])
+            for r, m in open_bag(tmp_path / "bag").iter_decoded(["/diagnostics"])]
+    assert said == [(300_000_000, [("sensors: gyro.y", f"fault: {faults[1]}")]),
+                    (500_000_000, [("sensors: gyro.x", f"fault: {faults[0]}")]),
+                    (700_000_000, [("sensors: gyro.z", f"fault: {faults[2]}")]),
+                    (800_000_000, [("sensors: gyro.y", f"fault ended: {faults[1]}")])]

@@ -31,6 +31,11 @@ body frame with sigma_about on the boresight axis. An exposure every 1 / rate_hz
 reported latency_s later, stamped with its exposure time t_j; an exposure inside a scheduled outage reports
 no attitude (REP 145: orientation_covariance[0] = -1).
 
+Gyro faults (docs/faults.md), per axis over their window of steps, on the reading as above:
+``scale K`` multiplies it by K, ``bias_jump B`` adds B deg/h, ``spike S`` adds S deg/s to one reading (or
+to each in its ``for`` window), ``stuck`` holds the reading of the step before, ``off`` reads 0. The filter
+is not told.
+
 Magnetometer: the gyro's static errors on the true field in B (scale factor, misalignment, bias), white
 noise, quantisation and saturation (:class:`Magnetometer`); it samples the field the plant publishes, where
 the scenario has one.
@@ -41,11 +46,12 @@ count change over [t_(k-1), t_k] times 2 pi / (counts_per_rev dt) (rad/s), so it
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
 
-from attitude_sil.core.faults import outage_windows
+from attitude_sil.core.faults import Fault, faults_of, first_step, outage_windows
 from attitude_sil.core.plant.quaternion import (
     cross_matrix,
     quat_conjugate,
@@ -155,10 +161,14 @@ class Gyro:
         One seed per episode.
     """
 
-    def __init__(self, errors: GyroErrors, dt: float, seeds: np.ndarray) -> None:
+    def __init__(self, errors: GyroErrors, dt: float, seeds: np.ndarray, faults: list[Fault] | None = None) -> None:
         self.errors = errors
         self.dt = float(dt)
         self.seeds = np.asarray(seeds, dtype=np.int64)
+        self.dt_ns = int(round(self.dt * 1e9))
+        self.faults: list[tuple[Fault, int, int]] = []  # (fault, first step, end step) of each gyro fault
+        for f in faults or ():
+            self.add_fault(f)
         e = errors
         #: omega_sensor = C omega_true
         self.C = sensor_axes(e.scale_factor, e.misalignment)
@@ -176,6 +186,37 @@ class Gyro:
         self._q_last = np.zeros(0)
         self.b_gm = e.bias_instability * normals(self.seeds, 0, "gyro_markov_init")
         self.b_rw = np.zeros((self.n_episodes, 3))
+        self.last = None  # the reading of the step before (P, 3), for a stuck axis
+        self.held = {}  # a stuck axis: the reading it holds (P,)
+
+    def add_fault(self, fault: Fault, step: int | None = None) -> None:
+        """A ``gyro.<axis>`` fault, from ``step`` (default: its time's) for its duration; a spike without
+        ``for`` is one reading."""
+        start = first_step(fault.time_s, self.dt_ns) if step is None else int(step)
+        if fault.duration_s is not None:
+            end = start + first_step(fault.duration_s, self.dt_ns)
+        else:
+            end = start + 1 if fault.mode == "spike" else np.iinfo(np.int64).max
+        self.faults.append((fault, start, end))
+
+    def _faulted(self, w: np.ndarray, k: int) -> np.ndarray:
+        """The reading ``w`` (P, 3) at step ``k`` with the faults active then (module docstring)."""
+        w = w.copy()
+        for f, start, end in self.faults:
+            if not start <= k < end:
+                continue
+            i = "xyz".index(f.index)
+            if f.mode == "scale":
+                w[:, i] *= f.value
+            elif f.mode == "bias_jump":
+                w[:, i] += math.radians(f.value) / 3600.0
+            elif f.mode == "spike":
+                w[:, i] += math.radians(f.value)
+            elif f.mode == "stuck":
+                w[:, i] = self.held.setdefault((i, start), w[:, i].copy() if self.last is None else self.last[:, i])
+            else:  # off
+                w[:, i] = 0.0
+        return w
 
     @property
     def drift(self) -> np.ndarray:
@@ -202,6 +243,9 @@ class Gyro:
         if e.arw > 0.0:
             w = w + e.white_std(self.dt) * normals(self.seeds, k, "gyro_white")
         w = quantise_and_clip(w, e.resolution, e.range)
+        if self.faults:
+            w = self._faulted(w, k)
+        self.last = w
         if e.bias_instability > 0.0:
             self.b_gm = self.phi * self.b_gm + e.bias_instability * np.sqrt(1.0 - self.phi**2) * normals(
                 self.seeds, k, "gyro_markov")
@@ -459,7 +503,8 @@ class SensorSuite:
         seeds = np.full(n_episodes, int(values["seed"])) if seeds is None else np.asarray(seeds, dtype=np.int64)
         if seeds.shape != (n_episodes,):
             raise ScenarioError(f"sensors: {seeds.size} seeds for {n_episodes} episodes")
-        self.gyro = Gyro(GyroErrors.from_values(values), dt, seeds)
+        self.gyro = Gyro(GyroErrors.from_values(values), dt, seeds,
+                         [f for f in faults_of(values, "sensors") if f.kind == "gyro"])
         self.star_tracker = StarTracker(StarTrackerErrors.from_values(values), dt, seeds)
         self.tachometer = Tachometer(int(values["wheel_speed.counts_per_rev"]), dt)
         self.magnetometer = Magnetometer(MagnetometerErrors.from_values(values), seeds)
