@@ -8,15 +8,21 @@ pseudo-inverse over the wheels of ``wheels.available`` alone, which delivers
 each unit command exactly; a set that does not span the body axes is refused
 in one line; both drivers fly it alike (the wheels node's reallocation while
 it runs: test/graph/test_allocation_node.py).
+
+The torque envelope per body axis (the largest pure torque the wheels can
+make, each at most 0.8 N m) is the zonotope's facets' closed form
+(:func:`torque_envelope`), checked against a linear program's answer
+(scipy's HiGHS) for HST's four wheels, each three of them and random sets.
 """
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
+from scipy.optimize import linprog
 
 from attitude_sil.cli import main
-from attitude_sil.core.plant.wheels import GEOMETRIES, allocation_over
+from attitude_sil.core.plant.wheels import GEOMETRIES, allocation_envelope, allocation_over, torque_envelope
 from attitude_sil.core.sim.engine import simulate
 from attitude_sil.core.sim.scenario import default_config_dir, load_scenario
 from attitude_sil.errors import ScenarioError
@@ -70,3 +76,42 @@ def test_both_drivers_fly_the_allocation_alike_and_it_leaves_the_lost_wheel_stil
         np.testing.assert_array_equal(getattr(runs[0], name), getattr(runs[1], name), err_msg=name)
     assert not np.any(runs[0].wheel_speed[:, :, 0])  # wheel 1 is given nothing and never turns
     assert np.max(np.abs(runs[0].wheel_speed[:, :, 1:])) > 0.1
+
+
+def _lp_envelope(axes: np.ndarray, torque_max: float) -> np.ndarray:
+    """max t such that the wheels' torques u (|u_j| <= T) make t e_i exactly, per body axis: a linear program."""
+    out = []
+    n = axes.shape[1]
+    for i in range(3):
+        c = np.zeros(n + 1)
+        c[-1] = -1.0
+        a_eq = np.hstack([axes, -np.eye(3)[:, i:i + 1]])
+        r = linprog(c, A_eq=a_eq, b_eq=np.zeros(3), bounds=[(-torque_max, torque_max)] * n + [(0, None)],
+                    method="highs")
+        assert r.status == 0, r.message
+        out.append(r.x[-1])
+    return np.array(out)
+
+
+@pytest.mark.parametrize("available", [None, [1, 2, 3], [0, 2, 3], [0, 1, 3], [0, 1, 2]])
+def test_the_torque_envelope_per_axis_is_the_linear_programs_with_four_wheels_and_with_three(available):
+    used = list(range(4)) if available is None else available
+    envelope = torque_envelope(PYRAMID, 0.8, available)
+    np.testing.assert_allclose(envelope, _lp_envelope(PYRAMID[:, used], 0.8), rtol=1e-9)
+    if available is None:  # the figures of the faults guide
+        np.testing.assert_allclose(envelope, [0.7739, 2.1263, 2.2627], atol=5e-5)
+    else:  # three wheels of the pyramid: half of four's on every axis
+        np.testing.assert_allclose(envelope, 0.5 * torque_envelope(PYRAMID, 0.8), rtol=1e-12)
+    # eq. 14's share reaches it on the body axes here (the pyramid's symmetry), and never beyond
+    np.testing.assert_allclose(allocation_envelope(allocation_over(PYRAMID, available), 0.8), envelope, rtol=1e-9)
+
+
+def test_the_envelope_of_random_wheel_sets_is_the_linear_programs_and_bounds_the_pseudo_inverses():
+    rng = np.random.default_rng(43)
+    for n in (3, 4, 5, 6, 6, 7):
+        axes = rng.normal(size=(3, n))
+        axes /= np.linalg.norm(axes, axis=0)
+        envelope = torque_envelope(axes, 0.8)
+        np.testing.assert_allclose(envelope, _lp_envelope(axes, 0.8), rtol=1e-9)
+        assert np.all(allocation_envelope(allocation_over(axes), 0.8) <= envelope * (1.0 + 1e-12))
+    assert not np.any(torque_envelope(PYRAMID, 0.8, [0, 2]))  # two wheels span no volume: no pure torque

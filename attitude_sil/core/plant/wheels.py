@@ -45,6 +45,8 @@ __all__ = [
     "GEOMETRIES",
     "WheelAssembly",
     "allocation_over",
+    "torque_envelope",
+    "allocation_envelope",
     "no_failure",
     "HST_MOTOR",
 ]
@@ -208,6 +210,38 @@ def null_vector(axes_B: np.ndarray, allocation: np.ndarray) -> np.ndarray:
     n[np.abs(n) < 1e-15] = 0.0
     out[used] = n * np.sign(n[np.flatnonzero(n)[-1]])
     return out
+
+
+def torque_envelope(axes_B: np.ndarray, torque_max: float, available: list[int] | None = None) -> np.ndarray:
+    """The largest pure torque (N m) along +x, +y, +z of B that the wheels ``available`` (0-based; None: all),
+    each at most ``torque_max`` N m, can make together: (3,).
+
+    The torques they can make form a zonotope, the sum of the segments
+    ``[-T g_j, T g_j]`` over the wheels' spin axes g_j. Each of its facets is
+    normal to ``n = g_a x g_b`` for two axes, at ``|n . x| <= T sum_j |n . g_j|``;
+    so a ray ``t e`` leaves it at ``t = min over facets of T sum_j |n . g_j| / |n . e|``
+    (the zonotope is symmetric: -e gives the same). Zero where the wheels do not
+    span the three axes.
+    """
+    g = np.asarray(axes_B, dtype=float)
+    used = list(range(g.shape[1])) if available is None else sorted(set(available))
+    g = g[:, used]
+    out = np.zeros(3)
+    if np.linalg.matrix_rank(g) < 3:
+        return out
+    normals = [np.cross(g[:, a], g[:, b]) for a in range(g.shape[1]) for b in range(a + 1, g.shape[1])]
+    normals = [n / np.linalg.norm(n) for n in normals if np.linalg.norm(n) > 1e-12]
+    for i in range(3):
+        out[i] = min(torque_max * np.sum(np.abs(n @ g)) / abs(n[i]) for n in normals if abs(n[i]) > 1e-12)
+    return out
+
+
+def allocation_envelope(allocation: np.ndarray, torque_max: float) -> np.ndarray:
+    """The largest pure torque (N m) along +x, +y, +z of B that an ``allocation`` (n, 3) makes before its
+    first wheel reaches ``torque_max``: ``T / max_j |A_j e_i|`` per axis (3,); paper 000's eq. 14 shares a
+    command by the pseudo-inverse, which is not the largest share a wheel set can make (:func:`torque_envelope`)."""
+    a = np.abs(np.asarray(allocation, dtype=float))
+    return torque_max / np.max(a, axis=0)
 
 
 class WheelAssembly:
