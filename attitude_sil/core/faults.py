@@ -45,7 +45,8 @@ FAULT_NODES = ("wheels", "sensors")
 FLOWN: frozenset[tuple[str, str]] = frozenset({("wheel", "lost"), ("wheel", "stuck"), ("wheel", "torque_limit"),
                                               ("wheel", "speed_limit"), ("star_tracker", "off"),
                                               ("gyro", "off"), ("gyro", "stuck"), ("gyro", "bias_jump"),
-                                              ("gyro", "scale"), ("gyro", "spike"),
+                                              ("gyro", "scale"), ("gyro", "spike"), ("star_tracker", "stuck"),
+                                              ("magnetometer", "off"), ("magnetometer", "stuck"),
                                               ("controller", "gain"), ("controller", "delay")})
 #: target kinds that need the sensing loop (scenario.sensors)
 SENSED = frozenset({"gyro", "star_tracker", "magnetometer"})

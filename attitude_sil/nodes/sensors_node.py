@@ -17,9 +17,6 @@ so a run is repeatable and equals the batch engine's (docs/sensors.md).
 
 from __future__ import annotations
 
-import math
-from dataclasses import replace
-
 import numpy as np
 
 from attitude_sil.core.faults import Fault, first_step
@@ -95,17 +92,10 @@ class SensorsNode(LockstepNode):
     def _inject(self, faults: list[Fault]) -> None:
         """Faults added while the graph runs: each from its time, or, if that has passed, from the step after the
         one sampled last, for its duration (a star tracker off: an outage; a gyro axis' fault: on its reading)."""
-        errors = self.core.star_tracker.errors
         for fault in faults:
             step = max(first_step(fault.time_s, self.dt_ns), self.k + 1)
-            if fault.kind == "gyro":
-                self.core.gyro.add_fault(fault, step)
-            else:
-                start = step * self.dt_ns * 1e-9
-                end = math.inf if fault.duration_s is None else start + fault.duration_s
-                errors = replace(errors, outages=errors.outages + ((start, end),))
+            self.core.add_fault(fault, step)
             self.faults.started(fault, step, self.dt_ns)
-        self.core.star_tracker.errors = errors
 
     def _on_input(self, name: str, msg) -> None:
         t = stamp_to_ns(msg.header.stamp)

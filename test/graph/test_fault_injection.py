@@ -29,7 +29,7 @@ def test_the_wheels_node_takes_added_faults_and_refuses_what_cannot_fly():
     rclpy.init(args=[], context=context)
     try:
         node = WheelsNode(context=context)
-        for faults, words in ((["magnetometer stuck at 1"], "magnetometer stuck is not flown yet"),
+        for faults, words in ((["magnetorquers off at 1"], "magnetorquers off is not flown yet"),
                               (["wheel9 lost"], "the geometry has wheels 1..4"),
                               (["star_tracker off at 1"], "flown by the sensors node, not the wheels")):
             (result,) = node.set_parameters([Parameter("faults", value=faults)])
@@ -148,7 +148,7 @@ def test_the_sensors_node_takes_an_added_star_tracker_outage_from_its_next_step(
         assert node.core.star_tracker.errors.outages == ((1.5, 3.5),)  # from the next step, for its 2 s
         assert [str(f) for f in node.faults.faults] == ["star_tracker off at 1.5 for 2"]
         assert node.core.star_tracker.in_outage(150) and not node.core.star_tracker.in_outage(350)
-        (result,) = node.set_parameters([Parameter("faults", value=["star_tracker stuck at 1"])])
+        (result,) = node.set_parameters([Parameter("faults", value=["star_tracker latency 0.2 at 1"])])
         assert not result.successful and "not flown yet" in result.reason, result.reason
         faults = ["star_tracker off at 1 for 2", "gyro.x stuck at 0.2"]
         (result,) = node.set_parameters([Parameter("faults", value=faults)])

@@ -47,7 +47,7 @@ count change over [t_(k-1), t_k] times 2 pi / (counts_per_rev dt) (rad/s), so it
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -365,10 +365,16 @@ class StarTracker:
         self.schedule = TrackerSchedule(errors.rate_hz, errors.latency, dt)
         self._history: dict[int, np.ndarray] = {}  # exposure step -> true attitude, until reported
 
+        self.stuck: list[tuple[float, float]] = []  # a frozen tracker's windows [start, end) of exposure time, s
+        self._last = None  # the last attitude reported (P, 4), for a frozen tracker
+
     def in_outage(self, j: int) -> bool:
         """Whether exposure step ``j`` falls in a scheduled outage."""
+        return self._in(j, self.errors.outages)
+
+    def _in(self, j: int, windows) -> bool:
         t = j * self.dt
-        return any(a - 1e-9 <= t < b - 1e-9 for a, b in self.errors.outages)
+        return any(a - 1e-9 <= t < b - 1e-9 for a, b in windows)
 
     def sample(self, q_BN: np.ndarray, k: int) -> StarTrackerReport | None:
         """Step ``k``: remember the true attitude (P, 4); return the report due at this step, or None."""
@@ -380,8 +386,11 @@ class StarTracker:
         q_true = self._history.pop(j)
         if self.in_outage(j):
             return StarTrackerReport(j, q_true, False)
+        if self._last is not None and self._in(j, self.stuck):  # frozen: the last attitude again, as valid
+            return StarTrackerReport(j, self._last, True)
         d = normals(self.seeds, j, "star_tracker") * self.errors.sigma_B
-        return StarTrackerReport(j, quat_normalize(quat_multiply(q_true, small_rotation(d))), True)
+        self._last = quat_normalize(quat_multiply(q_true, small_rotation(d)))
+        return StarTrackerReport(j, self._last, True)
 
 
 class Tachometer:
@@ -461,14 +470,24 @@ class Magnetometer:
         self.seeds = np.asarray(seeds, dtype=np.int64)
         #: b_sensor = C b_true
         self.C = sensor_axes(errors.scale_factor, errors.misalignment)
+        self.faults: list[tuple[str, int, int]] = []  # (off or stuck, first step, end step)
+        self._last = None  # the reading of the step before (P, 3)
+        self._held: dict[int, np.ndarray] = {}  # a stuck fault's reading, by its first step
 
     def sample(self, b_true_B: np.ndarray, k: int) -> np.ndarray:
-        """The reading (P, 3) tesla at step ``k`` of the true field in B (P, 3) tesla."""
+        """The reading (P, 3) tesla at step ``k`` of the true field in B (P, 3) tesla; while a fault is active,
+        0 (``off``) or the reading of the step before it (``stuck``)."""
         e = self.errors
         b = np.asarray(b_true_B, dtype=float) @ self.C.T + np.asarray(e.bias)
         if e.noise > 0.0:
             b = b + e.noise * normals(self.seeds, k, "magnetometer")
-        return quantise_and_clip(b, e.resolution, e.range)
+        b = quantise_and_clip(b, e.resolution, e.range)
+        for mode, start, end in self.faults:
+            if start <= k < end:
+                b = np.zeros_like(b) if mode == "off" else self._held.setdefault(
+                    start, b if self._last is None else self._last)
+        self._last = b
+        return b
 
     @property
     def variance(self) -> np.ndarray:
@@ -503,11 +522,32 @@ class SensorSuite:
         seeds = np.full(n_episodes, int(values["seed"])) if seeds is None else np.asarray(seeds, dtype=np.int64)
         if seeds.shape != (n_episodes,):
             raise ScenarioError(f"sensors: {seeds.size} seeds for {n_episodes} episodes")
-        self.gyro = Gyro(GyroErrors.from_values(values), dt, seeds,
-                         [f for f in faults_of(values, "sensors") if f.kind == "gyro"])
-        self.star_tracker = StarTracker(StarTrackerErrors.from_values(values), dt, seeds)
+        self.dt_ns = int(round(dt * 1e9))
+        self.gyro = Gyro(GyroErrors.from_values(values), dt, seeds)
+        self.star_tracker = StarTracker(StarTrackerErrors.from_values(values), dt, seeds)  # its outages in
         self.tachometer = Tachometer(int(values["wheel_speed.counts_per_rev"]), dt)
         self.magnetometer = Magnetometer(MagnetometerErrors.from_values(values), seeds)
+        for f in faults_of(values, "sensors"):
+            if (f.kind, f.mode) != ("star_tracker", "off"):  # (an outage of StarTrackerErrors already)
+                self.add_fault(f)
+
+    def add_fault(self, fault: Fault, step: int | None = None) -> None:
+        """A fault of a sensor (:data:`attitude_sil.core.faults.OWNER`'s ``sensors``), from ``step`` (default: its
+        time's) for its duration."""
+        start = first_step(fault.time_s, self.dt_ns) if step is None else int(step)
+        if fault.kind == "gyro":
+            self.gyro.add_fault(fault, start)
+            return
+        t0 = start * self.dt_ns * 1e-9
+        t1 = math.inf if fault.duration_s is None else t0 + fault.duration_s
+        if fault.kind == "magnetometer":
+            end = np.iinfo(np.int64).max if fault.duration_s is None else first_step(t1, self.dt_ns)
+            self.magnetometer.faults.append((fault.mode, start, end))
+        elif fault.mode == "stuck":
+            self.star_tracker.stuck.append((t0, t1))
+        else:
+            st = self.star_tracker
+            st.errors = replace(st.errors, outages=st.errors.outages + ((t0, t1),))
 
     def sample(self, q_BN: np.ndarray, omega_BN_B: np.ndarray, k: int) -> SensorSample:
         """The readings at step ``k`` of the truth (P, 4), (P, 3)."""

@@ -1,4 +1,5 @@
-"""Gyro faults (issue 43's table: a gyro axis off, stuck, with a bias jump, a scale or a spike).
+"""Sensor faults (issue 43's table): a gyro axis off, stuck, with a bias jump, a scale or a spike; a star
+tracker frozen; a magnetometer off or stuck.
 
 The reference for each mode is the same run without the fault: flown on the
 truth (``feedback: truth``), the body moves alike, so the faulted run's
@@ -6,7 +7,11 @@ readings are the fault applied to the nominal run's, on its axis and in its
 window, and equal to them, bit for bit, everywhere else. The filter is not
 told: flown on its estimate, a 36 deg/h bias jump on z is taken into the
 filter's bias estimate on z (most of it within 50 s; the MEKF's bias gain sets
-the pace) while x and y stay where they were.
+the pace) while x and y stay where they were. The star tracker and the
+magnetometer are checked on their own suite, against the same suite without
+the fault: a frozen tracker reports its last attitude again, as valid, for
+the exposures of its window; a magnetometer off reads 0, a stuck one its
+reading of the step before.
 """
 
 from __future__ import annotations
@@ -16,6 +21,8 @@ import math
 import numpy as np
 import pytest
 
+from attitude_sil.core.plant.quaternion import quat_from_euler
+from attitude_sil.core.sensing.models import SensorSuite
 from attitude_sil.core.sim.engine import simulate
 from attitude_sil.core.sim.scenario import default_config_dir, load_scenario
 
@@ -65,3 +72,39 @@ def test_the_filter_takes_a_bias_jump_into_its_bias_estimate_on_that_axis():
     assert np.all(moved[:1000] == 0.0)  # nothing before the jump
     assert 0.6 * 36.0 < moved[5990, 2] < 1.05 * 36.0  # most of it within 50 s, none beyond
     assert np.max(np.abs(moved[:, :2])) < 0.01 * 36.0
+
+
+def _suite_readings(faults: list[str]):
+    """The star tracker's reports (exposure step, q (4,), valid) and the magnetometer's readings (K, 3) of a
+    suite of the sensors preset flown over 3 s of a turning body in a turning field."""
+    values = load_scenario(CONFIG / "hst_roll_step_sensors.yaml").with_values("sensors", faults=faults)
+    suite = SensorSuite(values.values["sensors"], 0.01, 1)
+    reports, mag = [], []
+    for k in range(300):
+        t = 0.01 * k
+        q = quat_from_euler(np.array([0.01 * t, 0.002 * t * t, -0.005 * t]))[None]
+        r = suite.sample(q, np.zeros((1, 3)), k).star_tracker
+        if r is not None:
+            reports.append((r.exposure_step, r.q_BN[0].copy(), r.valid))
+        mag.append(suite.magnetometer.sample(np.array([[2e-5 + 1e-7 * k, -1e-5, 3e-5 * np.cos(t)]]), k)[0])
+    return reports, np.array(mag)
+
+
+def test_a_frozen_star_tracker_reports_its_last_attitude_as_valid_through_its_window():
+    nominal, _ = _suite_readings([])
+    frozen, _ = _suite_readings(["star_tracker stuck at 1 for 1"])
+    assert [r[0] for r in frozen] == [r[0] for r in nominal] and all(r[2] for r in frozen)
+    last = [r for r in nominal if r[0] < 100][-1][1]  # the exposure at 0.9 s
+    for (j, q, _), (_, q_n, _) in zip(frozen, nominal, strict=True):
+        np.testing.assert_array_equal(q, last if 100 <= j < 200 else q_n)
+    assert any(not np.array_equal(q, last) for j, q, _ in nominal if 100 <= j < 200)  # the body turned meanwhile
+
+
+def test_a_magnetometer_off_reads_zero_and_a_stuck_one_its_reading_before():
+    _, nominal = _suite_readings([])
+    _, off = _suite_readings(["magnetometer off at 1 for 0.5"])
+    _, stuck = _suite_readings(["magnetometer stuck at 2"])
+    np.testing.assert_array_equal(off[100:150], 0.0)
+    np.testing.assert_array_equal(np.delete(off, np.s_[100:150], axis=0), np.delete(nominal, np.s_[100:150], axis=0))
+    np.testing.assert_array_equal(stuck[200:], np.broadcast_to(nominal[199], (100, 3)))
+    np.testing.assert_array_equal(stuck[:200], nominal[:200])
