@@ -22,7 +22,14 @@ import pytest
 from scipy.optimize import linprog
 
 from attitude_sil.cli import main
-from attitude_sil.core.plant.wheels import GEOMETRIES, allocation_envelope, allocation_over, torque_envelope
+from attitude_sil.core.plant.wheels import (
+    GEOMETRIES,
+    allocation_envelope,
+    allocation_over,
+    null_vector,
+    torque_envelope,
+)
+from attitude_sil.core.sim.build import build_wheels
 from attitude_sil.core.sim.engine import simulate
 from attitude_sil.core.sim.scenario import default_config_dir, load_scenario
 from attitude_sil.errors import ScenarioError
@@ -115,3 +122,21 @@ def test_the_envelope_of_random_wheel_sets_is_the_linear_programs_and_bounds_the
         np.testing.assert_allclose(envelope, _lp_envelope(axes, 0.8), rtol=1e-9)
         assert np.all(allocation_envelope(allocation_over(axes), 0.8) <= envelope * (1.0 + 1e-12))
     assert not np.any(torque_envelope(PYRAMID, 0.8, [0, 2]))  # two wheels span no volume: no pure torque
+
+
+def test_a_per_wheel_command_is_the_users_allocation_made_by_the_drives():
+    # the wheels' model takes each wheel's motor torque (N m) in place of a body-axis command (the wheel_cmd
+    # of a user's allocation): eq. 14's share of a body torque makes that torque, and a share along the null
+    # vector spins the wheels and makes none
+    scn = load_scenario(CONFIG / "hst_roll_step.yaml")
+    body, own, null = (build_wheels(scn, 2) for _ in range(3))
+    a = body.assembly.allocation
+    n = null_vector(PYRAMID, a)
+    for k in range(200):
+        tau = np.array([[0.3 * np.sin(0.05 * k), -0.2, 0.1], [0.1, 0.5 * np.cos(0.03 * k), -0.4]])
+        made, mine = body.advance(tau, True), own.advance(np.zeros((2, 3)), True, wheel_cmd=-(tau @ a.T))
+        np.testing.assert_allclose(mine.tau_c_B, made.tau_c_B, rtol=0, atol=1e-12)
+        spun = null.advance(np.zeros((2, 3)), True, wheel_cmd=np.outer([0.2, -0.1], n))
+        np.testing.assert_allclose(spun.tau_c_B, 0.0, rtol=0, atol=1e-12)
+    # the wheels did spin along n: J s' = T - B s on each (J = 0.84 kg m^2, 2 s of 0.2 and 0.1 N m)
+    np.testing.assert_allclose(np.abs(null.x[:, :, 2] @ n), [0.2 * 2.0 / 0.84, 0.1 * 2.0 / 0.84], rtol=0.01)

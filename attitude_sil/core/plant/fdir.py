@@ -110,9 +110,10 @@ class WheelFdir:
             self.isolated_step[newly] = k
         return newly
 
-    def predict(self, cmd_B: np.ndarray, torque_mode: bool, k: int) -> None:
-        """The model one step on under the command ``cmd_B`` (P, 3) the wheels take at step ``k``."""
-        self.x_hat, _, _ = self.model().advance(self.x_hat, cmd_B, torque_mode, k, self.isolation())
+    def predict(self, cmd_B: np.ndarray, torque_mode: bool, k: int, wheel_cmd: np.ndarray | None = None) -> None:
+        """The model one step on under the command the wheels take at step ``k``: ``cmd_B`` (P, 3), or each
+        wheel's ``wheel_cmd`` (P, n) N m."""
+        self.x_hat, _, _ = self.model().advance(self.x_hat, cmd_B, torque_mode, k, self.isolation(), wheel_cmd)
 
     def isolation(self) -> WheelFailure:
         """The model's failure record (P rows): no wheel failed, the detector's isolation."""

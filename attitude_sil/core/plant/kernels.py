@@ -130,11 +130,12 @@ def wheel_params_copy(wp):
 
 
 @njit(cache=True, error_model="numpy")
-def wheel_step(x, v_cmd, k, torque_mode, wp, fail):
+def wheel_step(x, v_cmd, k, torque_mode, wp, fail, w_cmd):
     """Drive limits, exact motor step and mean body torque for every episode at step ``k``.
 
     Shapes: x (P, n, 3) wheel state (angle, current, speed) at t_k, v_cmd (P, 3)
-    body-axis voltage (or, with ``torque_mode``, body torque in N m); ``wp`` a
+    body-axis voltage (or, with ``torque_mode``, body torque in N m), or with
+    ``w_cmd`` (P, n) each wheel's motor torque command (N m; (0, n): none); ``wp`` a
     :class:`WheelParams`, ``fail`` a :class:`WheelFailure`. Returns (x_next,
     tau_c (P, 3), h_start (P, 3)); see ``wheels.WheelAssembly`` for the rules.
     The rows go into a block and through :func:`attitude_sil.core.plant.lanes.wheel_lanes`,
@@ -144,7 +145,8 @@ def wheel_step(x, v_cmd, k, torque_mode, wp, fail):
     xw, xn, b = np.empty((x.shape[1], 3, m)), np.empty((x.shape[1], 3, m)), np.zeros((BODY_ROWS, m))
     wheels_to_lanes(x, 0, xw)
     rows_to_lanes(v_cmd, 0, b, U, m)
-    wheel_lanes(m, 0, k, xw, xn, b, motor_lanes(wp, 0, m), np.full(m, torque_mode), wp, fail)
+    wcmd = np.ascontiguousarray(w_cmd.T)  # (n, P), episodes last as the lanes are
+    wheel_lanes(m, 0, k, xw, xn, b, motor_lanes(wp, 0, m), np.full(m, torque_mode), wp, fail, wcmd)
     x_next, tau_c, h_start = np.empty_like(x), np.empty((m, 3)), np.empty((m, 3))
     lanes_to_wheels(xn, x_next)
     lanes_to_rows(b, TC, tau_c)

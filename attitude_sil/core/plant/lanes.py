@@ -270,14 +270,17 @@ def _null_volts(s, wp, k_b, k_i, r_a):
 
 
 @njit(cache=True, inline="always")
-def _drive(m, j, xw, b, mot, torque, wp, fail, lo, k, reallocate):
-    # wheel j's drive voltage per episode into row E of the motor block: the allocation (eq. 14; with
+def _drive(m, j, xw, b, mot, torque, wp, fail, lo, k, reallocate, wcmd):
+    # wheel j's drive voltage per episode into row E of the motor block: its own motor torque command where
+    # ``wcmd`` (n, m) has rows (a per-wheel command: the inverse motor model, no allocation, no null-space loop),
+    # else the allocation (eq. 14; with
     # ``reallocate``, over the wheels left once a wheel failed: ideal isolation), the inverse motor model in
     # torque mode, the null-space speed loop (not once a wheel is dropped), the driver's current headroom around
     # the back-EMF, no drive beyond the speed limit, the bus voltage
     b_m, speed_max, v_max = wp.b_m, wp.speed_max, wp.v_max
     n_j, tau_n = wp.null[j], wp.null_tau
     one = fail.isolated.shape[0] == 1
+    per_wheel = wcmd.shape[0] > 0
     for p in range(m):
         f = -1  # the isolated wheel the allocation leaves out
         if reallocate:
@@ -286,10 +289,10 @@ def _drive(m, j, xw, b, mot, torque, wp, fail, lo, k, reallocate):
                 f = fail.isolated[pf]
         alloc = wp.allocation[j] if f < 0 else wp.realloc[f, j]
         speed = xw[j, SPEED, p]
-        v = -(alloc[0] * b[U, p] + alloc[1] * b[U + 1, p] + alloc[2] * b[U + 2, p])
+        v = wcmd[j, p] if per_wheel else -(alloc[0] * b[U, p] + alloc[1] * b[U + 1, p] + alloc[2] * b[U + 2, p])
         emf = mot[KB, p] * speed
-        null = tau_n > 0.0 and n_j != 0.0 and f < 0
-        if torque[p]:  # wheel torque (and the null-space loop's) -> steady current -> volts
+        null = tau_n > 0.0 and n_j != 0.0 and f < 0 and not per_wheel
+        if torque[p] or per_wheel:  # wheel torque (and the null-space loop's) -> steady current -> volts
             if null:
                 v += n_j * wp.j_m * (wp.null_target - _null_speed(xw, p, wp)) / tau_n
             v = mot[RA, p] * (v + b_m * speed) / mot[KI, p] + emf
@@ -327,7 +330,7 @@ def _fail(m, j, lo, k, fail, mot, xw):
 
 
 @njit(cache=True, inline="always")
-def wheel_lanes(m, lo, k, xw, xn, b, mot, torque, wp, fail):
+def wheel_lanes(m, lo, k, xw, xn, b, mot, torque, wp, fail, wcmd):
     """Drive limits, exact motor step and mean body torque of a block's m episodes at step ``k``.
 
     Parameters
@@ -347,6 +350,9 @@ def wheel_lanes(m, lo, k, xw, xn, b, mot, torque, wp, fail):
     torque : (>= m,) bool array
     wp, fail : kernels.WheelParams, kernels.WheelFailure
         The assembly and the failures (F = 1 or P; ``e_hold`` is updated in place).
+    wcmd : (n, >= m) array, or (0, m)
+        Each wheel's own motor torque command, N m (``wheel_cmd``: the command rows ``U`` are not read), or
+        no rows: the body-axis command.
     """
     axes, j_m, coast0, coast1 = wp.axes, wp.j_m, wp.coast[0], wp.coast[1]
     failing = fail.wheel.shape[0] > 1 or fail.wheel[0] >= 0
@@ -356,7 +362,7 @@ def wheel_lanes(m, lo, k, xw, xn, b, mot, torque, wp, fail):
             b[TC + i, p] = 0.0
             b[H + i, p] = 0.0
     for j in range(xw.shape[0]):
-        _drive(m, j, xw, b, mot, torque, wp, fail, lo, k, reallocate)
+        _drive(m, j, xw, b, mot, torque, wp, fail, lo, k, reallocate, wcmd)
         if failing:
             _fail(m, j, lo, k, fail, mot, xw)
         for r in range(3):  # the exact motor step, one state at a time (few rows written per loop)

@@ -413,7 +413,8 @@ class WheelAssembly:
         return x_next, tau_c_B
 
     def advance(self, x: np.ndarray, v_cmd_B: np.ndarray, torque_mode: bool = False, k: int = 0,
-                failure: tuple | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+                failure: tuple | None = None, wheel_cmd: np.ndarray | None = None
+                ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """:meth:`wheel_voltages` then :meth:`step`, compiled in one loop, with each episode's motor.
 
         With ``torque_mode`` the command is a body torque (N m): each wheel's
@@ -422,6 +423,10 @@ class WheelAssembly:
         1 ms electrical lag neglected), then the same drive limits apply.
         ``failure`` is a :class:`attitude_sil.core.plant.kernels.WheelFailure`
         for step ``k`` (its held voltages are updated in place); None: no failure.
+        ``wheel_cmd`` (P, n) N m: each wheel's own motor torque command
+        (``wheel_cmd``, a user's allocation), in place of the body-axis command:
+        the inverse motor model and the drive limits, no allocation and no
+        null-space loop.
 
         Returns
         -------
@@ -429,8 +434,9 @@ class WheelAssembly:
         tau_c_B : (P, 3) N m, mean torque on the body over the step
         h_start : (P, 3) N m s, wheel momentum at t_k
         """
+        w_cmd = np.zeros((x.shape[0], 0)) if wheel_cmd is None else np.asarray(wheel_cmd, dtype=float)
         return wheel_step(x, v_cmd_B, int(k), bool(torque_mode), self.params,
-                          NO_FAILURE if failure is None else failure)
+                          NO_FAILURE if failure is None else failure, w_cmd)
 
 
 def no_failure() -> WheelFailure:

@@ -204,6 +204,7 @@ def _chunk(lo, hi, m, sim, recs, noise, noise_lo, out, sums, at):
     fail = WheelFailure(f.wheel.copy(), f.step.copy(), f.mode.copy(), f.limit.copy(), f.e_hold.copy(),
                         f.isolated.copy(), f.isolated_step.copy())
     cf, cf_on, u_out = _command_fault_start(sim.cmd_fault, lo, hi, m)
+    no_wcmd = np.empty((0, m))  # the laws command the body axes: no per-wheel command
     tau_constant, tau_step = sim.tau_constant.copy(), sim.tau_step.copy()
     s_seeds, s_att, s_rate = sim.s_seeds.copy(), sim.s_att.copy(), sim.s_rate.copy()
     sw_k, sw_law = sim.sw_k.copy(), sim.sw_law.copy()
@@ -242,7 +243,7 @@ def _chunk(lo, hi, m, sim, recs, noise, noise_lo, out, sums, at):
             for i in range(3):
                 u_last[p, i] = u[p, i]
         rows_to_lanes(_command_faults(cf, cf_on, u, u_out, m, lo, k), 0, b, U, m)
-        wheel_lanes(m, lo, k, xw, xn, b, mot, torque, wp, fail)
+        wheel_lanes(m, lo, k, xw, xn, b, mot, torque, wp, fail, no_wcmd)
         if sim.mag:  # the rods, from the wheels' momentum at t_k
             lanes_to_rows(b, H, h0)
             _magnetic_stage(m, lo, k, sim, q, h0, u, law, mag)

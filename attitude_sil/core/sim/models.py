@@ -169,24 +169,27 @@ class Wheels:
             return WheelFailure(*self.failure, self.e_hold, f.isolated, f.isolated_step)
         return None if self.failure is None else WheelFailure(*self.failure, self.e_hold, *self.failure[:2])
 
-    def advance(self, cmd_B: np.ndarray, torque_mode: bool = False) -> WheelStep:
+    def advance(self, cmd_B: np.ndarray, torque_mode: bool = False, wheel_cmd: np.ndarray | None = None
+                ) -> WheelStep:
         """Hold a body-axis command (P, 3) over one step; return the step's outputs.
 
         The command is a voltage (V), or with ``torque_mode`` a body torque (N m)
-        that the inverse motor model turns into voltages.
+        that the inverse motor model turns into voltages; or, with ``wheel_cmd``
+        (P, n) N m, each wheel's own motor torque (``cmd_B`` unused: a user's
+        allocation, the ``wheel_cmd`` topic).
         """
         x = self.x
         cmd_B = np.ascontiguousarray(cmd_B, dtype=float)
-        if self.command_fault is not None:  # the controller output's gain and delay
+        if self.command_fault is not None and wheel_cmd is None:  # the controller output's gain and delay
             applied = np.empty_like(cmd_B)
             command_fault_rows(cmd_B, self.k, self.command_fault, applied)
             cmd_B = applied
         self.last_cmd = cmd_B
         if self.fdir is not None:  # the tachometer read at t_k, before the step's command is shared
             self.isolated_now = self.fdir.check(self.k, x)
-        self.x, tau_c, h = self.assembly.advance(x, cmd_B, torque_mode, self.k, self.failure_arrays())
+        self.x, tau_c, h = self.assembly.advance(x, cmd_B, torque_mode, self.k, self.failure_arrays(), wheel_cmd)
         if self.fdir is not None:
-            self.fdir.predict(cmd_B, torque_mode, self.k)
+            self.fdir.predict(cmd_B, torque_mode, self.k, wheel_cmd)
         self.k += 1
         return WheelStep(h, tau_c, x[:, :, ANGLE], x[:, :, SPEED], self.assembly.motor_torque(x))
 
