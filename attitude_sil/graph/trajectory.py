@@ -29,6 +29,7 @@ from attitude_sil.ros.contract import (
     MAGNETOMETER,
     RATE_SETPOINT,
     STEP_TOPICS,
+    WHEEL_CMD,
     WHEEL_MOMENTUM,
     WHEEL_STATE,
     WHEEL_TORQUE,
@@ -41,7 +42,7 @@ __all__ = ["KEPT_TOPICS", "StepAssembler", "command_topics", "trajectory_from_me
 
 #: the topics an episode keeps in memory to build its trajectory
 KEPT_TOPICS = (ATTITUDE, BODY_RATE, ATTITUDE_SETPOINT, RATE_SETPOINT, WHEEL_TORQUE, WHEEL_MOMENTUM,
-               DISTURBANCE_TORQUE, WHEEL_STATE, *COMMAND_TOPIC.values(), *APPLIED_COMMAND_TOPIC.values(),
+               DISTURBANCE_TORQUE, WHEEL_STATE, *COMMAND_TOPIC.values(), *APPLIED_COMMAND_TOPIC.values(), WHEEL_CMD,
                ESTIMATE_ATTITUDE, ESTIMATE_BODY_RATE, ESTIMATE_GYRO_BIAS, ESTIMATE_ATTITUDE_SIGMA, MAGNETIC_FIELD,
                MAGNETOMETER, DIPOLE_CMD, MAGNETIC_TORQUE)
 
@@ -95,7 +96,9 @@ def trajectory_from_messages(kept: dict[str, list[tuple[int, bytes]]]) -> Trajec
         Arrays of shape (1, n, .) where n is the number of steps present on
         every topic, with the command of each step taken from whichever
         command topic carried it (``kind`` says which): the wheels'
-        ``applied/*`` where the bag has them (:func:`command_topics`).
+        ``applied/*`` where the bag has them (:func:`command_topics`); a step
+        commanded on ``wheel_cmd`` has kind ``wheel`` and, as its body-axis
+        command, the torque the wheels made of it (``wheel_torque``).
     """
     arrays: dict[str, tuple[np.ndarray, np.ndarray]] = {}
     for name, topic in _FIELDS.items():
@@ -105,6 +108,10 @@ def trajectory_from_messages(kept: dict[str, list[tuple[int, bytes]]]) -> Trajec
         times, values = decode_step_messages(topic, kept.get(topic, []))
         for t, v in zip(times, values, strict=True):
             commands.setdefault(int(t), (kind, v))
+    made = dict(zip(arrays["tau_c_B"][0].tolist(), arrays["tau_c_B"][1], strict=True))
+    for t, _ in kept.get(WHEEL_CMD, []):  # a per-wheel command: the body torque the wheels made of it
+        if int(t) in made:
+            commands.setdefault(int(t), ("wheel", made[int(t)]))
     wheel_t, (angle, speed, effort) = _wheel_states(kept.get(WHEEL_STATE, []))
     estimates = {name: decode_step_messages(topic, kept[topic]) for name, topic in _OPTIONAL_FIELDS.items()
                  if kept.get(topic)}
@@ -133,7 +140,8 @@ class StepAssembler:
     """Hands an :class:`EpisodeAccumulator` each step of a live episode once its messages are all in.
 
     A step needs ``attitude``, ``attitude_setpoint``, ``wheel_torque`` and its
-    command (``voltage_cmd`` or ``torque_cmd``; with ``applied`` the wheels'
+    command (``voltage_cmd``, ``torque_cmd`` or ``wheel_cmd``, whose body-axis
+    command is the step's ``wheel_torque``; with ``applied`` the wheels'
     ``applied/*`` of it), and ``estimate/attitude`` with
     ``estimate=True`` (the sensing loop runs), and ``body_rate``,
     ``wheel_momentum`` (and ``dipole_cmd`` and ``magnetic_torque``, which
@@ -165,13 +173,15 @@ class StepAssembler:
         if topic in self.commands:
             part = "command"
             width = 3
+        elif topic == WHEEL_CMD:  # a per-wheel command: its step's body-axis command is the torque made of it
+            part, width = "command", 0
         elif topic in self.width:
             part, width = topic, self.width[topic]
         else:
             return
         if stamp_ns <= self.done:
             return  # a second copy of a step already handed on
-        values = stamped_values(data, width)
+        values = stamped_values(data, width) if width else np.zeros(0)
         if values is None:
             return
         self.pending.setdefault(stamp_ns, {}).setdefault(part, values.copy())
@@ -183,7 +193,8 @@ class StepAssembler:
             del self.pending[first]
             magnetic = (parts[BODY_RATE], parts[WHEEL_MOMENTUM], parts.get(DIPOLE_CMD)) if BODY_RATE in parts else None
             tau = parts[WHEEL_TORQUE] + parts[MAGNETIC_TORQUE] if MAGNETIC_TORQUE in parts else parts[WHEEL_TORQUE]
+            command = parts["command"] if parts["command"].size else parts[WHEEL_TORQUE]
             self.accumulator.add(first * 1e-9, parts[ATTITUDE], parts[ATTITUDE_SETPOINT], tau,  # the actuators'
-                                 parts["command"], parts.get(ESTIMATE_ATTITUDE), magnetic)
+                                 command, parts.get(ESTIMATE_ATTITUDE), magnetic)
             self.done = first
             self.steps += 1

@@ -5,7 +5,9 @@ motor model) stamped t_k it integrates the motors exactly over
 ``[t_k, t_k+1]`` with the voltage held (:class:`attitude_sil.core.sim.models.Wheels`)
 and publishes, stamped t_k: ``wheel_torque`` (mean torque on the body over the
 step, so momentum is exchanged exactly), ``wheel_momentum`` (h_w at t_k, in B)
-and ``wheel_state`` (per wheel angle, speed and motor torque at t_k).
+and ``wheel_state`` (per wheel angle, speed and motor torque at t_k). On
+``wheel_cmd`` (each wheel's motor torque, N m: a user's own allocation) it
+takes the step the same way, the allocation and the null-space loop left out.
 
 With ``command_timing`` ``sim_timer`` or ``wall`` (a controller on a timer of
 its own, docs/flight-software.md) a step starts on ``/clock`` instead, with
@@ -31,6 +33,7 @@ from attitude_sil.ros.contract import (
     CLOCK,
     TORQUE_CMD,
     VOLTAGE_CMD,
+    WHEEL_CMD,
     WHEEL_MOMENTUM,
     WHEEL_STATE,
     WHEEL_TORQUE,
@@ -53,6 +56,7 @@ class WheelsNode(LockstepNode):
         self.pub_state = self.step_publisher(WHEEL_STATE)
         self.step_subscription(VOLTAGE_CMD, lambda m: self._on_command(m, False))
         self.step_subscription(TORQUE_CMD, lambda m: self._on_command(m, True))
+        self.step_subscription(WHEEL_CMD, self._on_wheel_command)
         self.hold: CommandHold | None = None  # a controller on a timer of its own: the command held
         if self.param("command_timing") != "stamped":
             self.pub_applied = {mode: self.step_publisher(APPLIED_COMMAND_TOPIC["torque" if mode else "voltage"])
@@ -151,6 +155,34 @@ class WheelsNode(LockstepNode):
             return
         self._advance(t, v, torque_mode)
 
+    def _on_wheel_command(self, msg) -> None:
+        """``wheel_cmd``: each wheel's motor torque (N m) stamped t_k, a user's own allocation (one step)."""
+        t = stamp_to_ns(msg.header.stamp)
+        why = self._wheel_command_problem(msg)
+        if why:
+            self.get_logger().error(f"{WHEEL_CMD} stamped {t * 1e-9:.6f} s refused ({why})", throttle_duration_sec=1.0)
+            return
+        names = list(msg.name) or self.core.names
+        effort = np.array([dict(zip(names, msg.effort, strict=True))[n] for n in self.core.names])[None]
+        kind = self.seq.classify(t, self.dt_ns)
+        if kind == StepSequencer.NEW:
+            self.new_episode()
+        elif kind != StepSequencer.NEXT:
+            self.refuse_stamp(WHEEL_CMD, t, kind)
+            return
+        self._advance(t, np.zeros((1, 3)), True, effort)
+
+    def _wheel_command_problem(self, msg) -> str:
+        """Why a ``wheel_cmd`` cannot be taken ('' if it can)."""
+        if self.hold is not None or self.param("actuator") != "reaction_wheels":
+            return "wheel_cmd needs actuator reaction_wheels and command_timing stamped"
+        names, n = list(msg.name), self.core.assembly.n_wheels
+        if len(msg.effort) != n or (names and sorted(names) != sorted(self.core.names)):
+            return f"expected an effort for each of {', '.join(self.core.names)}, got {len(msg.effort)} for {names}"
+        if not self.finite(np.asarray(msg.effort, dtype=float)):
+            return f"effort not finite: {list(msg.effort)}"
+        return ""
+
     def _on_clock(self, msg) -> None:
         """A held-command step starts on ``/clock``."""
         t = stamp_to_ns(msg.clock)
@@ -176,8 +208,8 @@ class WheelsNode(LockstepNode):
         self.pub_applied[torque_mode].publish(stamped_vector_cdr(v[0], t, "body"))
         self._advance(t, v, torque_mode)
 
-    def _advance(self, t: int, v: np.ndarray, torque_mode: bool) -> None:
-        out = self.core.advance(v, torque_mode)
+    def _advance(self, t: int, v: np.ndarray, torque_mode: bool, wheel_cmd: np.ndarray | None = None) -> None:
+        out = self.core.advance(v, torque_mode, wheel_cmd)
         if self.core.isolated_now.size:  # the FDIR isolated a wheel at this step (the one episode)
             wheel = int(self.core.fdir.isolated[0]) + 1
             self.faults.publisher.publish(isolation_diagnostics_msg(wheel, t, self.param("reallocate_on_fault")))

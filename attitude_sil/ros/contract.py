@@ -15,7 +15,8 @@ import re
 from attitude_sil.errors import AttitudeSilError
 
 __all__ = ["CLOCK", "ATTITUDE", "BODY_RATE", "ATTITUDE_SETPOINT", "RATE_SETPOINT", "VOLTAGE_CMD", "TORQUE_CMD",
-           "WHEEL_TORQUE", "WHEEL_MOMENTUM", "WHEEL_STATE", "DISTURBANCE_TORQUE", "ATTITUDE_ERROR", "FLEXIBLE_MODE",
+           "WHEEL_CMD", "WHEEL_TORQUE", "WHEEL_MOMENTUM", "WHEEL_STATE", "DISTURBANCE_TORQUE", "ATTITUDE_ERROR",
+           "FLEXIBLE_MODE",
            "PLANT_INPUTS", "clock_remap",
            "STEP_TOPICS", "COMMAND_TOPICS", "COMMAND_TOPIC", "APPLIED_COMMAND_TOPIC", "APPLIED_TOPICS",
            "CONTROLLER_INPUTS", "MODEL_TOPICS", "RECORDED_TOPICS",
@@ -70,6 +71,10 @@ ATTITUDE_SETPOINT = "attitude_setpoint"
 RATE_SETPOINT = "rate_setpoint"
 VOLTAGE_CMD = "voltage_cmd"
 TORQUE_CMD = "torque_cmd"
+#: each wheel's own command (a user's allocation): ``sensor_msgs/msg/JointState`` stamped t_k, ``name`` the
+#: wheels' (``wheel_1`` ... as ``wheel_state``; empty: in that order), ``effort`` each wheel's motor torque, N m
+#: (positive spins the wheel up along its axis; the body takes the reaction), ``position`` and ``velocity`` empty
+WHEEL_CMD = "wheel_cmd"
 WHEEL_TORQUE = "wheel_torque"
 WHEEL_MOMENTUM = "wheel_momentum"
 WHEEL_STATE = "wheel_state"
@@ -102,6 +107,7 @@ STEP_TOPICS: dict[str, str] = {
     RATE_SETPOINT: "geometry_msgs/msg/Vector3Stamped",
     VOLTAGE_CMD: "geometry_msgs/msg/Vector3Stamped",
     TORQUE_CMD: "geometry_msgs/msg/Vector3Stamped",
+    WHEEL_CMD: "sensor_msgs/msg/JointState",
     WHEEL_TORQUE: "geometry_msgs/msg/Vector3Stamped",
     WHEEL_MOMENTUM: "geometry_msgs/msg/Vector3Stamped",
     WHEEL_STATE: "sensor_msgs/msg/JointState",
@@ -109,8 +115,9 @@ STEP_TOPICS: dict[str, str] = {
     ATTITUDE_ERROR: "geometry_msgs/msg/Vector3Stamped",
 }
 
-#: the controller publishes one of these per step, depending on its law
-COMMAND_TOPICS = (VOLTAGE_CMD, TORQUE_CMD)
+#: the controller publishes one of these per step, depending on its law (``wheel_cmd``: a user's flight software
+#: that shares the command among the wheels itself)
+COMMAND_TOPICS = (VOLTAGE_CMD, TORQUE_CMD, WHEEL_CMD)
 
 #: the command topic of each kind of law (:meth:`attitude_sil.core.control.bank.ControllerBank.kind_of`)
 COMMAND_TOPIC = {"voltage": VOLTAGE_CMD, "torque": TORQUE_CMD}

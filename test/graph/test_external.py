@@ -171,12 +171,12 @@ def test_a_best_effort_publisher_is_named_in_one_line():
 
 def test_no_external_node_is_a_one_line_timeout():
     with pytest.raises(RunError, match=r"no external node within 1 s: waiting for controller "
-                                       r"\(voltage_cmd or torque_cmd\)"):
+                                       r"\(voltage_cmd or torque_cmd or wheel_cmd\)"):
         run_graph(load_scenario(SCENARIO), duration=1.0, external=("controller",), external_timeout=1.0,
                   progress=False)
 
 
-@pytest.mark.parametrize("name", ["pid_controller.py", "timer_controller.py"])
+@pytest.mark.parametrize("name", ["pid_controller.py", "timer_controller.py", "wheel_controller.py"])
 def test_the_examples_import_nothing_of_the_package(name):
     import ast
 

@@ -75,7 +75,7 @@ def test_a_timer_driven_controller_under_the_stamped_lockstep_is_named(tmp_path,
         node.communicate(timeout=60)
     elapsed = time.monotonic() - started
     err = capfd.readouterr().err
-    expected = "the controller sent no voltage_cmd or torque_cmd stamped 0.000000 s ("
+    expected = "the controller sent no voltage_cmd or torque_cmd or wheel_cmd stamped 0.000000 s ("
     # the end of the run: the plant's own line, the wall time into the episode, and the culprit
     assert line.startswith("plant: no wheel_torque, wheel_momentum for step t=0.000000 s"), line
     assert " s into the episode); " + expected in line, line
@@ -99,8 +99,9 @@ def test_the_culprit_is_the_first_role_whose_output_is_missing():
     topics = ["attitude", "attitude_setpoint", "rate_setpoint", "disturbance_torque", "wheel_torque",
               "wheel_momentum"]
     line = stall_culprit(Recorder(), topics)
-    assert line.startswith("the controller sent no voltage_cmd or torque_cmd stamped 0.000000 s (3 message(s) "
-                           "refused, the last stamped 5.000000 s; the newest taken stamped 0.000000 s)"), line
+    assert line.startswith("the controller sent no voltage_cmd or torque_cmd or wheel_cmd stamped 0.000000 s "
+                           "(3 message(s) refused, the last stamped 5.000000 s; the newest taken stamped "
+                           "0.000000 s)"), line
     assert stall_culprit(Recorder(), topics, refused_only=True) == line  # refused ones came: said at a restart
     Recorder.refused = {}
     assert stall_culprit(Recorder(), topics, refused_only=True) == ""  # a lost first message: a quiet restart
