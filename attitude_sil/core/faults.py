@@ -43,6 +43,7 @@ OWNER: dict[str, str] = {"wheel": "wheels", "gyro": "sensors", "star_tracker": "
 FAULT_NODES = ("wheels", "sensors")
 #: (target kind, mode) pairs the drivers fly today
 FLOWN: frozenset[tuple[str, str]] = frozenset({("wheel", "lost"), ("wheel", "stuck"), ("wheel", "torque_limit"),
+                                              ("wheel", "friction"),
                                               ("wheel", "speed_limit"), ("star_tracker", "off"),
                                               ("gyro", "off"), ("gyro", "stuck"), ("gyro", "bias_jump"),
                                               ("gyro", "scale"), ("gyro", "spike"), ("star_tracker", "stuck"),
@@ -51,7 +52,8 @@ FLOWN: frozenset[tuple[str, str]] = frozenset({("wheel", "lost"), ("wheel", "stu
 #: target kinds that need the sensing loop (scenario.sensors)
 SENSED = frozenset({"gyro", "star_tracker", "magnetometer"})
 #: modes that last once they happen (a wheel that seized stays seized): no ``for``
-PERMANENT = frozenset({("wheel", "lost"), ("wheel", "stuck"), ("wheel", "torque_limit"), ("wheel", "speed_limit")})
+PERMANENT = frozenset({("wheel", "lost"), ("wheel", "stuck"), ("wheel", "torque_limit"), ("wheel", "speed_limit"),
+                       ("wheel", "friction")})
 #: modes whose VALUE is a size (a gain, a factor, a limit, a time)
 VALUED = frozenset({"friction", "torque_limit", "speed_limit", "bias_jump", "scale", "spike", "latency", "gain",
                     "delay"})
@@ -241,12 +243,12 @@ def wheel_failure_values(w: dict) -> dict:
     fault = next((f for f in map(parse_fault, w["faults"]) if f.kind == "wheel"), None)
     if fault is None:
         return {}
-    legacy = legacy_wheel_fault(w["failure.wheel"], w["failure.time"], w["failure.mode"], w["failure.limit"])
+    legacy = legacy_wheel_fault(w["failure.wheel"], w["failure.time"], w["failure.mode"], w["failure.value"])
     if legacy is not None:
         raise ScenarioError(f"fault '{fault}' and wheels.failure ('{legacy}'): one wheel fault per run; "
                             "say it in faults")
     return {"failure.wheel": fault.index, "failure.time": fault.time_s, "failure.mode": fault.mode,
-            "failure.limit": 0.0 if fault.value is None else fault.value}
+            "failure.value": 0.0 if fault.value is None else fault.value}
 
 
 def faults_of(values: dict, node: str) -> list[Fault]:
@@ -255,7 +257,7 @@ def faults_of(values: dict, node: str) -> list[Fault]:
     out = [f for f in map(parse_fault, values.get("faults", ())) if OWNER[f.kind] == node]
     if "failure.wheel" in values:
         legacy = legacy_wheel_fault(values["failure.wheel"], values["failure.time"], values["failure.mode"],
-                                    values["failure.limit"])
+                                    values["failure.value"])
         out += [] if legacy is None else [legacy]
     return out
 

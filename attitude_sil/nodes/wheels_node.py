@@ -126,8 +126,8 @@ class WheelsNode(LockstepNode):
             if fault.kind == "controller":
                 self.core.add_command_fault(fault, step)
             else:
-                limit = (fault.value or 0.0) * (RPM if fault.mode == "speed_limit" else 1.0)
-                self.core.fail(fault.index - 1, step, WHEEL_FAILURE_MODES.index(fault.mode), limit)
+                value = (fault.value or 0.0) * (RPM if fault.mode == "speed_limit" else 1.0)
+                self.core.fail(fault.index - 1, step, WHEEL_FAILURE_MODES.index(fault.mode), value)
             self.faults.started(fault, step, self.dt_ns)
 
     def _on_command(self, msg, torque_mode: bool) -> None:
@@ -209,8 +209,8 @@ class WheelsNode(LockstepNode):
         self._advance(t, v, torque_mode)
 
     def _advance(self, t: int, v: np.ndarray, torque_mode: bool, wheel_cmd: np.ndarray | None = None) -> None:
-        out = self.core.advance(v, torque_mode, wheel_cmd)
-        if self.core.isolated_now.size:  # the FDIR isolated a wheel at this step (the one episode)
+        out = self.core.advance(v, torque_mode) if wheel_cmd is None else self.core.advance(v, torque_mode, wheel_cmd)
+        if getattr(self.core, "fdir", None) is not None and self.core.isolated_now.size:  # isolated at this step
             wheel = int(self.core.fdir.isolated[0]) + 1
             self.faults.publisher.publish(isolation_diagnostics_msg(wheel, t, self.param("reallocate_on_fault")))
             self.get_logger().warning(f"FDIR isolated wheel{wheel} at t={t * 1e-9:g} s")

@@ -58,11 +58,12 @@ _SLOTS = {"inertia_pct": slice(0, 3), "initial_attitude_deg": slice(3, 6), "init
           "setpoint_deg": slice(9, 12), "motor_constant_pct": slice(12, 13), "noise_level_pct": slice(13, 14),
           "failure_happens": 14, "failure_wheel": 15, "failure_time": 16, "failure_mode": 17,
           "gyro_bias_deg_h": slice(18, 21), "residual_dipole_Am2": slice(21, 24),
-          "magnetometer_bias_nt": slice(24, 27), "epoch_s": 27, "failure_limit": 28}
+          "magnetometer_bias_nt": slice(24, 27), "epoch_s": 27, "failure_value": 28}
 #: (slots are drawn in order from each run's stream: a slot added at the end leaves the others' values as they were)
 _N_SLOTS = 29
 #: a wheel failure's modes, and the range key of each that has a size
-_FAILURE_MODES = {"lost": None, "stuck": None, "torque_limit": "torque_limit_Nm", "speed_limit": "speed_limit_rpm"}
+_FAILURE_MODES = {"lost": None, "stuck": None, "torque_limit": "torque_limit_Nm", "speed_limit": "speed_limit_rpm",
+                  "friction": "friction_factor"}
 
 
 def _number(v: Any) -> bool:
@@ -106,10 +107,10 @@ def check_dispersions(where: str, raw: Any, scn: Scenario) -> dict:
                 raise SpecError(f"{at} must be true or false, got {value!r}")
             out[key] = value
         elif key == "wheel_failure":
-            if not isinstance(value, dict) or set(value) - {"probability", "modes", "time", "torque_limit_Nm",
-                                                            "speed_limit_rpm"}:
-                raise SpecError(f"{at} must be a mapping of probability, modes, time, torque_limit_Nm, "
-                                f"speed_limit_rpm, got {value!r}")
+            sizes = [v for v in _FAILURE_MODES.values() if v]
+            if not isinstance(value, dict) or set(value) - {"probability", "modes", "time", *sizes}:
+                raise SpecError(f"{at} must be a mapping of probability, modes, time, {', '.join(sizes)}, "
+                                f"got {value!r}")
             p = value.get("probability", 1.0)
             if not (_number(p) and 0.0 <= p <= 1.0):
                 raise SpecError(f"{at}.probability must be a number in 0..1, got {p!r}")
@@ -202,8 +203,8 @@ def _failure_values(wf: dict, u: np.ndarray, n_wheels: int) -> dict[str, np.ndar
         limit = np.zeros(u.shape[0])
         for mode, (lo, hi) in wf["limits"].items():
             chosen = out["wheels.failure.mode"] == mode
-            limit[chosen] = np.round(lo + (hi - lo) * u[chosen, _SLOTS["failure_limit"]], 3)
-        out["wheels.failure.limit"] = limit
+            limit[chosen] = np.round(lo + (hi - lo) * u[chosen, _SLOTS["failure_value"]], 3)
+        out["wheels.failure.value"] = limit
     return out
 
 

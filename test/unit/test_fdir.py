@@ -164,5 +164,24 @@ def test_a_campaign_reports_its_fdir_figures_against_the_failures_it_drew(tmp_pa
     lost = failed & (t["wheels.failure.mode"] == "lost")
     assert np.all(detected[lost])  # a lost wheel in the step is always found
     limited = t["wheels.failure.mode"] == "torque_limit"
-    assert np.all((t["wheels.failure.limit"][limited] >= 0.0) & (t["wheels.failure.limit"][limited] <= 0.2))
+    assert np.all((t["wheels.failure.value"][limited] >= 0.0) & (t["wheels.failure.value"][limited] <= 0.2))
     assert f"fdir: {f['detected']} of {f['failed_runs']} failures detected" in format_campaign(result.summary)
+
+
+def test_a_seized_wheel_stops_and_hands_its_momentum_to_the_body_which_keeps_the_total():
+    from attitude_sil.core.plant.quaternion import quat_to_dcm
+
+    base = load_scenario(CONFIG / "hst_roll_step.yaml")
+    same = simulate(base.with_values("wheels", faults=["wheel2 friction 1 at 0.5"]), 1, duration=1.0,
+                    driver="compiled")
+    np.testing.assert_array_equal(same.q_BN, simulate(base, 1, duration=1.0, driver="compiled").q_BN)
+    scn = base.with_values("wheels", faults=["wheel1 friction 1e5 at 2"])  # B x 1e5: 10 N m s/rad on 0.84 kg m^2
+    a, b = (simulate(scn, 1, duration=4.0, driver=d) for d in ("compiled", "stepwise"))
+    np.testing.assert_array_equal(a.wheel_speed, b.wheel_speed)
+    w1 = np.abs(b.wheel_speed[0, :, 0])
+    assert w1[199] > 0.1 and w1[300] < 1e-3 * w1[199]  # stopped within a second
+    inertia = np.diag(scn.values["plant"]["inertia"])
+    h_B = b.omega_BN_B[0] @ inertia.T + b.h_wheels_B[0]
+    h_N = np.einsum("kij,kj->ki", quat_to_dcm(b.q_BN[0]), h_B)  # the total in N: no external torque, it stays
+    assert np.max(np.abs(h_N)) < 1e-9 * np.max(np.abs(b.h_wheels_B))
+    assert np.max(np.abs(b.omega_BN_B[0, 210:])) > 2.0 * np.max(np.abs(b.omega_BN_B[0, 150:199]))  # the body took it

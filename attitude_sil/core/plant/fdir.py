@@ -119,7 +119,8 @@ class WheelFdir:
         """The model's failure record (P rows): no wheel failed, the detector's isolation."""
         P = self.n_episodes
         return WheelFailure(np.full(P, -1, dtype=np.int64), np.zeros(P, dtype=np.int64), np.zeros(P, dtype=np.int64),
-                            np.zeros(P), np.zeros(P), self.isolated, self.isolated_step)
+                            np.zeros(P), np.zeros(P), self.isolated, self.isolated_step, np.zeros((1, 3, 3)),
+                            np.zeros((1, 3)))
 
 
 #: the per-episode figures of an FDIR run (:func:`fdir_columns`): the wheel isolated (1..n, 0: none), when (s)

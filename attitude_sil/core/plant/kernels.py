@@ -103,9 +103,11 @@ class WheelFailure(NamedTuple):
 
     A stuck drive holds the voltage of the step before the failure, which
     ``e_hold`` keeps (state, updated until the failure); a lost wheel (open
-    circuit) coasts; a torque-limited drive makes at most ``limit`` N m (its
+    circuit) coasts; a torque-limited drive makes at most ``value`` N m (its
     current limit lowered), a speed-limited one no longer drives beyond
-    ``limit`` rad/s. The wheel isolated is the failed one from its failure's
+    ``value`` rad/s; a wheel whose bearing's viscous friction grew ``value``
+    times steps with the motor transition ``phi``, ``gamma`` of that friction
+    (a large factor seizes it). The wheel isolated is the failed one from its failure's
     step under ideal isolation, or the one the drive's FDIR isolates, from the
     step it does (:mod:`attitude_sil.core.plant.fdir`, which writes it: state).
     """
@@ -113,10 +115,12 @@ class WheelFailure(NamedTuple):
     wheel: np.ndarray  # (F,) int64
     step: np.ndarray  # (F,) int64
     mode: np.ndarray  # (F,) int64, WHEEL_FAILURE_MODES' code
-    limit: np.ndarray  # (F,) N m (torque_limit) or rad/s (speed_limit)
+    value: np.ndarray  # (F,) N m (torque_limit), rad/s (speed_limit) or the friction factor (friction)
     e_hold: np.ndarray  # (F,) V
     isolated: np.ndarray  # (F,) int64, -1: none
     isolated_step: np.ndarray  # (F,) int64
+    phi: np.ndarray  # (F or 1, 3, 3) the friction fault's motor transition, x_next = x @ phi + e gamma
+    gamma: np.ndarray  # (F or 1, 3)
 
 
 @njit(cache=True)

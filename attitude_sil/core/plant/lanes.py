@@ -65,8 +65,8 @@ PHI, GAMMA, KB, KI, HEAD, RA, E, LOST = 0, 9, 12, 13, 14, 15, 16, 17
 MOTOR_ROWS = 18
 #: the modes of a wheel failure (:data:`attitude_sil.core.faults.CATALOGUE`'s wheel modes but friction), by code
 #: (``WheelFailure.mode``)
-WHEEL_FAILURE_MODES = ("lost", "stuck", "torque_limit", "speed_limit")
-FAIL_LOST, FAIL_STUCK, FAIL_TORQUE_LIMIT, FAIL_SPEED_LIMIT = 0, 1, 2, 3
+WHEEL_FAILURE_MODES = ("lost", "stuck", "torque_limit", "speed_limit", "friction")
+FAIL_LOST, FAIL_STUCK, FAIL_TORQUE_LIMIT, FAIL_SPEED_LIMIT, FAIL_FRICTION = 0, 1, 2, 3, 4
 
 
 # ---------------------------------------------------------------- copies
@@ -323,10 +323,20 @@ def _fail(m, j, lo, k, fail, mot, xw):
             elif mode[pf] == FAIL_LOST:
                 mot[LOST, p] = 1.0
             elif mode[pf] == FAIL_TORQUE_LIMIT:
-                head = mot[RA, p] * fail.limit[pf] / mot[KI, p]
+                head = mot[RA, p] * fail.value[pf] / mot[KI, p]
                 mot[E, p] = min(max(mot[E, p], emf - head), emf + head)
-            elif abs(xw[j, SPEED, p]) >= fail.limit[pf] and (mot[E, p] - emf) * xw[j, SPEED, p] > 0.0:
+            elif mode[pf] == FAIL_FRICTION:
+                mot[LOST, p] = 2.0  # stepped with the fault's transition (wheel_lanes)
+            elif abs(xw[j, SPEED, p]) >= fail.value[pf] and (mot[E, p] - emf) * xw[j, SPEED, p] > 0.0:
                 mot[E, p] = emf
+
+
+@njit(cache=True)
+def _friction_step(j, p, pf, xw, xn, mot, fail):
+    # wheel j of episode p over the step with the friction fault's exact motor transition (row pf of fail's)
+    for r in range(3):
+        xn[j, r, p] = (xw[j, ANGLE, p] * fail.phi[pf, 0, r] + xw[j, CURRENT, p] * fail.phi[pf, 1, r]
+                       + xw[j, SPEED, p] * fail.phi[pf, 2, r] + mot[E, p] * fail.gamma[pf, r])
 
 
 @njit(cache=True, inline="always")
@@ -369,12 +379,14 @@ def wheel_lanes(m, lo, k, xw, xn, b, mot, torque, wp, fail, wcmd):
             for p in range(m):
                 xn[j, r, p] = (xw[j, ANGLE, p] * mot[PHI + r, p] + xw[j, CURRENT, p] * mot[PHI + 3 + r, p]
                                + xw[j, SPEED, p] * mot[PHI + 6 + r, p] + mot[E, p] * mot[GAMMA + r, p])
-        if failing:  # open circuit: no current, the wheel coasts down on its viscous friction
+        if failing:  # open circuit: no current, the wheel coasts down on its viscous friction; or a grown friction
             for p in range(m):
-                if mot[LOST, p] != 0.0:
+                if mot[LOST, p] == 1.0:
                     speed = xw[j, SPEED, p]
                     xn[j, ANGLE, p] = xw[j, ANGLE, p] + coast1 * speed
                     xn[j, CURRENT, p], xn[j, SPEED, p] = 0.0, coast0 * speed
+                elif mot[LOST, p] == 2.0:
+                    _friction_step(j, p, 0 if fail.phi.shape[0] == 1 else lo + p, xw, xn, mot, fail)
         for i in range(3):
             x_i = axes[i, j]
             for p in range(m):

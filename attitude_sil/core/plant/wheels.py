@@ -299,6 +299,18 @@ class WheelAssembly:
                 realloc[f] = self.allocation
         self.params = self.params._replace(realloc=realloc, reallocate=bool(on))
 
+    def friction_transition(self, factor: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The exact motor transition (phi_T (F, 3, 3), gamma (F, 3); x_next = x @ phi_T + e gamma) of each
+        episode's motor with its viscous friction ``factor`` (F,) times the datasheet's: a bearing that wears
+        (a large factor seizes it)."""
+        factor = np.atleast_1d(np.asarray(factor, dtype=float))
+        phi, gamma = np.empty((factor.size, 3, 3)), np.empty((factor.size, 3))
+        for p, f in enumerate(factor):
+            m = self.motors[p if len(self.motors) > 1 else 0]
+            phi[p], gamma[p] = _motor_transition(m.resistance, m.inductance, m.torque_constant, m.back_emf_constant,
+                                                 m.rotor_inertia, f * m.viscous_friction, self.dt)
+        return phi, gamma
+
     def nominal(self) -> WheelAssembly:
         """A copy of the assembly as it stands (allocation, null-space loop, reallocation) flying the nominal
         motor in every episode: the drive's model of its motors (:mod:`attitude_sil.core.plant.fdir`)."""
@@ -330,6 +342,7 @@ class WheelAssembly:
         """
         base = self.motor
         motors = [base] if motors is None else list(motors)
+        self.motors = motors  # one per episode, or the nominal one for all
         for mp in motors:
             mp.validate()
             for name in ("rotor_inertia", "viscous_friction", "v_max", "speed_max"):
@@ -442,7 +455,8 @@ class WheelAssembly:
 def no_failure() -> WheelFailure:
     """The failure record of :meth:`WheelAssembly.advance` for "no wheel fails" (F = 1)."""
     return WheelFailure(np.full(1, -1, dtype=np.int64), np.zeros(1, dtype=np.int64), np.zeros(1, dtype=np.int64),
-                        np.zeros(1), np.zeros(1), np.full(1, -1, dtype=np.int64), np.zeros(1, dtype=np.int64))
+                        np.zeros(1), np.zeros(1), np.full(1, -1, dtype=np.int64), np.zeros(1, dtype=np.int64),
+                        np.zeros((1, 3, 3)), np.zeros((1, 3)))
 
 
 NO_FAILURE = no_failure()  # read-only in use: e_hold is written only for the failed wheel, and there is none

@@ -201,8 +201,8 @@ def _chunk(lo, hi, m, sim, recs, noise, noise_lo, out, sums, at):
     xfer = (u_last, offset, has_off)  # the bumpless transfer's arrays
     # private copies of the shared read-only arrays: threads sharing one array would fight over its reference count
     wp, f = wheel_params_copy(sim.wheel), sim.failure
-    fail = WheelFailure(f.wheel.copy(), f.step.copy(), f.mode.copy(), f.limit.copy(), f.e_hold.copy(),
-                        f.isolated.copy(), f.isolated_step.copy())
+    fail = WheelFailure(f.wheel.copy(), f.step.copy(), f.mode.copy(), f.value.copy(), f.e_hold.copy(),
+                        f.isolated.copy(), f.isolated_step.copy(), f.phi.copy(), f.gamma.copy())
     cf, cf_on, u_out = _command_fault_start(sim.cmd_fault, lo, hi, m)
     no_wcmd = np.empty((0, m))  # the laws command the body axes: no per-wheel command
     tau_constant, tau_step = sim.tau_constant.copy(), sim.tau_step.copy()

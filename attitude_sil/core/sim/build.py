@@ -159,7 +159,7 @@ def motor_params(values: dict) -> MotorParams:
 EPISODE_MOTOR = ("motor.resistance", "motor.inductance", "motor.torque_constant", "motor.back_emf_constant",
                  "motor.torque_max")
 #: per-episode wheel failure parameters
-EPISODE_FAILURE = ("failure.wheel", "failure.time", "failure.mode", "failure.limit")
+EPISODE_FAILURE = ("failure.wheel", "failure.time", "failure.mode", "failure.value")
 
 
 def available_wheels(w: dict, n: int) -> list[int] | None:
@@ -226,9 +226,9 @@ def build_wheels(scn: Scenario, n_episodes: int = 1, per_episode: dict | None = 
         dt_ns = int(round(w["control_period"] * 1e9))
         step = np.array([first_step(float(x), dt_ns) for x in t], dtype=np.int64)  # the first step at or after
         mode = np.atleast_1d(np.asarray(per_episode.get("failure.mode", w["failure.mode"])))
-        limit = np.atleast_1d(np.asarray(per_episode.get("failure.limit", w["failure.limit"]), dtype=float))
+        value = np.atleast_1d(np.asarray(per_episode.get("failure.value", w["failure.value"]), dtype=float))
         code = np.array([WHEEL_FAILURE_MODES.index(str(x)) for x in mode], dtype=np.int64)
-        failure = (wheel - 1, step, code, np.where(code == FAIL_SPEED_LIMIT, limit * RPM, limit))
+        failure = (wheel - 1, step, code, np.where(code == FAIL_SPEED_LIMIT, value * RPM, value))
     fdir = None
     if w["fdir.enabled"]:
         fdir = WheelFdir(assembly, n_episodes, w["fdir.counts_per_rev"], w["fdir.threshold_rad"],

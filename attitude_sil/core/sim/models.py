@@ -29,7 +29,7 @@ from attitude_sil.core.plant.command_faults import command_fault_record, command
 from attitude_sil.core.plant.disturbance import lvlh_attitude
 from attitude_sil.core.plant.fdir import WheelFdir
 from attitude_sil.core.plant.kernels import WheelFailure
-from attitude_sil.core.plant.lanes import ANGLE, SPEED
+from attitude_sil.core.plant.lanes import ANGLE, FAIL_FRICTION, SPEED
 from attitude_sil.core.plant.magnetorquers import Magnetorquers
 from attitude_sil.core.plant.quaternion import quat_from_euler
 from attitude_sil.core.plant.rigid_body import BodyState, rk4_step
@@ -119,7 +119,16 @@ class Wheels:
             f = n_episodes  # the held voltage is per episode
             self.failure = tuple(np.broadcast_to(np.atleast_1d(np.asarray(a)), (f,)).astype(t)
                                  for a, t in zip(failure, (np.int64, np.int64, np.int64, np.float64), strict=True))
+        self._friction()
         self.reset()
+
+    def _friction(self) -> None:
+        """The friction fault's motor transitions (per episode), or a placeholder row where none flies."""
+        f = self.failure
+        if f is not None and np.any((f[0] >= 0) & (f[2] == FAIL_FRICTION)):
+            self.friction = self.assembly.friction_transition(np.where(f[2] == FAIL_FRICTION, f[3], 1.0))
+        else:
+            self.friction = (np.zeros((1, 3, 3)), np.zeros((1, 3)))
 
     def reset(self) -> None:
         self.x = self.assembly.initial_state(self.n_episodes, self.speed0)
@@ -134,17 +143,18 @@ class Wheels:
     def names(self) -> list[str]:
         return [f"wheel_{i + 1}" for i in range(self.assembly.n_wheels)]
 
-    def fail(self, wheel: int, step: int, mode: int, limit: float = 0.0) -> None:
+    def fail(self, wheel: int, step: int, mode: int, value: float = 0.0) -> None:
         """Wheel ``wheel`` (0-based) fails from step ``step`` on in every episode, in ``mode`` (a code of
-        :data:`~attitude_sil.core.plant.lanes.WHEEL_FAILURE_MODES`) with ``limit`` (N m or rad/s): a fault
-        injected while a run goes. ``step`` must be after the step in hand (``step > k``): a stuck drive holds
-        the voltage of the step before, which the steps until then record.
+        :data:`~attitude_sil.core.plant.lanes.WHEEL_FAILURE_MODES`) of size ``value`` (N m, rad/s or a
+        friction factor): a fault injected while a run goes. ``step`` must be after the step in hand
+        (``step > k``): a stuck drive holds the voltage of the step before, which the steps until then record.
         """
         if step <= self.k:
             raise ValueError(f"a wheel fails from a step to come (> {self.k}), not {step}")
         f = self.n_episodes
         self.failure = (np.full(f, wheel, dtype=np.int64), np.full(f, step, dtype=np.int64),
-                        np.full(f, mode, dtype=np.int64), np.full(f, float(limit)))
+                        np.full(f, mode, dtype=np.int64), np.full(f, float(value)))
+        self._friction()
         self.e_hold = np.zeros(f)
 
     def add_command_fault(self, fault, step: int) -> None:
@@ -166,8 +176,9 @@ class Wheels:
             f = self.fdir
             if self.failure is None:
                 return f.isolation()
-            return WheelFailure(*self.failure, self.e_hold, f.isolated, f.isolated_step)
-        return None if self.failure is None else WheelFailure(*self.failure, self.e_hold, *self.failure[:2])
+            return WheelFailure(*self.failure, self.e_hold, f.isolated, f.isolated_step, *self.friction)
+        return None if self.failure is None else WheelFailure(*self.failure, self.e_hold, *self.failure[:2],
+                                                              *self.friction)
 
     def advance(self, cmd_B: np.ndarray, torque_mode: bool = False, wheel_cmd: np.ndarray | None = None
                 ) -> WheelStep:

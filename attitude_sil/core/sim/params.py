@@ -212,9 +212,11 @@ NODE_PARAMS: dict[str, list[ParamSpec]] = {
         _d("failure.time", 0.0, "sim time the wheel fails (the first step at or after it), s", min=0.0),
         ParamSpec("failure.mode", "string", "lost", "lost: the drive opens, no current, the wheel coasts on "
                   "its friction; stuck: the drive holds the voltage of the step before the failure; torque_limit: "
-                  "the drive makes at most failure.limit N m; speed_limit: it drives to failure.limit rpm at most",
-                  choices=("lost", "stuck", "torque_limit", "speed_limit")),
-        _d("failure.limit", 0.0, "the failed wheel's limit: N m (torque_limit) or rpm (speed_limit)", min=0.0),
+                  "the drive makes at most failure.value N m; speed_limit: it drives to failure.value rpm at most; "
+                  "friction: the bearing's viscous friction grows failure.value times (a large factor seizes it)",
+                  choices=("lost", "stuck", "torque_limit", "speed_limit", "friction")),
+        _d("failure.value", 0.0, "the failed wheel's size: N m (torque_limit), rpm (speed_limit) or a friction "
+           "factor (friction)", min=0.0),
         ParamSpec("actuator", "string", "reaction_wheels",
                   "reaction_wheels (PMDC motors, paper 000), speed_loop (identified motor with a wheel-speed "
                   "PID, paper 003), torque (ideal torquer saturated at torque_limit: torque rods, paper 001), "
