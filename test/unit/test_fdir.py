@@ -168,20 +168,21 @@ def test_a_campaign_reports_its_fdir_figures_against_the_failures_it_drew(tmp_pa
     assert f"fdir: {f['detected']} of {f['failed_runs']} failures detected" in format_campaign(result.summary)
 
 
-def test_a_seized_wheel_stops_and_hands_its_momentum_to_the_body_which_keeps_the_total():
+def test_a_seized_wheel_hands_its_momentum_to_the_body_which_keeps_the_total():
     from attitude_sil.core.plant.quaternion import quat_to_dcm
 
     base = load_scenario(CONFIG / "hst_roll_step.yaml")
     same = simulate(base.with_values("wheels", faults=["wheel2 friction 1 at 0.5"]), 1, duration=1.0,
                     driver="compiled")
     np.testing.assert_array_equal(same.q_BN, simulate(base, 1, duration=1.0, driver="compiled").q_BN)
-    scn = base.with_values("wheels", faults=["wheel1 friction 1e5 at 2"])  # B x 1e5: 10 N m s/rad on 0.84 kg m^2
+    # wheel 1 at 300 rpm seizes at 2 s: B x 1e5 = 10 N m s/rad on its 0.84 kg m^2
+    scn = base.with_values("wheels", initial_speed_rpm=[300.0, 0.0, 0.0, 0.0], faults=["wheel1 friction 1e5 at 2"])
     a, b = (simulate(scn, 1, duration=4.0, driver=d) for d in ("compiled", "stepwise"))
     np.testing.assert_array_equal(a.wheel_speed, b.wheel_speed)
     w1 = np.abs(b.wheel_speed[0, :, 0])
-    assert w1[199] > 0.1 and w1[300] < 1e-3 * w1[199]  # stopped within a second
+    # it stops but for what its drive, at its 0.8 N m current limit, holds against the bearing: 0.8 / 10 rad/s
+    assert w1[199] > 29.0 and w1[399] == pytest.approx(0.8 / 10.0, rel=1e-6)
     inertia = np.diag(scn.values["plant"]["inertia"])
-    h_B = b.omega_BN_B[0] @ inertia.T + b.h_wheels_B[0]
-    h_N = np.einsum("kij,kj->ki", quat_to_dcm(b.q_BN[0]), h_B)  # the total in N: no external torque, it stays
-    assert np.max(np.abs(h_N)) < 1e-9 * np.max(np.abs(b.h_wheels_B))
-    assert np.max(np.abs(b.omega_BN_B[0, 210:])) > 2.0 * np.max(np.abs(b.omega_BN_B[0, 150:199]))  # the body took it
+    h_N = np.einsum("kij,kj->ki", quat_to_dcm(b.q_BN[0]), b.omega_BN_B[0] @ inertia.T + b.h_wheels_B[0])
+    assert np.max(np.abs(h_N - h_N[0])) < 1e-9 * np.linalg.norm(h_N[0])  # no external torque: the total stays
+    assert np.max(np.abs(b.omega_BN_B[0, 250:])) > 10.0 * np.max(np.abs(b.omega_BN_B[0, 150:199]))  # the body took it
