@@ -40,7 +40,7 @@ CATALOGUE: dict[str, tuple[str, ...]] = {
 OWNER: dict[str, str] = {"wheel": "wheels", "gyro": "sensors", "star_tracker": "sensors", "magnetometer": "sensors",
                          "magnetorquers": "magnetorquers", "controller": "wheels"}
 #: the nodes that declare the ``faults`` list today
-FAULT_NODES = ("wheels", "sensors")
+FAULT_NODES = ("wheels", "sensors", "magnetorquers")
 #: (target kind, mode) pairs the drivers fly today
 FLOWN: frozenset[tuple[str, str]] = frozenset({("wheel", "lost"), ("wheel", "stuck"), ("wheel", "torque_limit"),
                                               ("wheel", "friction"),
@@ -48,6 +48,7 @@ FLOWN: frozenset[tuple[str, str]] = frozenset({("wheel", "lost"), ("wheel", "stu
                                               ("gyro", "off"), ("gyro", "stuck"), ("gyro", "bias_jump"),
                                               ("gyro", "scale"), ("gyro", "spike"), ("star_tracker", "stuck"),
                                               ("magnetometer", "off"), ("magnetometer", "stuck"),
+                                              ("magnetorquers", "off"), ("magnetorquers", "stuck"),
                                               ("controller", "gain"), ("controller", "delay")})
 #: target kinds that need the sensing loop (scenario.sensors)
 SENSED = frozenset({"gyro", "star_tracker", "magnetometer"})
@@ -170,7 +171,8 @@ def outage_windows(values: dict) -> list[tuple[float, float]]:
             for f in faults_of(values, "sensors") if f.kind == "star_tracker" and f.mode == "off"]
 
 
-def parse_faults(lines, duration_s: float, n_wheels: int | None, sensing: bool = True) -> list[Fault]:
+def parse_faults(lines, duration_s: float, n_wheels: int | None, sensing: bool = True,
+                 rods: bool = True) -> list[Fault]:
     """Every fault of a ``faults`` list, checked against the run: each starts within it (0 <= T <= the
     duration, when the run has one: ``duration_s`` > 0), a wheel is one of the geometry's (``n_wheels``;
     None: no reaction wheels to fail), at most one wheel fails in a run (the drivers' failure record
@@ -187,6 +189,9 @@ def parse_faults(lines, duration_s: float, n_wheels: int | None, sensing: bool =
             raise ScenarioError(f"fault '{f}': at {f.time_s:g} s is after the run's end ({duration_s:g} s)")
         if f.kind in SENSED and not sensing:
             raise ScenarioError(f"fault '{f}': a {f.kind} fault needs the sensing loop (scenario.sensors true)")
+        if f.kind == "magnetorquers" and not rods:
+            raise ScenarioError(f"fault '{f}': the magnetorquers do not fly in this run (controller momentum.mode, "
+                                "or bdot among its laws)")
         if f.kind == "wheel":
             if n_wheels is None:
                 raise ScenarioError(f"fault '{f}': a wheel fault needs wheels.actuator reaction_wheels")

@@ -29,7 +29,7 @@ def test_the_wheels_node_takes_added_faults_and_refuses_what_cannot_fly():
     rclpy.init(args=[], context=context)
     try:
         node = WheelsNode(context=context)
-        for faults, words in ((["magnetorquers off at 1"], "magnetorquers off is not flown yet"),
+        for faults, words in ((["magnetorquers off at 1"], "flown by the magnetorquers node, not the wheels"),
                               (["wheel9 lost"], "the geometry has wheels 1..4"),
                               (["star_tracker off at 1"], "flown by the sensors node, not the wheels")):
             (result,) = node.set_parameters([Parameter("faults", value=faults)])

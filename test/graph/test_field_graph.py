@@ -221,3 +221,15 @@ def test_record_takes_the_magnetorquers_parameters_into_its_snapshot(tmp_path, c
         stop_processes(procs + [rec])
     snapshot = yaml.safe_load(open_bag(tmp_path / "bag").custom_data["attitude_sil.parameters"])
     assert snapshot["/**/magnetorquers"]["ros__parameters"]["rods.max_dipole"] == 3600.0
+
+
+def test_a_magnetorquers_fault_flies_in_the_graph_as_in_the_stepwise_driver(tmp_path):
+    faults = ["magnetorquers stuck at 0.5 for 1", "magnetorquers off at 2"]
+    scn = load_scenario(CONFIG / "cubesat_1u_detumble.yaml").with_values("magnetorquers", faults=faults)
+    graph, engine = _fly(scn, 3.0, record_dir=tmp_path / "bag")
+    _assert_same(graph.trajectory, engine, ["omega_BN_B", "dipole_cmd_B", "magnetic_torque_B"], 31)
+    assert np.all(engine.magnetic_torque_B[0, 20:] == 0.0) and np.any(engine.magnetic_torque_B[0, :20] != 0.0)
+    said = [(r.log_time_ns, [s.message for s in m.status])
+            for r, m in open_bag(tmp_path / "bag").iter_decoded(["/diagnostics"])]
+    assert said == [(500_000_000, [f"fault: {faults[0]}"]), (1_500_000_000, [f"fault ended: {faults[0]}"]),
+                    (2_000_000_000, [f"fault: {faults[1]}"])]

@@ -52,7 +52,7 @@ def test_a_fault_line_reads_as_written(text, fault):
     ("controller stuck", "a controller cannot be 'stuck'"),
     ("wheel1 friction at 2", "friction needs a value"),
     ("star_tracker latency 0.1 at 3", "star_tracker latency is not flown yet"),
-    ("magnetorquers stuck at 30 for 60", "magnetorquers stuck is not flown yet"),
+    ("star_tracker latency 0.5 at 30 for 60", "star_tracker latency is not flown yet"),
     ("wheel1 lost at -1", "'at' must be >= 0 s"),
     ("wheel1 lost at nan", "must be finite"),
     ("wheel1 lost at two", "at 'two' is not a number"),

@@ -1,5 +1,7 @@
-"""Sensor faults (issue 43's table): a gyro axis off, stuck, with a bias jump, a scale or a spike; a star
-tracker frozen; a magnetometer off or stuck.
+"""Sensor and rod faults (issue 43's table): a gyro axis off, stuck, with a bias jump, a scale or a spike; a
+star tracker frozen; a magnetometer off or stuck; the magnetorquers off or stuck (the last on B-dot's
+detumbling cube, against the run without the fault: no torque in the window, or the dipole of the step before
+crossed with the field).
 
 The reference for each mode is the same run without the fault: flown on the
 truth (``feedback: truth``), the body moves alike, so the faulted run's
@@ -25,6 +27,7 @@ from attitude_sil.core.plant.quaternion import quat_from_euler
 from attitude_sil.core.sensing.models import SensorSuite
 from attitude_sil.core.sim.engine import simulate
 from attitude_sil.core.sim.scenario import default_config_dir, load_scenario
+from attitude_sil.errors import ScenarioError
 
 CONFIG = default_config_dir()
 K0 = 100  # the faults start at 1 s: step 100 of 10 ms
@@ -108,3 +111,18 @@ def test_a_magnetometer_off_reads_zero_and_a_stuck_one_its_reading_before():
     np.testing.assert_array_equal(np.delete(off, np.s_[100:150], axis=0), np.delete(nominal, np.s_[100:150], axis=0))
     np.testing.assert_array_equal(stuck[200:], np.broadcast_to(nominal[199], (100, 3)))
     np.testing.assert_array_equal(stuck[:200], nominal[:200])
+
+
+def test_magnetorquers_off_make_no_torque_and_stuck_ones_hold_the_dipole_of_the_step_before():
+    scn = load_scenario(CONFIG / "cubesat_1u_detumble.yaml")  # B-dot on the rods, 0.1 s steps
+    nominal = simulate(scn, 1, duration=20.0)
+    off = simulate(scn.with_values("magnetorquers", faults=["magnetorquers off at 5 for 5"]), 1, duration=20.0)
+    window = slice(50, 100)
+    np.testing.assert_array_equal(off.magnetic_torque_B[0, window], 0.0)
+    np.testing.assert_array_equal(off.magnetic_torque_B[0, :50], nominal.magnetic_torque_B[0, :50])
+    assert np.max(np.abs(off.dipole_cmd_B[0, window])) > 0.01  # the law still commands: the rods do not make it
+    stuck = simulate(scn.with_values("magnetorquers", faults=["magnetorquers stuck at 5"]), 1, duration=20.0)
+    made = np.cross(nominal.dipole_cmd_B[0, 49], stuck.magnetic_field_B[0, 50:])  # m(4.9 s) x B(t), rods unclipped
+    np.testing.assert_allclose(stuck.magnetic_torque_B[0, 50:], made, rtol=1e-12, atol=1e-18)
+    with pytest.raises(ScenarioError, match="the magnetorquers do not fly in this run"):
+        load_scenario(CONFIG / "hst_roll_step.yaml").with_values("magnetorquers", faults=["magnetorquers off"])

@@ -265,6 +265,8 @@ class _Run:
                 why = "the sensors and estimator run in the stepwise driver"
             if self.magnetic and self.magnetic.field.epochs is not None:
                 why = "a field epoch per episode runs in the stepwise driver"
+            if self.magnetic and self.magnetic.rods.faults:
+                why = "a magnetorquers fault runs in the stepwise driver"
             if driver == "compiled" and why:
                 raise ScenarioError(f"the compiled driver does not run this scenario ({why}); use driver='auto'")
             self.compiled = not why
@@ -409,6 +411,6 @@ def _magnetic_step(tr: Trajectory, k: int, t_ns: int, q_BN: np.ndarray, h_wheels
         tr.magnetometer_B[:, k] = sensing.suite.magnetometer.sample(b_B, k)
         if sensing.feedback == "estimate":
             b_read = tr.magnetometer_B[:, k]
-    m_cmd, tau_mag = magnetic.step(active, h_wheels_B, b_B, b_read, u)
+    m_cmd, tau_mag = magnetic.step(active, h_wheels_B, b_B, b_read, u, k)
     tr.magnetic_field_B[:, k], tr.dipole_cmd_B[:, k], tr.magnetic_torque_B[:, k] = b_B, m_cmd, tau_mag
     return tau_mag

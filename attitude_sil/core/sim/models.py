@@ -283,13 +283,13 @@ class MagneticLoop:
         return self.field.field_B(np.array([t_ns]), q_BN[:, None, :])[:, 0]
 
     def step(self, active: str, h_wheels_B: np.ndarray, b_B: np.ndarray, b_read_B: np.ndarray,
-             tau_cmd_B: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+             tau_cmd_B: np.ndarray, k: int = 0) -> tuple[np.ndarray, np.ndarray]:
         """The dipole command (P, 3) A m^2 under law ``active`` for the wheel momentum ``h_wheels_B`` (P, 3)
         N m s, the field the controller reads ``b_read_B`` (P, 3) T and the law's command ``tau_cmd_B`` (P, 3)
         (its torque demand, N m, where the rods are the torque actuator), and the rods' torque (P, 3) N m in
-        the true field ``b_B``."""
+        the true field ``b_B``, at step ``k`` (the rods' faults, :meth:`Magnetorquers.command_at`)."""
         m_cmd = self.law.dipole(active, h_wheels_B, b_read_B, tau_cmd_B)
-        return m_cmd, self.rods.torque(m_cmd, b_B)
+        return m_cmd, self.rods.torque(self.rods.command_at(m_cmd, k) if self.rods.faults else m_cmd, b_B)
 
 
 #: the arrays a run with the sensing loop adds to its trajectory (:class:`~attitude_sil.core.trajectory.Trajectory`)

@@ -297,6 +297,7 @@ NODE_PARAMS: dict[str, list[ParamSpec]] = {
             "(default: three orthogonal rods, paper 001)", rule=_rods_rule),
         _d("rods.max_dipole", 25.0, "saturation of each rod, A m^2 (default: paper 001, Hawai'iSat-1's 25 A m^2 "
            "rods)", min=0.0, min_exclusive=True),
+        _FAULTS,
     ],
     "sensors": [
         # The defaults are a generic navigation-grade gyro and a mid-class star tracker (assumed); the presets

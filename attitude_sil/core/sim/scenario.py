@@ -285,7 +285,8 @@ def _check_faults(scn: Scenario) -> None:
     n_wheels = GEOMETRIES[w["geometry"]]().shape[1] if w["actuator"] == "reaction_wheels" else None
     try:
         for node in FAULT_NODES:  # each node's list (one list under /**, or a section's own)
-            for fault in parse_faults(scn.values[node]["faults"], scn.duration, n_wheels, scn.has_sensors):
+            for fault in parse_faults(scn.values[node]["faults"], scn.duration, n_wheels, scn.has_sensors,
+                                      scn.has_magnetorquers):
                 owner = OWNER[fault.kind]  # set on a node alone, a fault must reach the node that flies it
                 if owner in FAULT_NODES and str(fault) not in map(str, faults_of(scn.values[owner], owner)):
                     raise ScenarioError(f"fault '{fault}' is set on the {node} but flown by the {owner} node: set "
