@@ -41,6 +41,7 @@ from attitude_sil.nodes.recorder_node import Recorder
 from attitude_sil.nodes.sensors_node import SensorsNode
 from attitude_sil.nodes.wheels_node import WheelsNode
 from attitude_sil.ros.contract import (
+    OUTSIDE_ONLY,
     PRODUCERS,
     ROLE_OUTPUTS,
     STEP_TOPICS,
@@ -194,7 +195,8 @@ def wait_connected(recorder: Recorder, spin: Callable[[float], None], nodes: lis
 
     def multi_process_ready() -> bool:
         for name, sub in recorder.subs.items():
-            if name in STEP_TOPICS and PRODUCERS[name] not in external and sub.get_publisher_count() < 1:
+            if name in STEP_TOPICS and name not in OUTSIDE_ONLY and PRODUCERS[name] not in external \
+                    and sub.get_publisher_count() < 1:
                 return False
         for name, n in graph_subscribers(external, feedback, magnetic).items():
             if recorder.count_subscribers(recorder.resolved[name]) < n + 1:

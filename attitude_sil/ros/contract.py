@@ -20,7 +20,8 @@ __all__ = ["CLOCK", "ATTITUDE", "BODY_RATE", "ATTITUDE_SETPOINT", "RATE_SETPOINT
            "PLANT_INPUTS", "clock_remap",
            "STEP_TOPICS", "COMMAND_TOPICS", "COMMAND_TOPIC", "APPLIED_COMMAND_TOPIC", "APPLIED_TOPICS",
            "CONTROLLER_INPUTS", "MODEL_TOPICS", "RECORDED_TOPICS",
-           "graph_subscribers", "PRODUCERS", "PARAMETER_EVENTS", "DIAGNOSTICS", "message_class", "check_namespace",
+           "graph_subscribers", "PRODUCERS", "OUTSIDE_ONLY",
+           "PARAMETER_EVENTS", "DIAGNOSTICS", "message_class", "check_namespace",
            "check_node_name",
            "check_parameter_name", "ROLE_OUTPUTS", "OPTIONAL_TOPICS", "ROLE_INPUTS", "episode_topics", "EXTERNAL",
            "UNKNOWN_NODE", "IMU", "STAR_TRACKER", "WHEEL_SPEED", "ESTIMATE_ATTITUDE", "ESTIMATE_BODY_RATE",
@@ -174,10 +175,14 @@ def feedback_remap(feedback: str) -> list[str]:
     return [arg for src, dst in FEEDBACK_REMAP.items() for arg in ("-r", f"{src}:={dst}")]
 
 
+#: step topics only a node outside the package publishes (a user's flight software in the controller's role)
+OUTSIDE_ONLY = frozenset({WHEEL_CMD})
+
 #: the one node of the graph that publishes each step topic (docs/architecture.md, "ROS contract")
 PRODUCERS = {
     CLOCK: "plant", ATTITUDE: "plant", BODY_RATE: "plant", ATTITUDE_SETPOINT: "guidance", RATE_SETPOINT: "guidance",
-    VOLTAGE_CMD: "controller", TORQUE_CMD: "controller", WHEEL_TORQUE: "wheels", WHEEL_MOMENTUM: "wheels",
+    VOLTAGE_CMD: "controller", TORQUE_CMD: "controller", WHEEL_CMD: "controller", WHEEL_TORQUE: "wheels",
+    WHEEL_MOMENTUM: "wheels",
     WHEEL_STATE: "wheels", DISTURBANCE_TORQUE: "disturbance", ATTITUDE_ERROR: "controller",
     IMU: "sensors", STAR_TRACKER: "sensors", WHEEL_SPEED: "sensors", ESTIMATE_ATTITUDE: "estimator",
     ESTIMATE_BODY_RATE: "estimator", ESTIMATE_GYRO_BIAS: "estimator", ESTIMATE_ATTITUDE_SIGMA: "estimator",

@@ -187,7 +187,7 @@ def test_the_examples_import_nothing_of_the_package(name):
     assert not any(m.split(".")[0] == "attitude_sil" for m in modules), modules
     assert "rclpy" in modules and "geometry_msgs.msg" in modules
     assert modules <= {"__future__", "math", "time", "rclpy", "rclpy.executors", "rclpy.node", "geometry_msgs.msg",
-                       "pid_controller"}, modules  # the other example, beside it, at most
+                       "sensor_msgs.msg", "numpy", "pid_controller"}, modules  # the other example, beside it, at most
     assert "10)" in example.read_text()  # its publisher: the tutorials' QoS, depth 10, reliable, volatile
 
 

@@ -63,7 +63,7 @@ def test_bag_holds_every_topic_with_types_and_counts(roll_run):
     steps = 2001  # 20 s at 100 Hz, k = 0..2000
     for name, type_name in STEP_TOPICS.items():
         topic = name if name.startswith("/") else "/" + name
-        if name == "torque_cmd":  # the PID commands volts: no torque command in this run
+        if name in ("torque_cmd", "wheel_cmd"):  # the PID commands volts: no torque or wheel command in this run
             assert topic not in counts
             continue
         assert counts.get(topic) == steps, (topic, counts.get(topic))
@@ -203,5 +203,6 @@ def test_three_runs_at_once_with_default_settings_do_not_see_each_other(tmp_path
     for name in ("run0", "run1", "run2", "solo"):
         reader = open_bag(tmp_path / name)
         counts = {t: info.count for t, info in reader.topics.items() if t not in (
-            "/parameter_events", "/flexible_mode", "/torque_cmd", "/body_model", "/diagnostics")}  # the model: once
+            "/parameter_events", "/flexible_mode", "/torque_cmd", "/wheel_cmd", "/body_model",
+            "/diagnostics")}  # the body model: once
         assert set(counts.values()) == {301}, counts  # exactly one message per step on every topic

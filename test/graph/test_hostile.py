@@ -139,7 +139,7 @@ def test_the_episode_ends_on_its_last_command_not_on_a_count_a_foreign_one_can_f
 
     scn, rec, progress = _episode_follower()
     K, dt_ns = 100, int(round(scn.dt * 1e9))
-    voltage, torque = COMMAND_TOPICS
+    voltage, torque, _ = COMMAND_TOPICS
     spins = []
 
     def spin(timeout):
