@@ -58,7 +58,7 @@ def test_flight_software_that_commands_each_wheel_flies_as_the_models_stepped_by
     tr = result.trajectory
     reference = _by_hand(scn, DURATION)
     assert tr.q_BN.shape[1] == reference.shape[0] and np.max(np.abs(tr.q_BN[0] - reference)) <= 1e-12
-    assert np.degrees(2.0 * np.arcsin(tr.q_BN[0, -1, 0])) > 0.5  # the law turned the body towards its 1 deg
+    assert np.degrees(2.0 * np.arcsin(tr.q_BN[0, -1, 0])) > 0.3  # the law turns the body towards its 1 deg
     assert set(tr.kind) == {"wheel"} and np.array_equal(tr.u_cmd, tr.tau_c_B)
     bag = open_bag(tmp_path / "bag")
     sent = [m for _, m in bag.iter_decoded(["/wheel_cmd"])]
