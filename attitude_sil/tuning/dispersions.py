@@ -11,6 +11,8 @@ A ``dispersions`` mapping (in a Monte Carlo spec, or a tuning spec's
     noise_level_pct:      {dist: uniform, scale: 50}           # disturbance noise.power x (1 + d / 100)
     noise_seeds: true                                          # noise.seed + run (default when noise is on)
     wheel_failure: {probability: 0.1, modes: [lost, stuck], time: [0, 20]}
+    faults:               # any fault of docs/faults.md, each drawn per run (at most 8 entries)
+      - {fault: gyro.x bias_jump, probability: 0.3, time: [2, 10], value: [10, 100], for: 5}
     # (modes may add torque_limit with torque_limit_Nm: [low, high] and speed_limit with speed_limit_rpm: [low, high],
     #  each run's limit uniform in its range)
     sensor_noise: {attitude_std_deg: 0.001, rate_std_deg_s: 0.0005}   # seed: sensor_noise.seed + run
@@ -42,8 +44,10 @@ import numpy as np
 from scipy.special import ndtri
 
 from attitude_sil.core.environment.earth_time import epoch_from_text
+from attitude_sil.core.faults import FAULT_NODES, VALUED
 from attitude_sil.core.plant.wheels import GEOMETRIES
-from attitude_sil.core.sim.scenario import Scenario, derived_values, effective_values
+from attitude_sil.core.sim.build import command_faults_of
+from attitude_sil.core.sim.scenario import Scenario, check_fault_lines, derived_values, effective_values
 from attitude_sil.errors import ScenarioError, SpecError
 
 __all__ = ["DISPERSION_KEYS", "check_dispersions", "draw", "episode_values", "run_scenario", "value_columns"]
@@ -52,15 +56,20 @@ __all__ = ["DISPERSION_KEYS", "check_dispersions", "draw", "episode_values", "ru
 _NUMERIC = {"inertia_pct": 3, "initial_attitude_deg": 3, "initial_rate_deg_s": 3, "setpoint_deg": 3,
             "motor_constant_pct": 1, "noise_level_pct": 1, "gyro_bias_deg_h": 3, "residual_dipole_Am2": 3,
             "magnetometer_bias_nt": 3, "epoch_s": 1}
-DISPERSION_KEYS = (*_NUMERIC, "noise_seeds", "wheel_failure", "sensor_noise", "sensor_seeds")
+DISPERSION_KEYS = (*_NUMERIC, "noise_seeds", "wheel_failure", "sensor_noise", "sensor_seeds", "faults")
 #: the per-run uniform slots, in draw order
 _SLOTS = {"inertia_pct": slice(0, 3), "initial_attitude_deg": slice(3, 6), "initial_rate_deg_s": slice(6, 9),
           "setpoint_deg": slice(9, 12), "motor_constant_pct": slice(12, 13), "noise_level_pct": slice(13, 14),
           "failure_happens": 14, "failure_wheel": 15, "failure_time": 16, "failure_mode": 17,
           "gyro_bias_deg_h": slice(18, 21), "residual_dipole_Am2": slice(21, 24),
-          "magnetometer_bias_nt": slice(24, 27), "epoch_s": 27, "failure_value": 28}
+          "magnetometer_bias_nt": slice(24, 27), "epoch_s": 27, "failure_value": 28,
+          "faults": slice(29, 53)}  # per entry of ``faults``: whether, when, how large
 #: (slots are drawn in order from each run's stream: a slot added at the end leaves the others' values as they were)
-_N_SLOTS = 29
+_N_SLOTS = 53
+#: entries of the ``faults`` dispersion a campaign may have (three slots each)
+MAX_FAULT_ENTRIES = 8
+#: the per-run key of the drawn faults: the run's ``faults`` list, set under /** (each node flies its own)
+FAULTS_KEY = "/**.faults"
 #: a wheel failure's modes, and the range key of each that has a size
 _FAILURE_MODES = {"lost": None, "stuck": None, "torque_limit": "torque_limit_Nm", "speed_limit": "speed_limit_rpm",
                   "friction": "friction_factor"}
@@ -133,6 +142,8 @@ def check_dispersions(where: str, raw: Any, scn: Scenario) -> dict:
                 raise SpecError(f"{at}: the scenario's actuator is {scn.param('wheels', 'actuator')}; wheel failures "
                                 "need reaction_wheels")
             out[key] = {"probability": float(p), "modes": list(modes), "time": [float(v) for v in t], "limits": ranges}
+        elif key == "faults":
+            out[key] = _check_fault_entries(at, value, scn)
         elif key == "sensor_noise":
             if not isinstance(value, dict) or set(value) - {"attitude_std_deg", "rate_std_deg_s"}:
                 raise SpecError(f"{at} must be a mapping of attitude_std_deg, rate_std_deg_s, got {value!r}")
@@ -184,6 +195,67 @@ def draw(seed: int, runs) -> np.ndarray:
 def _offsets(d: dict, u: np.ndarray) -> np.ndarray:
     z = ndtri(u) if d["dist"] == "normal" else 2.0 * u - 1.0
     return d["scale"] * z
+
+
+def _check_fault_entries(at: str, raw: Any, scn: Scenario) -> list[dict]:
+    """The ``faults`` dispersion: a list of {fault: "TARGET MODE", probability, time: [t0, t1], value: [low, high]
+    (a mode with a size), for: D (optional)}, each checked as a fault line of the run would be."""
+    if not isinstance(raw, list) or not 1 <= len(raw) <= MAX_FAULT_ENTRIES:
+        raise SpecError(f"{at} must be a list of 1..{MAX_FAULT_ENTRIES} mappings, got {raw!r}")
+    out = []
+    for i, e in enumerate(raw):
+        where = f"{at}[{i}]"
+        if not isinstance(e, dict) or set(e) - {"fault", "probability", "time", "value", "for"} or "fault" not in e:
+            raise SpecError(f"{where} must be a mapping of fault, probability, time, value, for, got {e!r}")
+        words = str(e["fault"]).split()
+        p, t = e.get("probability", 1.0), e.get("time", [0.0, scn.duration])
+        if not (_number(p) and 0.0 <= p <= 1.0):
+            raise SpecError(f"{where}.probability must be a number in 0..1, got {p!r}")
+        if not (isinstance(t, list) and len(t) == 2 and all(_number(v) and v >= 0 for v in t) and t[0] <= t[1]):
+            raise SpecError(f"{where}.time must be [earliest, latest] s, 0 <= earliest <= latest, got {t!r}")
+        size = e.get("value")
+        valued = len(words) == 2 and words[1] in VALUED
+        if valued != (size is not None) or (valued and not (isinstance(size, list) and len(size) == 2 and all(
+                _number(v) for v in size) and size[0] <= size[1])):
+            raise SpecError(f"{where}.value must be [low, high] where the mode has a size, and absent where not, "
+                            f"got {size!r}")
+        entry = {"fault": " ".join(words), "probability": float(p), "time": [float(v) for v in t],
+                 "value": None if size is None else [float(v) for v in size], "for": e.get("for")}
+        try:  # the extremes as the run's fault lines, against the scenario
+            for v in ([None] if size is None else size):
+                line = _fault_line(entry, t[1], v)
+                check_fault_lines(scn, [line])
+                command_faults_of({**scn.values["wheels"], "faults": [line]})  # a delay in whole steps
+        except ScenarioError as exc:
+            raise SpecError(f"{where}: {exc}") from None
+        out.append(entry)
+    return out
+
+
+def _fault_line(entry: dict, time_s: float, value: float | None) -> str:
+    """One drawn fault as a line of the ``faults`` list."""
+    size = "" if value is None else f" {value:g}"
+    span = "" if entry["for"] is None else f" for {entry['for']:g}"
+    return f"{entry['fault']}{size} at {time_s:g}{span}"
+
+
+def _fault_lists(entries: list[dict], u: np.ndarray, scn: Scenario) -> np.ndarray:
+    """Each run's ``faults`` list (n,) of tuples: the scenario's own lines, then the faults drawn for it (a time
+    in whole milliseconds and a size in four significant digits, as a file states them)."""
+    own = list(dict.fromkeys(line for node in FAULT_NODES for line in scn.values[node]["faults"]))
+    slots = u[:, _SLOTS["faults"]]
+    out = np.empty(u.shape[0], dtype=object)
+    for r in range(u.shape[0]):
+        lines = list(own)
+        for i, e in enumerate(entries):
+            happens, when, size = slots[r, 3 * i:3 * i + 3]
+            if happens < e["probability"]:
+                t0, t1 = e["time"]
+                lo, hi = e["value"] or (0.0, 0.0)
+                value = None if e["value"] is None else float(f"{lo + (hi - lo) * size:.4g}")
+                lines.append(_fault_line(e, round(t0 + (t1 - t0) * when, 3), value))
+        out[r] = tuple(lines)
+    return out
 
 
 def _failure_values(wf: dict, u: np.ndarray, n_wheels: int) -> dict[str, np.ndarray]:
@@ -251,6 +323,8 @@ def episode_values(scn: Scenario, dispersions: dict, seed: int, runs) -> dict[st
         out["disturbance.noise.seed"] = v["disturbance"]["noise.seed"] + runs
     if "wheel_failure" in dispersions:
         out.update(_failure_values(dispersions["wheel_failure"], u, GEOMETRIES[v["wheels"]["geometry"]]().shape[1]))
+    if "faults" in dispersions:
+        out[FAULTS_KEY] = _fault_lists(dispersions["faults"], u, scn)
     if "gyro_bias_deg_h" in dispersions:
         out["sensors.gyro.bias_deg_h"] = (np.asarray(v["sensors"]["gyro.bias_deg_h"], dtype=float)
                                           + _offsets(dispersions["gyro_bias_deg_h"], u[:, _SLOTS["gyro_bias_deg_h"]]))
@@ -308,7 +382,7 @@ def run_scenario(scn: Scenario, values: dict[str, np.ndarray], row: int) -> Scen
         node, _, name = key.partition(".")
         node = "/**" if name.startswith("orbit.") else node  # one orbit: every node that flies it
         try:
-            scn = scn.with_values(node, **{name: _plain(col[row])})
+            scn = scn.with_values(node, **{name: list(col[row]) if key == FAULTS_KEY else _plain(col[row])})
         except ScenarioError as exc:
             raise ScenarioError(f"run {row}: {exc}") from None
     return scn
@@ -318,6 +392,9 @@ def value_columns(values: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
     """Flat table columns of :func:`episode_values`: ``plant.inertia[0]``, ..., one (n,) array each."""
     cols: dict[str, np.ndarray] = {}
     for key, col in values.items():
+        if key == FAULTS_KEY:  # each run's list, as one line of text
+            cols["faults"] = np.array(["; ".join(lines) for lines in col])
+            continue
         a = np.asarray(col)
         if a.ndim == 1:
             cols[key] = a

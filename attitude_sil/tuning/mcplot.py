@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -11,12 +12,26 @@ from attitude_sil.core.analysis.metrics import principal_angle
 from attitude_sil.core.plant.quaternion import euler_from_quat
 from attitude_sil.core.sim.engine import simulate
 
-from .dispersions import episode_values
+from .dispersions import FAULTS_KEY, episode_values, run_scenario
 from .montecarlo import METRIC_KEYS, MonteCarloSpec
 
 __all__ = ["plot_campaign"]
 
 _AXES = ("roll", "pitch", "yaw")
+
+
+def _sample(spec: MonteCarloSpec, sample: np.ndarray):
+    """The trajectories (q_BN, q_RN, every ``plot.stride``-th step) of runs ``sample``: in one batch, or one
+    run at a time where each run has faults of its own (``dispersions.faults``)."""
+    scn = spec.scenario
+    values = episode_values(scn, spec.dispersions, spec.seed, sample)
+    seeds = scn.param("disturbance", "noise.seed") + sample
+    options = {"controller": spec.controller, "stride": spec.plot["stride"], "keep": ("q_BN", "q_RN")}
+    if FAULTS_KEY not in values:
+        return simulate(scn, sample.size, episode_values={"disturbance.noise.seed": seeds, **values}, **options)
+    runs = [simulate(run_scenario(scn, values, r), 1, episode_values={"disturbance.noise.seed": seeds[r:r + 1]},
+                     **options) for r in range(sample.size)]
+    return replace(runs[0], q_BN=np.concatenate([t.q_BN for t in runs]), q_RN=np.concatenate([t.q_RN for t in runs]))
 
 
 def plot_campaign(spec: MonteCarloSpec, table: dict[str, np.ndarray], out: Path) -> list[Path]:
@@ -31,11 +46,7 @@ def plot_campaign(spec: MonteCarloSpec, table: dict[str, np.ndarray], out: Path)
     sample = np.sort(runs)[:spec.plot["runs"]]
     scn = spec.scenario
     if sample.size:
-        values = episode_values(scn, spec.dispersions, spec.seed, sample)
-        seeds = scn.param("disturbance", "noise.seed") + sample
-        tr = simulate(scn, sample.size, controller=spec.controller,
-                      episode_values={"disturbance.noise.seed": seeds, **values},
-                      stride=spec.plot["stride"], keep=("q_BN", "q_RN"))
+        tr = _sample(spec, sample)
         fig = Figure(figsize=(9, 5), layout="constrained")
         ax = fig.add_subplot()
         if scn.param("scenario", "metrics.mode") == "tracking":

@@ -51,9 +51,10 @@ from attitude_sil.core.sim.build import check_episode
 from attitude_sil.core.sim.engine import simulate_summary
 from attitude_sil.core.sim.params import NODE_PARAMS
 from attitude_sil.core.sim.scenario import Scenario, load_scenario, with_parameter_file
+from attitude_sil.core.trajectory import EpisodeSummary
 from attitude_sil.errors import ScenarioError, SpecError
 
-from .dispersions import check_dispersions, episode_values, run_scenario, value_columns
+from .dispersions import FAULTS_KEY, check_dispersions, episode_values, run_scenario, value_columns
 from .executor import Executor
 from .spec import output_path
 
@@ -245,8 +246,14 @@ def run_chunk(spec: MonteCarloSpec, lo: int, hi: int, threads: int | None = None
     runs = np.arange(lo, hi)
     values = episode_values(spec.scenario, spec.dispersions, spec.seed, runs)
     seeds = spec.scenario.param("disturbance", "noise.seed") + runs
-    s = simulate_summary(spec.scenario, hi - lo, controller=spec.controller, threads=threads, warn_nonfinite=False,
-                         episode_values={"disturbance.noise.seed": seeds, **values})
+    if FAULTS_KEY in values:  # each run its own faults list: one run at a time, each its own scenario
+        s = _summaries([simulate_summary(run_scenario(spec.scenario, values, r), 1, controller=spec.controller,
+                                         threads=threads, warn_nonfinite=False,
+                                         episode_values={"disturbance.noise.seed": seeds[r:r + 1]})
+                        for r in range(hi - lo)])
+    else:
+        s = simulate_summary(spec.scenario, hi - lo, controller=spec.controller, threads=threads,
+                             warn_nonfinite=False, episode_values={"disturbance.noise.seed": seeds, **values})
     out: dict[str, np.ndarray] = {"run": runs}
     out.update(value_columns(values))
     out.update({k: np.asarray(v, dtype=float) for k, v in s.metrics.items()})
@@ -255,6 +262,15 @@ def run_chunk(spec: MonteCarloSpec, lo: int, hi: int, threads: int | None = None
     if s.peak_wheel_speed is not None:
         out["peak_wheel_speed_rad_s"] = np.asarray(s.peak_wheel_speed, dtype=float)
     return out
+
+
+def _summaries(parts: list) -> EpisodeSummary:
+    """One :class:`EpisodeSummary` of the runs of ``parts`` (each of one run), in order."""
+    peaks = [p.peak_wheel_speed for p in parts]
+    return EpisodeSummary(metrics={k: np.concatenate([p.metrics[k] for p in parts]) for k in parts[0].metrics},
+                          finite=np.concatenate([p.finite for p in parts]),
+                          peak_command=np.concatenate([p.peak_command for p in parts]),
+                          peak_wheel_speed=None if peaks[0] is None else np.concatenate(peaks))
 
 
 @dataclass

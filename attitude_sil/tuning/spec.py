@@ -377,6 +377,9 @@ def _robust(p: Path, raw: Any, scenarios: list[Scenario]) -> dict[str, Any]:
     dispersions = {}
     for scn in scenarios:
         dispersions = check_dispersions(f"{p}: robust", raw.get("dispersions"), scn)
+        if "faults" in dispersions:
+            raise _fail(p, "robust.dispersions.faults: fault dispersions are for Monte Carlo campaigns (a "
+                           "tuning's robust runs share one scenario per candidate)")
     return {"runs": runs, "statistic": statistic, "seed": seed, "dispersions": dispersions}
 
 

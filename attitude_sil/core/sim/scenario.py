@@ -43,7 +43,7 @@ from attitude_sil.errors import ScenarioError
 
 __all__ = ["ScenarioError", "Scenario", "load_scenario", "scenario_from_dict", "with_parameter_file", "yaml_problem",
            "GRAPH_NODES", "SENSOR_NODES", "MAGNETIC_NODES", "ALL_NODES", "PRESETS", "default_config_dir",
-           "derived_values", "effective_values", "flatten_parameters"]
+           "derived_values", "effective_values", "flatten_parameters", "check_fault_lines"]
 
 #: the preset scenarios of the five papers (``config/<name>.yaml``)
 PRESETS = ("hst_roll_step", "hawaiisat_lvlh", "flexible_axis", "cubesat_1u", "pitch_axis")
@@ -279,14 +279,25 @@ def _check_torque_actuator(scn: Scenario) -> None:
                             "controller command torque")
 
 
+def check_fault_lines(scn: Scenario, lines) -> list:
+    """The faults of ``lines`` as this scenario would fly them (its targets, its length): the parsed faults.
+
+    Raises
+    ------
+    ScenarioError
+        One line for the first that cannot fly.
+    """
+    w = scn.values["wheels"]
+    n_wheels = GEOMETRIES[w["geometry"]]().shape[1] if w["actuator"] == "reaction_wheels" else None
+    return parse_faults(lines, scn.duration, n_wheels, scn.has_sensors, scn.has_magnetorquers)
+
+
 def _check_faults(scn: Scenario) -> None:
     """The ``faults`` list flies in this run: targets it has, times within it, one wheel fault at most."""
     w = scn.values["wheels"]
-    n_wheels = GEOMETRIES[w["geometry"]]().shape[1] if w["actuator"] == "reaction_wheels" else None
     try:
         for node in FAULT_NODES:  # each node's list (one list under /**, or a section's own)
-            for fault in parse_faults(scn.values[node]["faults"], scn.duration, n_wheels, scn.has_sensors,
-                                      scn.has_magnetorquers):
+            for fault in check_fault_lines(scn, scn.values[node]["faults"]):
                 owner = OWNER[fault.kind]  # set on a node alone, a fault must reach the node that flies it
                 if owner in FAULT_NODES and str(fault) not in map(str, faults_of(scn.values[owner], owner)):
                     raise ScenarioError(f"fault '{fault}' is set on the {node} but flown by the {owner} node: set "
