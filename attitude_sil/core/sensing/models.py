@@ -161,14 +161,12 @@ class Gyro:
         One seed per episode.
     """
 
-    def __init__(self, errors: GyroErrors, dt: float, seeds: np.ndarray, faults: list[Fault] | None = None) -> None:
+    def __init__(self, errors: GyroErrors, dt: float, seeds: np.ndarray) -> None:
         self.errors = errors
         self.dt = float(dt)
         self.seeds = np.asarray(seeds, dtype=np.int64)
         self.dt_ns = int(round(self.dt * 1e9))
-        self.faults: list[tuple[Fault, int, int]] = []  # (fault, first step, end step) of each gyro fault
-        for f in faults or ():
-            self.add_fault(f)
+        self.faults: list[tuple[Fault, int, int]] = []  # (fault, first step, end step): :meth:`add_fault`
         e = errors
         #: omega_sensor = C omega_true
         self.C = sensor_axes(e.scale_factor, e.misalignment)
