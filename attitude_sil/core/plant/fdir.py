@@ -24,8 +24,8 @@ It runs as an observer:
 * a wheel whose ``|r|`` exceeds ``threshold_rad`` for ``persistence`` steps in a
   row is isolated (the largest residual, where several do at once): from that
   step the allocation shares the command among the others, as ideal isolation
-  does from the failure's step (``WheelParams.reallocate``), and the detector
-  stops (one wheel per run);
+  does from the failure's step (``WheelParams.reallocate``), and no other
+  wheel is isolated after it (one wheel per run);
 * then the model predicts the next step from the corrected state.
 
 The drivers call :meth:`WheelFdir.check` and :meth:`WheelFdir.predict` around
