@@ -17,6 +17,9 @@ table); :data:`FLOWN` the ones the drivers fly today. A mode a target cannot
 take, or one not flown yet, is refused in one line, never accepted in
 silence. Today's ``wheels.failure.*`` keys are the fault
 ``wheel<n> <mode> at <time>`` (:func:`legacy_wheel_fault`), flown the same.
+The steps a fault is active in (:func:`fault_steps`) and a device's ``off``
+and ``stuck`` (:class:`HeldFaults`) are computed here too, once for every
+model that flies them.
 """
 
 from __future__ import annotations
@@ -24,6 +27,8 @@ from __future__ import annotations
 import math
 import re
 from dataclasses import dataclass
+
+import numpy as np
 
 from attitude_sil.errors import ScenarioError
 
@@ -274,12 +279,49 @@ def first_step(time_s: float, dt_ns: int) -> int:
     return t_ns // dt_ns + (t_ns % dt_ns > 0)
 
 
+#: a step index no run reaches: the end of a fault that lasts
+NEVER = int(np.iinfo(np.int64).max)
+
+
+def fault_steps(fault: Fault, dt_ns: int, start: int | None = None) -> tuple[int, int]:
+    """The steps [start, end) a fault is active in (steps of ``dt_ns`` ns; end :data:`NEVER` for one that
+    lasts): from its time, or from step ``start`` where it was added while a run went, for its duration."""
+    t_s = fault.time_s if start is None else start * dt_ns * 1e-9
+    first = first_step(t_s, dt_ns)
+    return first, NEVER if fault.duration_s is None else first_step(t_s + fault.duration_s, dt_ns)
+
+
+class HeldFaults:
+    """The ``off`` and ``stuck`` faults of a device's whole output (a magnetometer's reading, the rods' dipole):
+    while one is active the output is 0 (``off``) or the output of the step before it (``stuck``)."""
+
+    def __init__(self) -> None:
+        self.windows: list[tuple[str, int, int]] = []  # (off or stuck, first step, end step)
+        self._last = None  # the output of the step before (P, 3)
+        self._held: dict[int, np.ndarray] = {}  # a stuck fault's output, by its first step
+
+    def __bool__(self) -> bool:
+        return bool(self.windows)
+
+    def add(self, fault: Fault, dt_ns: int, start: int | None = None) -> None:
+        """``fault`` (off or stuck) from its time, or from step ``start``, for its duration."""
+        self.windows.append((fault.mode, *fault_steps(fault, dt_ns, start)))
+
+    def apply(self, x: np.ndarray, k: int) -> np.ndarray:
+        """The output at step ``k`` for the device's own ``x`` (P, 3)."""
+        for mode, first, end in self.windows:
+            if first <= k < end:
+                x = np.zeros_like(x) if mode == "off" else self._held.setdefault(
+                    first, x if self._last is None else self._last)
+        self._last = x
+        return x
+
+
 def changes_at(faults: list[Fault], k: int, dt_ns: int) -> list[tuple[Fault, bool]]:
     """The faults that become active (True) or end (False) at step ``k`` (steps of ``dt_ns`` ns)."""
     out = []
     for f in faults:
-        start = first_step(f.time_s, dt_ns)
-        end = None if f.duration_s is None else first_step(f.time_s + f.duration_s, dt_ns)
+        start, end = fault_steps(f, dt_ns)
         if end == start:  # between two steps: no step sees it, so nothing happens and nothing is said
             continue
         if start == k:

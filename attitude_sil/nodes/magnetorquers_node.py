@@ -17,7 +17,7 @@ from __future__ import annotations
 import numpy as np
 
 from attitude_sil.core.faults import first_step
-from attitude_sil.core.sim.build import add_rods_fault, build_magnetorquers
+from attitude_sil.core.sim.build import build_magnetorquers
 from attitude_sil.errors import ScenarioError
 from attitude_sil.ros.contract import DIPOLE_CMD, MAGNETIC_FIELD, MAGNETIC_TORQUE
 from attitude_sil.ros.convert import message_to_array, stamp_to_ns
@@ -60,7 +60,7 @@ class MagnetorquersNode(LockstepNode):
         if "faults" in names:  # each from its time, or from the step after the one taken last
             for fault in self.faults.added():
                 step = max(first_step(fault.time_s, self.dt_ns), self.k + 1)
-                add_rods_fault(self.core, fault, step, self.dt_ns)
+                self.core.faults.add(fault, self.dt_ns, step)
                 self.faults.started(fault, step, self.dt_ns)
 
     def _on_input(self, name: str, value: np.ndarray, msg) -> None:
@@ -69,8 +69,7 @@ class MagnetorquersNode(LockstepNode):
         if slot is None:
             return
         self.k = t // self.dt_ns
-        m_cmd = self.core.command_at(slot[DIPOLE_CMD], self.k) if self.core.faults else slot[DIPOLE_CMD]
-        tau = self.core.torque(m_cmd, slot[MAGNETIC_FIELD])
+        tau = self.core.torque(self.core.command_at(slot[DIPOLE_CMD], self.k), slot[MAGNETIC_FIELD])
         self.pub.publish(stamped_vector_cdr(tau[0], t, "body"))
         self.faults.say(t, self.dt_ns)
 

@@ -25,12 +25,9 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit
 
-from attitude_sil.core.faults import first_step
+from attitude_sil.core.faults import NEVER, fault_steps
 
 __all__ = ["CommandFault", "no_command_fault", "command_fault_rows", "command_fault_row", "delay_steps"]
-
-#: a step index no run reaches: a fault without an end
-NEVER = np.iinfo(np.int64).max
 
 
 class CommandFault(NamedTuple):
@@ -121,8 +118,7 @@ def command_fault_record(faults, dt_ns: int, n_episodes: int, held: np.ndarray |
         return None
     cf = no_command_fault(n_episodes)
     for mode, f in ours.items():
-        start = first_step(f.time_s, dt_ns)
-        end = NEVER if f.duration_s is None else first_step(f.time_s + f.duration_s, dt_ns)
+        start, end = fault_steps(f, dt_ns)
         if mode == "gain":
             cf = cf._replace(gain=np.full(1, float(f.value)), gain_from=np.full(1, start), gain_to=np.full(1, end))
         else:

@@ -85,6 +85,10 @@ class WheelFdir:
         self.residual = np.zeros((P, n))
         self.isolated = np.full(P, -1, dtype=np.int64)
         self.isolated_step = np.zeros(P, dtype=np.int64)
+        # the model's failure record: no wheel failed, the isolation above (its arrays, written in place)
+        self._record = WheelFailure(np.full(P, -1, dtype=np.int64), np.zeros(P, dtype=np.int64),
+                                    np.zeros(P, dtype=np.int64), np.zeros(P), np.zeros(P), self.isolated,
+                                    self.isolated_step, np.zeros((1, 3, 3)), np.zeros((1, 3)))
 
     def model(self) -> WheelAssembly:
         """The drive's model: the assembly as it now stands (allocation, null-space loop) with its nominal motor."""
@@ -117,10 +121,7 @@ class WheelFdir:
 
     def isolation(self) -> WheelFailure:
         """The model's failure record (P rows): no wheel failed, the detector's isolation."""
-        P = self.n_episodes
-        return WheelFailure(np.full(P, -1, dtype=np.int64), np.zeros(P, dtype=np.int64), np.zeros(P, dtype=np.int64),
-                            np.zeros(P), np.zeros(P), self.isolated, self.isolated_step, np.zeros((1, 3, 3)),
-                            np.zeros((1, 3)))
+        return self._record
 
 
 #: the per-episode figures of an FDIR run (:func:`fdir_columns`): the wheel isolated (1..n, 0: none), when (s)

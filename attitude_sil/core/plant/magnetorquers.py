@@ -17,6 +17,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from attitude_sil.core.faults import HeldFaults
 from attitude_sil.errors import ScenarioError
 
 __all__ = ["Magnetorquers", "rod_axes", "rods_torque_row"]
@@ -60,20 +61,12 @@ class Magnetorquers:
         self.max_dipole = float(max_dipole)
         # (n, 3): the rods' minimum-norm share of a body dipole
         self.allocation = np.ascontiguousarray(np.linalg.pinv(self.axes.T))
-        self.faults: list[tuple[str, int, int]] = []  # (off or stuck, first step, end step): on the command
-        self._last = None  # the command the rods took at the step before (P, 3)
-        self._held: dict[int, np.ndarray] = {}  # a stuck fault's command, by its first step
+        self.faults = HeldFaults()  # off and stuck, on the command
 
     def command_at(self, m_cmd_B: np.ndarray, k: int) -> np.ndarray:
         """The dipole command (P, 3) the rods take at step ``k``: ``m_cmd_B``, or while a fault is active none
         (``off``) or the one of the step before it (``stuck``: the drivers hold their last current)."""
-        m = np.asarray(m_cmd_B, dtype=float)
-        for mode, start, end in self.faults:
-            if start <= k < end:
-                m = np.zeros_like(m) if mode == "off" else self._held.setdefault(
-                    start, m if self._last is None else self._last)
-        self._last = m
-        return m
+        return self.faults.apply(np.asarray(m_cmd_B, dtype=float), k)
 
     @property
     def n_rods(self) -> int:

@@ -51,7 +51,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from attitude_sil.core.faults import Fault, faults_of, first_step, outage_windows
+from attitude_sil.core.faults import Fault, HeldFaults, fault_steps, faults_of, first_step, outage_windows
 from attitude_sil.core.plant.quaternion import (
     cross_matrix,
     quat_conjugate,
@@ -190,11 +190,9 @@ class Gyro:
     def add_fault(self, fault: Fault, step: int | None = None) -> None:
         """A ``gyro.<axis>`` fault, from ``step`` (default: its time's) for its duration; a spike without
         ``for`` is one reading."""
-        start = first_step(fault.time_s, self.dt_ns) if step is None else int(step)
-        if fault.duration_s is not None:
-            end = start + first_step(fault.duration_s, self.dt_ns)
-        else:
-            end = start + 1 if fault.mode == "spike" else np.iinfo(np.int64).max
+        start, end = fault_steps(fault, self.dt_ns, step)
+        if fault.mode == "spike" and fault.duration_s is None:
+            end = start + 1
         self.faults.append((fault, start, end))
 
     def _faulted(self, w: np.ndarray, k: int) -> np.ndarray:
@@ -468,9 +466,7 @@ class Magnetometer:
         self.seeds = np.asarray(seeds, dtype=np.int64)
         #: b_sensor = C b_true
         self.C = sensor_axes(errors.scale_factor, errors.misalignment)
-        self.faults: list[tuple[str, int, int]] = []  # (off or stuck, first step, end step)
-        self._last = None  # the reading of the step before (P, 3)
-        self._held: dict[int, np.ndarray] = {}  # a stuck fault's reading, by its first step
+        self.faults = HeldFaults()  # off and stuck
 
     def sample(self, b_true_B: np.ndarray, k: int) -> np.ndarray:
         """The reading (P, 3) tesla at step ``k`` of the true field in B (P, 3) tesla; while a fault is active,
@@ -479,13 +475,7 @@ class Magnetometer:
         b = np.asarray(b_true_B, dtype=float) @ self.C.T + np.asarray(e.bias)
         if e.noise > 0.0:
             b = b + e.noise * normals(self.seeds, k, "magnetometer")
-        b = quantise_and_clip(b, e.resolution, e.range)
-        for mode, start, end in self.faults:
-            if start <= k < end:
-                b = np.zeros_like(b) if mode == "off" else self._held.setdefault(
-                    start, b if self._last is None else self._last)
-        self._last = b
-        return b
+        return self.faults.apply(quantise_and_clip(b, e.resolution, e.range), k)
 
     @property
     def variance(self) -> np.ndarray:
@@ -536,12 +526,12 @@ class SensorSuite:
         if fault.kind == "gyro":
             self.gyro.add_fault(fault, start)
             return
-        t0 = start * self.dt_ns * 1e-9
-        t1 = math.inf if fault.duration_s is None else t0 + fault.duration_s
         if fault.kind == "magnetometer":
-            end = np.iinfo(np.int64).max if fault.duration_s is None else first_step(t1, self.dt_ns)
-            self.magnetometer.faults.append((fault.mode, start, end))
-        elif fault.mode == "stuck":
+            self.magnetometer.faults.add(fault, self.dt_ns, start)
+            return
+        t0 = start * self.dt_ns * 1e-9  # the tracker's windows are of exposure time
+        t1 = math.inf if fault.duration_s is None else t0 + fault.duration_s
+        if fault.mode == "stuck":
             self.star_tracker.stuck.append((t0, t1))
         else:
             st = self.star_tracker

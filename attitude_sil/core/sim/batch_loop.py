@@ -29,7 +29,8 @@ from attitude_sil.core.control.dispatch import command_stage, enter_at, reset_ro
 from attitude_sil.core.control.laws.bdot import bdot_row
 from attitude_sil.core.control.momentum import dumping_row, torque_dipole_row
 from attitude_sil.core.environment.ephemeris import body_field
-from attitude_sil.core.plant.command_faults import NEVER, CommandFault, command_fault_row
+from attitude_sil.core.faults import NEVER
+from attitude_sil.core.plant.command_faults import CommandFault, command_fault_row
 from attitude_sil.core.plant.disturbance import orbit_torques
 from attitude_sil.core.plant.kernels import WheelFailure, measure_row, wheel_params_copy
 from attitude_sil.core.plant.lanes import (

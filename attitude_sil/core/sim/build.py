@@ -44,7 +44,7 @@ from attitude_sil.errors import ScenarioError
 __all__ = ["build_plant", "build_wheels", "build_disturbance", "build_guidance", "build_controller", "build_sensing",
            "build_environment", "build_scene", "build_dipole_command", "build_magnetorquers", "build_magnetic_loop",
            "law_bank", "check_episode", "schedule_from_scenario", "flexible_states", "flexible_settling",
-           "initial_attitude", "motor_params", "available_wheels", "command_faults_of", "add_rods_fault",
+           "initial_attitude", "motor_params", "available_wheels", "command_faults_of",
            "EPISODE_VALUES", "EPISODE_MOTOR", "EPISODE_FAILURE",
            "split_episode_values", "episode_laws", "check_episode_parameters",
            "episode_parameter_faults"]
@@ -305,16 +305,9 @@ def build_magnetorquers(scn: Scenario) -> Magnetorquers:
     """The ``magnetorquers`` node's rods."""
     m = scn.values["magnetorquers"]
     rods = Magnetorquers(rod_axes(m["rods.axes"]), m["rods.max_dipole"])
-    dt_ns = int(round(m["control_period"] * 1e9))
     for f in faults_of(m, "magnetorquers"):
-        add_rods_fault(rods, f, first_step(f.time_s, dt_ns), dt_ns)
+        rods.faults.add(f, int(round(m["control_period"] * 1e9)))
     return rods
-
-
-def add_rods_fault(rods: Magnetorquers, fault, start: int, dt_ns: int) -> None:
-    """A ``magnetorquers`` fault on ``rods`` from step ``start`` for its duration (steps of ``dt_ns`` ns)."""
-    end = np.iinfo(np.int64).max if fault.duration_s is None else start + first_step(fault.duration_s, dt_ns)
-    rods.faults.append((fault.mode, start, end))
 
 
 def build_magnetic_loop(scn: Scenario, params: dict | None = None, epochs=None) -> MagneticLoop | None:

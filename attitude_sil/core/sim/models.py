@@ -95,9 +95,10 @@ class Plant:
 class Wheels:
     """Reaction-wheel assembly driven by a body-axis voltage command.
 
-    ``failure`` is ``(wheel (P,) int, -1 none; step (P,) int; mode (P,) int; limit (P,))``:
+    ``failure`` is ``(wheel (P,) int, -1 none; step (P,) int; mode (P,) int; value (P,))``:
     from that step on the wheel is lost (open circuit), its drive is stuck at
-    the voltage of the step before, or limited to ``limit`` N m or rad/s
+    the voltage of the step before, limited to ``value`` N m or rad/s, or its
+    bearing's friction ``value`` times
     (:data:`~attitude_sil.core.plant.lanes.WHEEL_FAILURE_MODES`, :func:`attitude_sil.core.plant.kernels.wheel_step`).
     ``command_faults`` are the ``controller`` faults (gain, delay) on the command it takes
     (:mod:`attitude_sil.core.plant.command_faults`).
@@ -289,7 +290,7 @@ class MagneticLoop:
         (its torque demand, N m, where the rods are the torque actuator), and the rods' torque (P, 3) N m in
         the true field ``b_B``, at step ``k`` (the rods' faults, :meth:`Magnetorquers.command_at`)."""
         m_cmd = self.law.dipole(active, h_wheels_B, b_read_B, tau_cmd_B)
-        return m_cmd, self.rods.torque(self.rods.command_at(m_cmd, k) if self.rods.faults else m_cmd, b_B)
+        return m_cmd, self.rods.torque(self.rods.command_at(m_cmd, k), b_B)
 
 
 #: the arrays a run with the sensing loop adds to its trajectory (:class:`~attitude_sil.core.trajectory.Trajectory`)
