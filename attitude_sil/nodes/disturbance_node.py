@@ -10,7 +10,6 @@ from __future__ import annotations
 
 from attitude_sil.core.plant.quaternion import unit_or_none
 from attitude_sil.core.sim.build import build_disturbance
-from attitude_sil.core.sim.lockstep import StepSequencer
 from attitude_sil.ros.contract import ATTITUDE, DISTURBANCE_TORQUE
 from attitude_sil.ros.convert import quaternion_to_array, stamp_to_ns
 from attitude_sil.ros.node import LockstepNode, run_node
@@ -40,11 +39,7 @@ class DisturbanceNode(LockstepNode):
             self.get_logger().error(f"attitude at t={t * 1e-9:.6f} s is not a finite unit quaternion; ignored",
                                     throttle_duration_sec=1.0)
             return
-        kind = self.seq.classify(t, self.dt_ns)
-        if kind == StepSequencer.NEW:
-            self.new_episode()
-        elif kind != StepSequencer.NEXT:
-            self.refuse_stamp(ATTITUDE, t, kind)
+        if not self.in_sequence(ATTITUDE, t):
             return
         tau = self.core.torque(q, t)[0]
         self.pub.publish(stamped_vector_cdr(tau, t, "body"))

@@ -25,7 +25,6 @@ import numpy as np
 from attitude_sil.core.plant.quaternion import unit_or_none
 from attitude_sil.core.sensing.mekf import Mekf, MekfSettings
 from attitude_sil.core.sensing.models import StarTrackerReport, TrackerSchedule
-from attitude_sil.core.sim.lockstep import StepSequencer
 from attitude_sil.errors import ScenarioError
 from attitude_sil.ros.contract import (
     ESTIMATE_ATTITUDE,
@@ -81,13 +80,12 @@ class EstimatorNode(LockstepNode):
             self.get_logger().error(f"imu at t={t * 1e-9:.6f} s: angular velocity or its covariance not finite "
                                     "(or negative); ignored", throttle_duration_sec=1.0)
             return
-        kind = self.seq.classify(t, self.dt_ns)
-        if kind == StepSequencer.NEW:
+        def start() -> None:
             self.imu.clear()
             self.star = {s: v for s, v in self.star.items() if s == 0}  # what a past episode left is not ours
             self._start(variance)
-        elif kind != StepSequencer.NEXT:
-            self.refuse_stamp(IMU, t, kind)
+
+        if not self.in_sequence(IMU, t, on_new=start):
             return
         self.imu[t] = (rate, variance)
         self._advance()

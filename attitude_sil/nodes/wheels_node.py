@@ -26,7 +26,7 @@ from attitude_sil.core.plant.actuators import RPM
 from attitude_sil.core.plant.lanes import WHEEL_FAILURE_MODES
 from attitude_sil.core.plant.wheels import NO_NULL_SPACE, allocation_over, null_vector
 from attitude_sil.core.sim.build import available_wheels, build_wheels, command_faults_of
-from attitude_sil.core.sim.lockstep import CommandHold, StepSequencer, tick_period_ns
+from attitude_sil.core.sim.lockstep import CommandHold, tick_period_ns
 from attitude_sil.errors import ScenarioError
 from attitude_sil.ros.contract import (
     APPLIED_COMMAND_TOPIC,
@@ -147,13 +147,8 @@ class WheelsNode(LockstepNode):
                                         throttle_duration_sec=1.0)
             self._step_held()
             return
-        kind = self.seq.classify(t, self.dt_ns)
-        if kind == StepSequencer.NEW:
-            self.new_episode()
-        elif kind != StepSequencer.NEXT:
-            self.refuse_stamp(TORQUE_CMD if torque_mode else VOLTAGE_CMD, t, kind)
-            return
-        self._advance(t, v, torque_mode)
+        if self.in_sequence(TORQUE_CMD if torque_mode else VOLTAGE_CMD, t):
+            self._advance(t, v, torque_mode)
 
     def _on_wheel_command(self, msg) -> None:
         """``wheel_cmd``: each wheel's motor torque (N m) stamped t_k, a user's own allocation (one step)."""
@@ -164,13 +159,8 @@ class WheelsNode(LockstepNode):
             return
         names = list(msg.name) or self.core.names
         effort = np.array([dict(zip(names, msg.effort, strict=True))[n] for n in self.core.names])[None]
-        kind = self.seq.classify(t, self.dt_ns)
-        if kind == StepSequencer.NEW:
-            self.new_episode()
-        elif kind != StepSequencer.NEXT:
-            self.refuse_stamp(WHEEL_CMD, t, kind)
-            return
-        self._advance(t, np.zeros((1, 3)), True, effort)
+        if self.in_sequence(WHEEL_CMD, t):
+            self._advance(t, np.zeros((1, 3)), True, effort)
 
     def _wheel_command_problem(self, msg) -> str:
         """Why a ``wheel_cmd`` cannot be taken ('' if it can)."""
@@ -189,11 +179,7 @@ class WheelsNode(LockstepNode):
         previous, self.clock_ns = self.clock_ns, t
         if self.hold.replays_start(t, previous):
             return  # the plant bringing a sim-time timer back in phase: the tick still waits
-        kind = self.seq.classify(t, self.dt_ns)
-        if kind == StepSequencer.NEW:
-            self.new_episode()  # a hold of its own, with no command yet
-        elif kind != StepSequencer.NEXT:
-            self.refuse_stamp(CLOCK, t, kind)
+        if not self.in_sequence(CLOCK, t):  # a new episode: a hold of its own, with no command yet
             return
         self.step_ns = t
         self._step_held()

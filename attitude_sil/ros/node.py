@@ -217,6 +217,19 @@ class LockstepNode(SchemaNode):
         self.get_logger().error(f"{topic} stamped {t * 1e-9:.6f} s refused ({kind}); expected {expected}",
                                 throttle_duration_sec=1.0)
 
+    def in_sequence(self, topic: str, t: int, seq: StepSequencer | None = None,
+                    on_new: Callable[[], None] | None = None) -> bool:
+        """Whether a message of ``topic`` stamped ``t`` (ns) is the next step of ``seq`` (default: the node's):
+        a stamp 0 starts an episode first (:meth:`new_episode`, or ``on_new``); a stamp the lockstep cannot
+        take is refused (:meth:`refuse_stamp`)."""
+        kind = (self.seq if seq is None else seq).classify(t, self.dt_ns)
+        if kind == StepSequencer.NEW:
+            (self.new_episode if on_new is None else on_new)()
+        elif kind != StepSequencer.NEXT:
+            self.refuse_stamp(topic, t, kind)
+            return False
+        return True
+
     def new_episode(self) -> None:
         """The control period and the subclass's models (``rebuild()``) from the current parameters."""
         self.dt_ns = int(round(self.param("control_period") * 1e9))
@@ -248,11 +261,7 @@ class LockstepNode(SchemaNode):
         slot = inputs.add(name, t, value)  # the first valid message of a step counts, as in the plant
         if slot is None:
             return None
-        kind = seq.classify(t, self.dt_ns)
-        if kind == StepSequencer.NEW:
-            (self.new_episode if on_new is None else on_new)()
-        elif kind != StepSequencer.NEXT:
-            self.refuse_stamp(f"{name} (with the step's other inputs)", t, kind)
+        if not self.in_sequence(f"{name} (with the step's other inputs)", t, seq, on_new):
             return None
         inputs.taken(t)
         return slot
