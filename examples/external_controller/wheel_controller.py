@@ -1,6 +1,7 @@
 """Flight software that shares its command among the wheels itself: one ``wheel_cmd`` a step.
 
-It imports rclpy, numpy and the ROS message packages only. Run it in place of
+It imports rclpy, numpy, the ROS message packages and the PID example beside it
+(its ``spin`` and ``stamp_ns``) only. Run it in place of
 the simulator's own controller:
 
     attitude-sil run config/hst_roll_step.yaml --external controller &
@@ -27,7 +28,7 @@ import math
 import numpy as np
 import rclpy
 from geometry_msgs.msg import QuaternionStamped, Vector3Stamped
-from rclpy.executors import ExternalShutdownException
+from pid_controller import spin, stamp_ns
 from rclpy.node import Node
 from sensor_msgs.msg import JointState
 
@@ -37,10 +38,6 @@ HST_AXES = np.array([[-_S20 * _R, _S20 * _R, _S20 * _R, -_S20 * _R],
                      [-_C20 * _R, -_C20 * _R, _C20 * _R, _C20 * _R],
                      [_R, _R, _R, _R]])
 NAMES = ["wheel_1", "wheel_2", "wheel_3", "wheel_4"]
-
-
-def stamp_ns(stamp) -> int:
-    return stamp.sec * 1_000_000_000 + stamp.nanosec
 
 
 def pd_wheel_torques(q_BN, omega_BN_B, q_RN, kp: float, kd: float, axes: np.ndarray = HST_AXES) -> np.ndarray:
@@ -95,15 +92,7 @@ class WheelController(Node):
 
 def main() -> int:
     rclpy.init()
-    node = WheelController()
-    try:
-        rclpy.spin(node)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    finally:
-        node.destroy_node()
-        rclpy.try_shutdown()
-    return 0
+    return spin(WheelController())
 
 
 if __name__ == "__main__":

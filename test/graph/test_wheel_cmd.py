@@ -12,6 +12,7 @@ command in the run's trajectory is the torque the wheels made of it.
 from __future__ import annotations
 
 import runpy
+import sys
 
 import numpy as np
 
@@ -29,7 +30,11 @@ DURATION = 3.0
 
 def _by_hand(scn, duration: float) -> np.ndarray:
     """q_BN (K+1, 4) of the models stepped as the graph steps them, under the example's law."""
-    pd_wheel_torques = runpy.run_path(str(EXAMPLE))["pd_wheel_torques"]  # the example's own law
+    sys.path.insert(0, str(EXAMPLE.parent))  # as when it runs: the PID example beside it on the path
+    try:
+        pd_wheel_torques = runpy.run_path(str(EXAMPLE))["pd_wheel_torques"]  # the example's own law
+    finally:
+        sys.path.remove(str(EXAMPLE.parent))
     plant, wheels, guide, dist = (build(scn, 1) for build in (build_plant, build_wheels, build_guidance,
                                                              build_disturbance))
     dt_ns = int(round(scn.dt * 1e9))

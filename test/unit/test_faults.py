@@ -96,6 +96,10 @@ def test_the_run_bounds_a_fault():
     ('["star_tracker latency 0.1 at 1"]', "star_tracker latency is not flown yet"),
     ('["wheel1 stuck at 1", "wheel2 lost at 2"]', "one wheel fault per run"),
     ('"wheel1 lost"', "must be a list"),
+    ('["controller delay 0.015"]', "not a whole number of 0.01 s control steps"),
+    ('["controller gain -1"]', "a gain must be >= 0"),
+    ('["controller delay 0"]', "a delay must be > 0"),
+    ('["controller gain 2", "controller gain 3 at 1"]', "one controller gain per run"),
 ])
 def test_a_fault_list_that_cannot_fly_stops_the_run_in_one_line(faults, words, tmp_path, capfd):
     over = tmp_path / "faults.yaml"

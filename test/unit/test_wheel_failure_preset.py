@@ -1,14 +1,19 @@
 """``config/hst_wheel_failure.yaml``: wheel 1 lost 2 s into HST's roll step, flown with and without
-reallocation (issue 43's "Done when" row, with ideal isolation standing in for the detector to come).
+reallocation (issue 43's "Done when" row), the wheel isolated ideally or by the wheels' FDIR.
 
 The reference is the nominal run of the same law (``config/hst_roll_step.yaml``
 with the preset's geometric law): with wheel 1 dropped from the allocation at
 2 s the step settles in the nominal 2 % band as the nominal run does, and its
 peak cross-axis (pitch, yaw) error is less than half of the run that keeps
-sharing commands over four wheels (eq. 14); both drivers fly it alike.
+sharing commands over four wheels (eq. 14); both drivers fly it alike. With
+the FDIR (docs/faults.md) wheel 1 is isolated after 2 s, at the step that ends
+the first run of ``fdir.persistence`` steps over the threshold, and the step
+settles as the nominal run.
 """
 
 from __future__ import annotations
+
+import math
 
 import numpy as np
 import pytest
@@ -50,3 +55,22 @@ def test_both_drivers_fly_the_reallocation_alike():
     runs = [simulate(scn, 2, duration=4.0, driver=d) for d in ("compiled", "stepwise")]
     for name in ("q_BN", "wheel_speed", "tau_c_B"):
         np.testing.assert_array_equal(getattr(runs[0], name), getattr(runs[1], name), err_msg=name)
+
+
+def test_wheel_1_lost_at_2_s_is_isolated_and_the_step_settles_as_nominal():
+    preset = load_scenario(CONFIG / "hst_wheel_failure.yaml")
+    law = preset.values["controller"]["controller_type"]
+    ts_nominal, _, _ = _flown(load_scenario(CONFIG / "hst_roll_step.yaml").with_values(
+        "controller", controller_type=law))
+    _, cross_without, _ = _flown(preset)
+    ts, cross, tr = _flown(preset.with_values("wheels", reallocate_on_fault=True, **{"fdir.enabled": True}))
+    assert math.isfinite(ts) and ts <= ts_nominal + 0.05  # in the nominal 2 % band, as soon as nominal
+    assert np.all(cross < 0.5 * cross_without)
+    k = int(np.argmax(tr.fdir_isolated[0] > 0))
+    assert tr.fdir_isolated[0, -1] == 1 and 2.0 < tr.t[k] < 3.0
+    # the persistence rule: the isolating step ends the first run of `persistence` steps over the threshold
+    w = preset.values["wheels"]
+    over = np.abs(tr.fdir_residual[0, :, 0]) > w["fdir.threshold_rad"]
+    n = w["fdir.persistence"]
+    runs = np.convolve(over.astype(int), np.ones(n, dtype=int), mode="valid")
+    assert k == int(np.argmax(runs == n)) + n - 1
