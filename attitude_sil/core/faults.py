@@ -13,9 +13,8 @@ parameter cannot be a list of mappings); set it under ``/**`` and each node
 takes the faults of its own targets.
 
 :data:`CATALOGUE` lists every target and the modes it can take (issue 43's
-table); :data:`FLOWN` the ones the drivers fly today. A mode a target cannot
-take, or one not flown yet, is refused in one line, never accepted in
-silence. Today's ``wheels.failure.*`` keys are the fault
+table), every one flown by every driver. A mode a target cannot take is
+refused in one line, never accepted in silence. Today's ``wheels.failure.*`` keys are the fault
 ``wheel<n> <mode> at <time>`` (:func:`legacy_wheel_fault`), flown the same.
 The steps a fault is active in (:func:`fault_steps`) and a device's ``off``
 and ``stuck`` (:class:`HeldFaults`) are computed here too, once for every
@@ -46,15 +45,6 @@ OWNER: dict[str, str] = {"wheel": "wheels", "gyro": "sensors", "star_tracker": "
                          "magnetorquers": "magnetorquers", "controller": "wheels"}
 #: the nodes that declare the ``faults`` list today
 FAULT_NODES = ("wheels", "sensors", "magnetorquers")
-#: (target kind, mode) pairs the drivers fly today
-FLOWN: frozenset[tuple[str, str]] = frozenset({("wheel", "lost"), ("wheel", "stuck"), ("wheel", "torque_limit"),
-                                              ("wheel", "friction"),
-                                              ("wheel", "speed_limit"), ("star_tracker", "off"),
-                                              ("gyro", "off"), ("gyro", "stuck"), ("gyro", "bias_jump"),
-                                              ("gyro", "scale"), ("gyro", "spike"), ("star_tracker", "stuck"),
-                                              ("magnetometer", "off"), ("magnetometer", "stuck"),
-                                              ("magnetorquers", "off"), ("magnetorquers", "stuck"),
-                                              ("controller", "gain"), ("controller", "delay")})
 #: target kinds that need the sensing loop (scenario.sensors)
 SENSED = frozenset({"gyro", "star_tracker", "magnetometer"})
 #: modes that last once they happen (a wheel that seized stays seized): no ``for``
@@ -118,7 +108,7 @@ def parse_fault(text: str) -> Fault:
     ------
     ScenarioError
         One line naming what is wrong: an unknown target, a mode the target
-        cannot take or that is not flown yet, a missing or needless value,
+        cannot take, a missing or needless value,
         a negative or non-finite time.
     """
     words = str(text).split()
@@ -151,9 +141,6 @@ def parse_fault(text: str) -> Fault:
         if times[word] < 0.0 or (word == "for" and times[word] == 0.0):
             raise ScenarioError(f"{where}: '{word}' must be {'>' if word == 'for' else '>='} 0 s, got "
                                 f"{times[word]:g}")
-    if (kind, mode) not in FLOWN:
-        flown = ", ".join(f"{k}<n> {m}" if k == "wheel" else f"{k} {m}" for k, m in sorted(FLOWN))
-        raise ScenarioError(f"{where}: {kind} {mode} is not flown yet (flown today: {flown})")
     if times["for"] is not None and (kind, mode) in PERMANENT:
         raise ScenarioError(f"{where}: a {kind} {mode} lasts to the end of the run; drop 'for'")
     return Fault(kind, index, mode, value, times["at"], times["for"])

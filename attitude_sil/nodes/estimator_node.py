@@ -4,10 +4,12 @@ A multiplicative extended Kalman filter on attitude and gyro bias
 (:class:`attitude_sil.core.sensing.mekf.Mekf`). For step k it waits for
 ``imu`` stamped t_k and, when the star tracker's schedule
 (``star_tracker.rate_hz``, ``star_tracker.latency_s``) has a report due at
-step k, for ``star_tracker`` stamped with that report's exposure time; then it
-propagates on the gyro, updates with the report (rolling back to the exposure
-for the latency; a report with its orientation absent, an outage, is no
-update) and publishes, stamped t_k, ``estimate/attitude`` (QuaternionStamped,
+step k, for that step's ``star_tracker`` message (the tracker's next, in the
+order it publishes them; stamped with its exposure time, which a slow tracker
+makes older than the latency); then it propagates on the gyro, updates with
+the report (rolling back to the exposure; a report with its orientation
+absent, an outage, is no update; one older than ``star_tracker.max_age_s`` is
+dropped, with a warning) and publishes, stamped t_k, ``estimate/attitude`` (QuaternionStamped,
 frame ``inertial``), ``estimate/body_rate`` (bias-corrected, rad/s),
 ``estimate/gyro_bias`` (rad/s) and ``estimate/attitude_sigma`` (1-sigma per
 body axis, rad). The noise it assumes comes with the messages: the gyro's
@@ -20,10 +22,12 @@ the user's may take this one's place (``run --external estimator``).
 
 from __future__ import annotations
 
+from collections import deque
+
 import numpy as np
 
 from attitude_sil.core.plant.quaternion import unit_or_none
-from attitude_sil.core.sensing.mekf import Mekf, MekfSettings
+from attitude_sil.core.sensing.mekf import Mekf, MekfSettings, report_reach
 from attitude_sil.core.sensing.models import StarTrackerReport, TrackerSchedule
 from attitude_sil.errors import ScenarioError
 from attitude_sil.ros.contract import (
@@ -54,7 +58,8 @@ class EstimatorNode(LockstepNode):
         self.step_subscription(IMU, self._on_imu)
         self.step_subscription(STAR_TRACKER, self._on_star_tracker)
         self.imu: dict[int, tuple[np.ndarray, np.ndarray]] = {}  # stamp -> (rate, variance)
-        self.star: dict[int, tuple[np.ndarray, np.ndarray] | None] = {}  # exposure stamp -> (q, variance) or None
+        #: the tracker's reports in the order published: (exposure stamp, (q, variance) or None)
+        self.star: deque[tuple[int, tuple[np.ndarray, np.ndarray] | None]] = deque()
         self.filter: Mekf | None = None
         self.new_episode()
 
@@ -70,7 +75,7 @@ class EstimatorNode(LockstepNode):
         dt = self.param("control_period")
         arw = float(np.sqrt(np.max(variance) * dt))
         settings = MekfSettings.from_values(self.values(), arw, np.zeros(3))
-        self.filter = Mekf(settings, dt, 1, self.latency_steps)
+        self.filter = Mekf(settings, dt, 1, report_reach(self.values(), self.latency_steps, dt))
         self.k = 0
 
     def _on_imu(self, msg) -> None:
@@ -82,7 +87,7 @@ class EstimatorNode(LockstepNode):
             return
         def start() -> None:
             self.imu.clear()
-            self.star = {s: v for s, v in self.star.items() if s == 0}  # what a past episode left is not ours
+            self.star = deque(m for m in self.star if m[0] == 0)  # what a past episode left is not ours
             self._start(variance)
 
         if not self.in_sequence(IMU, t, on_new=start):
@@ -100,7 +105,7 @@ class EstimatorNode(LockstepNode):
                                         "quaternion or covariance invalid; ignored", throttle_duration_sec=1.0)
                 return
             got = (q, got[1])
-        self.star.setdefault(t, got)
+        self.star.append((t, got))
         self._advance()
 
     def _advance(self) -> None:
@@ -112,21 +117,24 @@ class EstimatorNode(LockstepNode):
                 return
             report = None
             if self.schedule.reports_at(k):
-                t_exp = (k - self.latency_steps) * self.dt_ns
-                if t_exp not in self.star:
+                if not self.star:
                     return
-                got = self.star.pop(t_exp)
+                t_exp, got = self.star.popleft()
                 if got is None:
-                    report = StarTrackerReport(k - self.latency_steps, np.array([[0.0, 0.0, 0.0, 1.0]]), False)
+                    report = StarTrackerReport(t_exp // self.dt_ns, np.array([[0.0, 0.0, 0.0, 1.0]]), False)
                 else:
                     self.filter.set_star_tracker_variance(got[1])
-                    report = StarTrackerReport(k - self.latency_steps, got[0], True)
+                    report = StarTrackerReport(t_exp // self.dt_ns, got[0], True)
             rate, _ = self.imu.pop(t)
+            dropped = self.filter.dropped
             try:
                 est = self.filter.step(k, rate[None], report)
             except ScenarioError as exc:
                 self.get_logger().error(str(exc), throttle_duration_sec=1.0)
                 return
+            if self.filter.dropped > dropped:
+                self.get_logger().warning(f"star_tracker report of t={t_exp * 1e-9:g} s at t={t * 1e-9:g} s: older "
+                                          "than star_tracker.max_age_s, dropped", throttle_duration_sec=5.0)
             self.k = k + 1
             self.pub_q.publish(stamped_vector_cdr(est.q_BN[0], t, "inertial"))
             self.pub_w.publish(stamped_vector_cdr(est.omega_BN_B[0], t, "body"))

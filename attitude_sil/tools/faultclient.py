@@ -6,7 +6,7 @@ the list of the node that flies its target, through its parameter service
 (``ros2 param set`` could do the same). The line carries the sim time the
 fault was given (the graph's latest ``/clock``); the node starts it at the
 first step it can, and says so on ``/diagnostics``, which this client waits
-for and reports. A fault the node cannot fly (a mode not flown yet, a second
+for and reports. A fault the node cannot fly (a latency of no whole number of steps, a second
 wheel fault, a wheel the geometry lacks) is refused in one line, and nothing
 changes.
 """

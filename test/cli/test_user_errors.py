@@ -437,7 +437,7 @@ def _flag_cases() -> list:
     cases += [_case(f"fault-{label}", ["fault", *args], {}, (needle,))
               for label, args, needle in [("target", ["whel1", "lost"], "unknown target 'whel1'"),
                                           ("mode", ["wheel1", "off"], "a wheel cannot be 'off'"),
-                                          ("not-flown", ["star_tracker", "latency", "0.1"], "not flown yet"),
+                                          ("latency-zero", ["star_tracker", "latency", "0"], "a latency must be > 0"),
                                           ("no-value", ["wheel1", "friction"], "needs a value"),
                                           ("value-nan", ["wheel1", "friction", "nan"], "must be finite"),
                                           ("namespace", ["wheel1", "lost", "--namespace", "a b"], "a b"),

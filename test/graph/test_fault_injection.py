@@ -148,8 +148,9 @@ def test_the_sensors_node_takes_an_added_star_tracker_outage_from_its_next_step(
         assert node.core.star_tracker.errors.outages == ((1.5, 3.5),)  # from the next step, for its 2 s
         assert [str(f) for f in node.faults.faults] == ["star_tracker off at 1.5 for 2"]
         assert node.core.star_tracker.in_outage(150) and not node.core.star_tracker.in_outage(350)
-        (result,) = node.set_parameters([Parameter("faults", value=["star_tracker latency 0.2 at 1"])])
-        assert not result.successful and "not flown yet" in result.reason, result.reason
+        (result,) = node.set_parameters([Parameter("faults", value=["star_tracker off at 1 for 2",
+                                                                 "star_tracker latency 0.005 at 1"])])
+        assert not result.successful and "not a whole number of control steps" in result.reason, result.reason
         faults = ["star_tracker off at 1 for 2", "gyro.x stuck at 0.2"]
         (result,) = node.set_parameters([Parameter("faults", value=faults)])
         assert result.successful, result.reason

@@ -78,6 +78,21 @@ def test_a_star_tracker_off_flies_on_the_graph_as_stepped_and_says_its_start_and
     assert blind == pytest.approx([0.5 + 0.1 * j for j in range(5)])  # the exposures at 0.5 ... 0.9 s
 
 
+def test_a_slow_star_tracker_flies_on_the_graph_as_stepped():
+    # the estimator node takes each report step's message as the tracker published it, whatever its exposure:
+    # here 0.3 s older than the latency from 0.5 s to 1 s, which the filter (max age 0.5 s) rolls back to
+    fault = "star_tracker latency 0.3 at 0.5 for 0.5"
+    scn = load_scenario(CONFIG / "hst_roll_step_sensors.yaml").with_values("sensors", faults=[fault]) \
+        .with_values("estimator", **{"star_tracker.max_age_s": 0.5})
+    graph = run_graph(scn, duration=1.5, keep_trajectory=True, progress=False)
+    stepped = simulate(scn, 1, duration=1.5)
+    nominal = simulate(load_scenario(CONFIG / "hst_roll_step_sensors.yaml"), 1, duration=1.5)
+    for name in ("q_BN", "q_BN_est", "attitude_sigma"):
+        assert np.max(np.abs(getattr(graph.trajectory, name) - getattr(stepped, name))) <= 1e-9, name
+    assert np.max(np.abs(stepped.attitude_sigma - nominal.attitude_sigma)) > 1e-9  # the delay acts
+    assert graph.metrics["faults"] == [fault]
+
+
 def test_the_wheel_failure_preset_reallocates_on_the_graph_as_in_the_engine():
     scn = load_scenario(CONFIG / "hst_wheel_failure.yaml").with_values("wheels", reallocate_on_fault=True)
     graph = run_graph(scn, duration=3.0, keep_trajectory=True, progress=False)

@@ -126,3 +126,41 @@ def test_magnetorquers_off_make_no_torque_and_stuck_ones_hold_the_dipole_of_the_
     np.testing.assert_allclose(stuck.magnetic_torque_B[0, 50:], made, rtol=1e-12, atol=1e-18)
     with pytest.raises(ScenarioError, match="the magnetorquers do not fly in this run"):
         load_scenario(CONFIG / "hst_roll_step.yaml").with_values("magnetorquers", faults=["magnetorquers off"])
+
+
+def test_a_slow_star_tracker_reports_older_exposures_at_the_same_steps():
+    # the preset's tracker: an exposure every 10 steps, reported 10 steps later; 0.3 s more from 1 s to 2 s
+    nominal, _ = _suite_readings([])
+    slow, _ = _suite_readings(["star_tracker latency 0.3 at 1 for 1"])
+    of = {j: q for j, q, _ in nominal}
+    k = [j + 10 for j, _, _ in nominal]  # the report steps, the same with the fault
+    assert [(r[0], r[2]) for r in slow] == [
+        (s - 10, True) if s < 100 or s >= 200 else (s - 10, False) if s < 130 else (s - 40, True) for s in k]
+    for j, q, valid in slow:
+        if valid:  # the exposure's own attitude and noise, however late it comes
+            np.testing.assert_array_equal(q, of[j])
+    # at 2 s the tracker reports its newest exposure (1.9 s): 1.6, 1.7 and 1.8 s are never reported
+    assert sorted({r[0] for r in slow if r[2]} ^ {r[0] for r in nominal}) == [160, 170, 180]
+
+
+def test_a_filter_that_keeps_the_older_reports_flies_a_slow_tracker_as_one_that_always_was():
+    scn = load_scenario(CONFIG / "hst_roll_step_sensors.yaml")  # latency 0.1 s, flown on the estimate
+    slow = simulate(scn.with_values("sensors", faults=["star_tracker latency 0.3"])
+                    .with_values("estimator", **{"star_tracker.max_age_s": 0.4}), 1, duration=5.0)
+    always = simulate(scn.with_values("/**", **{"star_tracker.latency_s": 0.4}), 1, duration=5.0)
+    nominal = simulate(scn, 1, duration=5.0)
+    for name in ("q_BN", "q_BN_est", "attitude_sigma"):
+        np.testing.assert_array_equal(getattr(slow, name), getattr(always, name))
+    assert np.max(np.abs(slow.q_BN_est - nominal.q_BN_est)) > 1e-9  # the latency shows
+
+
+def test_a_filter_that_keeps_only_the_latency_drops_a_slow_trackers_reports():
+    # reports at 1.0 ... 1.9 s carry exposures 0.6 ... 1.5 s (the first three nothing new), all older than the
+    # filter's 0.1 s: to the filter, the tracker is off for the exposures it would have reported then
+    scn = load_scenario(CONFIG / "hst_roll_step_sensors.yaml")
+    slow = simulate(scn.with_values("sensors", faults=["star_tracker latency 0.3 at 1 for 1"]), 1, duration=3.0)
+    off = simulate(scn.with_values("sensors", faults=["star_tracker off at 0.9 for 1"]), 1, duration=3.0)
+    for name in ("q_BN", "q_BN_est", "attitude_sigma"):
+        np.testing.assert_array_equal(getattr(slow, name), getattr(off, name))
+    with pytest.raises(ScenarioError, match="star_tracker latency = 0.005 s is not a whole number of control steps"):
+        SensorSuite(scn.with_values("sensors", faults=["star_tracker latency 0.005"]).values["sensors"], 0.01)

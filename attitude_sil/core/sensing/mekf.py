@@ -49,10 +49,16 @@ from attitude_sil.core.plant.quaternion import (
 from attitude_sil.core.sensing.models import DEG
 from attitude_sil.errors import ScenarioError
 
-__all__ = ["MekfSettings", "Mekf", "Estimate", "transition"]
+__all__ = ["MekfSettings", "Mekf", "Estimate", "transition", "report_reach"]
 
 #: smallest star-tracker noise the update assumes, rad (a perfect tracker would make the update singular)
 R_FLOOR = 1e-9
+
+
+def report_reach(estimator: dict, latency_steps: int, dt: float) -> int:
+    """How many steps back the filter takes a star tracker report: ``star_tracker.max_age_s`` of the
+    ``estimator`` parameters in whole steps, at least the tracker's latency ``latency_steps``."""
+    return max(int(latency_steps), int(np.floor(estimator["star_tracker.max_age_s"] / dt + 1e-9)))
 
 
 def transition(omega: np.ndarray, dt: float) -> np.ndarray:
@@ -146,7 +152,9 @@ class Mekf:
         Control step, s.
     n_episodes : int
     latency_steps : int
-        The tracker's latency in steps: how far back a report may reach.
+        How far back a report may reach, in steps: the tracker's latency, or more (``star_tracker.max_age_s``).
+        An older report is dropped (counted in ``dropped``), as a filter drops a measurement older than its
+        buffer: a tracker slowed by a ``latency`` fault beyond it is, to the filter, a tracker off.
     """
 
     def __init__(self, settings: MekfSettings, dt: float, n_episodes: int = 1, latency_steps: int = 0) -> None:
@@ -178,6 +186,7 @@ class Mekf:
         p0 = np.diag([s.initial_attitude_sigma**2] * 3 + [s.initial_bias_sigma**2] * 3)
         self.P = np.array(np.broadcast_to(p0, (self.n, 6, 6)))
         self._history: dict[int, tuple] = {}  # step -> (prior q, b, P, gyro reading) at that step
+        self.dropped = 0  # star tracker reports older than the history (latency_steps)
 
     def _propagate(self, q, b, P, omega_meas):
         w = omega_meas - b
@@ -210,11 +219,12 @@ class Mekf:
         if k > 0:
             self.q, self.b, self.P = self._propagate(self.q, self.b, self.P, w_meas)
         self._history[k] = (self.q, self.b, self.P, w_meas)
-        if star_tracker is not None and star_tracker.valid:
-            j = star_tracker.exposure_step
-            if j not in self._history:
-                raise ScenarioError(f"estimator: a star tracker report of step {j} at step {k} reaches back "
-                                    f"further than its latency ({self.latency_steps} steps)")
+        j = star_tracker.exposure_step if star_tracker is not None and star_tracker.valid else None
+        if j is not None and j > k:
+            raise ScenarioError(f"estimator: a star tracker report at step {k} of exposure step {j}, after it")
+        if j is not None and j not in self._history:  # older than the filter keeps: dropped
+            self.dropped += 1
+        elif j is not None:
             q, b, P, w = self._history[j]
             q, b, P = self._update(q, b, P, star_tracker.q_BN)
             self._history[j] = (q, b, P, w)

@@ -29,7 +29,10 @@ Its Allan variance is the sum of the three sources' (IEEE Std 952 annex C):
 Star tracker: q_meas = q_true ⊗ dq(d), d ~ N(0, diag(sigma_cross^2, sigma_cross^2, sigma_about^2)) in the
 body frame with sigma_about on the boresight axis. An exposure every 1 / rate_hz s (t_j = j / rate_hz) is
 reported latency_s later, stamped with its exposure time t_j; an exposure inside a scheduled outage reports
-no attitude (REP 145: orientation_covariance[0] = -1).
+no attitude (REP 145: orientation_covariance[0] = -1). A ``latency E`` fault makes the reports of its window
+(of report time) carry the newest exposure at least latency_s + E old, at the same report steps: the first
+reports of the window have nothing new (no attitude, stamped with the exposure they would have carried), and
+at its end the tracker reports its newest exposure again, the ones the delay held back passed over.
 
 Gyro faults (docs/faults.md), per axis over their window of steps, on the reading as above:
 ``scale K`` multiplies it by K, ``bias_jump B`` adds B deg/h, ``spike S`` adds S deg/s to one reading (or
@@ -362,7 +365,22 @@ class StarTracker:
         self._history: dict[int, np.ndarray] = {}  # exposure step -> true attitude, until reported
 
         self.stuck: list[tuple[float, float]] = []  # a frozen tracker's windows [start, end) of exposure time, s
+        #: a slow tracker's windows [start, end) of report time, s, each with its extra latency in steps
+        self.delays: list[tuple[float, float, int]] = []
         self._last = None  # the last attitude reported (P, 4), for a frozen tracker
+        self._reported = -1  # the newest exposure step reported
+
+    def add_delay(self, t0: float, t1: float, extra_s: float) -> None:
+        """Reports from ``t0`` to ``t1`` s come ``extra_s`` s later (a whole number of control steps, else
+        ScenarioError): the ``latency`` fault."""
+        self.delays.append((t0, t1, _steps(extra_s, self.dt, "star_tracker latency")))
+
+    def exposure_reported_at(self, k: int) -> int:
+        """The exposure step a report at step ``k`` carries: the newest exposure at least the latency (and the
+        extra latency of a ``latency`` fault then active) before it."""
+        extra = sum(e for a, b, e in self.delays if a - 1e-9 <= k * self.dt < b - 1e-9)
+        j = k - self.schedule.latency_steps
+        return j if extra == 0 else (j - extra) // self.schedule.period_steps * self.schedule.period_steps
 
     def in_outage(self, j: int) -> bool:
         """Whether exposure step ``j`` falls in a scheduled outage."""
@@ -378,8 +396,13 @@ class StarTracker:
             self._history[k] = np.array(q_BN, dtype=float)
         if not self.schedule.reports_at(k):
             return None
-        j = k - self.schedule.latency_steps
-        q_true = self._history.pop(j)
+        j = self.exposure_reported_at(k)
+        if j <= self._reported:  # a slow tracker whose next solution is not out yet: nothing new to report
+            return StarTrackerReport(k - self.schedule.latency_steps, q_BN, False)
+        q_true = self._history[j]
+        for old in [i for i in self._history if i <= j]:  # reported, or passed over (the newest goes out)
+            del self._history[old]
+        self._reported = j
         if self.in_outage(j):
             return StarTrackerReport(j, q_true, False)
         if self._last is not None and self._in(j, self.stuck):  # frozen: the last attitude again, as valid
@@ -533,9 +556,13 @@ class SensorSuite:
         t1 = math.inf if fault.duration_s is None else t0 + fault.duration_s
         if fault.mode == "stuck":
             self.star_tracker.stuck.append((t0, t1))
-        else:
+        elif fault.mode == "latency":
+            self.star_tracker.add_delay(t0, t1, fault.value)
+        elif fault.mode == "off":
             st = self.star_tracker
             st.errors = replace(st.errors, outages=st.errors.outages + ((t0, t1),))
+        else:
+            raise ScenarioError(f"fault '{fault}': the sensors fly no {fault.kind} {fault.mode}")
 
     def sample(self, q_BN: np.ndarray, omega_BN_B: np.ndarray, k: int) -> SensorSample:
         """The readings at step ``k`` of the truth (P, 4), (P, 3)."""

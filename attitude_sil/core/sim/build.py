@@ -34,7 +34,7 @@ from attitude_sil.core.plant.quaternion import quat_from_euler, quat_multiply
 from attitude_sil.core.plant.rigid_body import inertia_matrix
 from attitude_sil.core.plant.scene import BodyScene, body_scene
 from attitude_sil.core.plant.wheels import GEOMETRIES, MotorParams, WheelAssembly
-from attitude_sil.core.sensing.mekf import Mekf, MekfSettings
+from attitude_sil.core.sensing.mekf import Mekf, MekfSettings, report_reach
 from attitude_sil.core.sensing.models import SensorSuite
 from attitude_sil.core.sim.models import Guidance, MagneticLoop, Plant, Sensing, Wheels, per_episode
 from attitude_sil.core.sim.params import NODE_PARAMS, spec_for
@@ -357,7 +357,8 @@ def build_sensing(scn: Scenario, n_episodes: int = 1, seeds=None, gyro_bias_deg_
     if initial_rpy_deg is not None:
         estimator["initial_attitude_rpy_deg"] = np.asarray(initial_rpy_deg, dtype=float).reshape(n_episodes, 3)
     settings = MekfSettings.from_values(estimator, suite.gyro.errors.arw, suite.star_tracker.errors.sigma_B)
-    mekf = Mekf(settings, scn.dt, n_episodes, suite.star_tracker.schedule.latency_steps)
+    mekf = Mekf(settings, scn.dt, n_episodes, report_reach(estimator, suite.star_tracker.schedule.latency_steps,
+                                                          scn.dt))
     return Sensing(suite, mekf, scn.feedback)
 
 

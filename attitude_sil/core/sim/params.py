@@ -357,6 +357,8 @@ NODE_PARAMS: dict[str, list[ParamSpec]] = {
            "copies the sensors' unless set)", min=0.0, min_exclusive=True),
         _d("star_tracker.latency_s", 0.0, "the star tracker's latency the filter expects, s (the runner copies "
            "the sensors' unless set)", min=0.0, max=10.0),
+        _d("star_tracker.max_age_s", 0.0, "the oldest star tracker report the filter takes, s from its exposure "
+           "(0 or less than star_tracker.latency_s: that latency); an older one is dropped", min=0.0, max=60.0),
     ],
     SCENARIO_NODE: [
         ParamSpec("name", "string", "", "scenario name (read by the runner, not a node)"),
