@@ -16,8 +16,6 @@ import pytest
 
 from attitude_sil.cli import main
 from attitude_sil.core.faults import (
-    CATALOGUE,
-    VALUED,
     Fault,
     changes_at,
     foreign_line,
