@@ -8,6 +8,11 @@ step, so momentum is exchanged exactly), ``wheel_momentum`` (h_w at t_k, in B)
 and ``wheel_state`` (per wheel angle, speed and motor torque at t_k). On
 ``wheel_cmd`` (each wheel's motor torque, N m: a user's own allocation) it
 takes the step the same way, the allocation and the null-space loop left out.
+On ``wheel_status`` (``diagnostic_msgs/DiagnosticArray``: a user's flight
+software declaring wheels failed, level ERROR, or sound, OK, by
+``hardware_id`` ``wheel<n>``) it sets its own ``available`` parameter before
+the first command stamped after the declaration, so the declaration is checked
+as any parameter set is and the bag's parameter events keep it.
 
 With ``command_timing`` ``sim_timer`` or ``wall`` (a controller on a timer of
 its own, docs/flight-software.md) a step starts on ``/clock`` instead, with
@@ -19,7 +24,11 @@ and the command applied goes out on ``applied/voltage_cmd`` (or
 
 from __future__ import annotations
 
+import re
+
 import numpy as np
+from diagnostic_msgs.msg import DiagnosticStatus
+from rclpy.parameter import Parameter
 
 from attitude_sil.core.faults import Fault, first_step, parse_faults, wheel_failure_values
 from attitude_sil.core.plant.actuators import RPM
@@ -36,10 +45,13 @@ from attitude_sil.ros.contract import (
     WHEEL_CMD,
     WHEEL_MOMENTUM,
     WHEEL_STATE,
+    WHEEL_STATUS,
     WHEEL_TORQUE,
+    message_class,
 )
 from attitude_sil.ros.convert import isolation_diagnostics_msg, stamp_to_ns, vector_to_array
 from attitude_sil.ros.node import LockstepNode, NodeFaults, run_node
+from attitude_sil.ros.qos import INPUT_QOS
 from attitude_sil.storage.cdr import joint_state_cdr, stamped_vector_cdr
 
 
@@ -57,6 +69,9 @@ class WheelsNode(LockstepNode):
         self.step_subscription(VOLTAGE_CMD, lambda m: self._on_command(m, False))
         self.step_subscription(TORQUE_CMD, lambda m: self._on_command(m, True))
         self.step_subscription(WHEEL_CMD, self._on_wheel_command)
+        self.create_subscription(message_class("diagnostic_msgs/msg/DiagnosticArray"), WHEEL_STATUS,
+                                 self._on_wheel_status, INPUT_QOS)
+        self.declared: list[tuple[int, dict[int, bool]]] = []  # (stamp ns, wheel (1..n) -> sound), to apply
         self.hold: CommandHold | None = None  # a controller on a timer of its own: the command held
         if self.param("command_timing") != "stamped":
             self.pub_applied = {mode: self.step_publisher(APPLIED_COMMAND_TOPIC["torque" if mode else "voltage"])
@@ -148,7 +163,42 @@ class WheelsNode(LockstepNode):
             self._step_held()
             return
         if self.in_sequence(TORQUE_CMD if torque_mode else VOLTAGE_CMD, t):
+            self._take_declared(t)
             self._advance(t, v, torque_mode)
+
+    def _on_wheel_status(self, msg) -> None:
+        """``wheel_status``: wheels the flight software declares failed (ERROR) or sound (OK), stamped t."""
+        t = stamp_to_ns(msg.header.stamp)
+        said: dict[int, bool] = {}
+        for s in msg.status:
+            m = re.fullmatch(r"wheel_?([1-9][0-9]*)", s.hardware_id)
+            if m is None or int(m.group(1)) > self.core.assembly.n_wheels:
+                self.get_logger().error(f"{WHEEL_STATUS} stamped {t * 1e-9:.6f} s: hardware_id {s.hardware_id!r} "
+                                        f"is no wheel (wheel1..wheel{self.core.assembly.n_wheels}); ignored")
+                return
+            if s.level in (DiagnosticStatus.OK, DiagnosticStatus.ERROR):
+                said[int(m.group(1))] = s.level == DiagnosticStatus.OK
+        if said:
+            self.declared.append((t, said))
+            if self.param("allocation") != "available":
+                self.get_logger().warning(f"{WHEEL_STATUS} taken into the available wheels, which the allocation "
+                                          "uses with allocation available (now pseudo_inverse)", once=True)
+
+    def _take_declared(self, t: int) -> None:
+        """Before the command stamped ``t``: the declarations stamped before it, into ``available``."""
+        due = [d for d in self.declared if d[0] < t]
+        if not due:
+            return
+        self.declared = [d for d in self.declared if d[0] >= t]
+        n = self.core.assembly.n_wheels
+        sound = {w: True for w in (self.param("available") or range(1, n + 1))}
+        for _, said in due:
+            sound.update(said)
+        available = sorted(w for w, ok in sound.items() if ok)
+        value = available if len(available) < n else []
+        (result,) = self.set_parameters([Parameter("available", Parameter.Type.INTEGER_ARRAY, value)])
+        if not result.successful:
+            self.get_logger().error(f"{WHEEL_STATUS}: wheels {available} refused ({result.reason})")
 
     def _on_wheel_command(self, msg) -> None:
         """``wheel_cmd``: each wheel's motor torque (N m) stamped t_k, a user's own allocation (one step)."""

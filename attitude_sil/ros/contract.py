@@ -15,8 +15,8 @@ import re
 from attitude_sil.errors import AttitudeSilError
 
 __all__ = ["CLOCK", "ATTITUDE", "BODY_RATE", "ATTITUDE_SETPOINT", "RATE_SETPOINT", "VOLTAGE_CMD", "TORQUE_CMD",
-           "WHEEL_CMD", "WHEEL_TORQUE", "WHEEL_MOMENTUM", "WHEEL_STATE", "DISTURBANCE_TORQUE", "ATTITUDE_ERROR",
-           "FLEXIBLE_MODE",
+           "WHEEL_CMD", "WHEEL_STATUS", "WHEEL_TORQUE", "WHEEL_MOMENTUM", "WHEEL_STATE", "DISTURBANCE_TORQUE",
+           "ATTITUDE_ERROR", "FLEXIBLE_MODE",
            "PLANT_INPUTS", "clock_remap",
            "STEP_TOPICS", "COMMAND_TOPICS", "COMMAND_TOPIC", "APPLIED_COMMAND_TOPIC", "APPLIED_TOPICS",
            "CONTROLLER_INPUTS", "MODEL_TOPICS", "RECORDED_TOPICS",
@@ -76,6 +76,10 @@ TORQUE_CMD = "torque_cmd"
 #: wheels' (``wheel_1`` ... as ``wheel_state``; empty: in that order), ``effort`` each wheel's motor torque, N m
 #: (positive spins the wheel up along its axis; the body takes the reaction), ``position`` and ``velocity`` empty
 WHEEL_CMD = "wheel_cmd"
+#: which wheels a user's flight software declares failed (level ERROR) or sound again (OK):
+#: ``diagnostic_msgs/msg/DiagnosticArray``, a status per wheel with ``hardware_id`` ``wheel<n>``, stamped t_k;
+#: the wheels node takes it into its ``available`` parameter from the step after the stamp
+WHEEL_STATUS = "wheel_status"
 WHEEL_TORQUE = "wheel_torque"
 WHEEL_MOMENTUM = "wheel_momentum"
 WHEEL_STATE = "wheel_state"

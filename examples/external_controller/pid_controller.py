@@ -27,6 +27,12 @@ derivative ``(1 - a)/dt (e - x_f)`` with ``a = exp(-N dt)``, integral
 ``I + e dt/2``; conditional integration at the output limit), so
 a run with this node gives the built-in law's numbers. ``compute_delay``
 (s) makes each step take that long, as slow flight software would.
+``declare_failed_wheel`` (1..n; 0: none) and ``declare_failed_at`` (s) stand
+for the flight software's own FDIR: at the first step from that time it
+declares that wheel failed on ``wheel_status`` (diagnostic_msgs/DiagnosticArray,
+level ERROR, ``hardware_id`` ``wheel<n>``, stamped t_k), and the simulator's
+wheels share the commands from the next step among the others
+(``wheels.allocation: available``).
 """
 
 from __future__ import annotations
@@ -35,6 +41,7 @@ import math
 import time
 
 import rclpy
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from geometry_msgs.msg import QuaternionStamped, Vector3Stamped
 from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
@@ -89,6 +96,9 @@ class PidController(Node):
         self.declare_parameter("output_limit", 314.79)  # V, the HST preset's drive
         self.declare_parameter("control_period", 0.01)  # s
         self.declare_parameter("compute_delay", 0.0)  # s, simulated computation time per step
+        self.declare_parameter("declare_failed_wheel", 0)  # 1..n: a wheel this flight software's FDIR fails
+        self.declare_parameter("declare_failed_at", 0.0)  # s
+        self.pub_status = self.create_publisher(DiagnosticArray, "wheel_status", 10)
         self.pub = self.create_publisher(Vector3Stamped, "voltage_cmd", 10)
         self.create_subscription(QuaternionStamped, "attitude", lambda m: self.on_input("q", m), 10)
         self.create_subscription(QuaternionStamped, "attitude_setpoint", lambda m: self.on_input("r", m), 10)
@@ -119,6 +129,7 @@ class PidController(Node):
             u = self.law.step(slot["q"], slot["r"], gains, self.get_parameter("output_limit").value,
                               self.get_parameter("control_period").value)
             self.answered[t] = u
+        self.declare_failure(t)
         delay = self.get_parameter("compute_delay").value
         if delay > 0.0:
             time.sleep(delay)  # stands for the flight software's own computation
@@ -127,6 +138,19 @@ class PidController(Node):
         out.header.frame_id = "body"
         out.vector.x, out.vector.y, out.vector.z = u
         self.pub.publish(out)
+
+    def declare_failure(self, t: int) -> None:
+        """Step ``t`` (ns): at the first step from ``declare_failed_at``, say the wheel failed on ``wheel_status``."""
+        wheel = self.get_parameter("declare_failed_wheel").value
+        at_ns = round(self.get_parameter("declare_failed_at").value * 1e9)
+        dt_ns = round(self.get_parameter("control_period").value * 1e9)
+        if wheel < 1 or not at_ns <= t < at_ns + dt_ns:
+            return
+        status = DiagnosticStatus(level=DiagnosticStatus.ERROR, name=f"flight software: wheel{wheel}",
+                                  hardware_id=f"wheel{wheel}", message="failed")
+        msg = DiagnosticArray(status=[status])
+        msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(t, 1_000_000_000)
+        self.pub_status.publish(msg)
 
 
 def spin(node: Node) -> int:

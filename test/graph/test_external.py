@@ -16,10 +16,12 @@ import json
 import math
 import time
 
+import numpy as np
 import pytest
 
 from attitude_sil.cli import main
 from attitude_sil.core.analysis.metrics import METRIC_KEYS
+from attitude_sil.core.sim.engine import simulate
 from attitude_sil.core.sim.scenario import load_scenario
 from attitude_sil.errors import RunError
 from attitude_sil.graph.session import run_graph
@@ -187,7 +189,8 @@ def test_the_examples_import_nothing_of_the_package(name):
     assert not any(m.split(".")[0] == "attitude_sil" for m in modules), modules
     assert "rclpy" in modules and "geometry_msgs.msg" in modules
     assert modules <= {"__future__", "math", "time", "rclpy", "rclpy.executors", "rclpy.node", "geometry_msgs.msg",
-                       "sensor_msgs.msg", "numpy", "pid_controller"}, modules  # the other example, beside it, at most
+                       "sensor_msgs.msg", "diagnostic_msgs.msg", "numpy",
+                       "pid_controller"}, modules  # the other example, beside it, at most
     assert "10)" in example.read_text()  # its publisher: the tutorials' QoS, depth 10, reliable, volatile
 
 
@@ -237,3 +240,26 @@ def test_an_estimator_of_the_users_takes_the_estimators_place(builtin, tmp_path)
     _same_metrics(m, builtin[DURATION])
     assert m["ake_rms_rad"] == [0.0, 0.0, 0.0]
     assert result.counts["imu"] == round(DURATION / scn.dt) + 1  # the package's sensors node ran beside it
+
+
+def test_a_wheel_the_flight_software_declares_failed_is_left_out_as_ideal_isolation_would(tmp_path):
+    # wheel 1 lost at 2 s; the outside controller's FDIR says so on wheel_status stamped 1.99 s, so the wheels
+    # share the commands from 2 s among wheels 2-4: the run of ideal isolation (reallocate_on_fault), to 1e-9
+    lost = load_scenario(SCENARIO).with_values("wheels", faults=["wheel1 lost at 2"]) \
+        .with_values("controller", controller_type="pid")
+    ctrl = _start([str(EXAMPLE), "--ros-args", "-p", "declare_failed_wheel:=1", "-p", "declare_failed_at:=1.99"])
+    try:
+        result = run_graph(lost.with_values("wheels", allocation="available"), duration=DURATION,
+                           external=("controller",), record_dir=tmp_path / "bag", keep_trajectory=True,
+                           progress=False)
+    finally:
+        _stop([ctrl])
+    ideal = simulate(lost.with_values("wheels", reallocate_on_fault=True), 1, duration=DURATION, driver="compiled")
+    kept = simulate(lost, 1, duration=DURATION, driver="compiled")
+    for name in ("q_BN", "omega_BN_B", "wheel_speed"):
+        assert np.max(np.abs(getattr(result.trajectory, name) - getattr(ideal, name))) <= 1e-9, name
+    assert np.max(np.abs(ideal.q_BN - kept.q_BN)) > 1e-6  # the reallocation acted
+    events = [(raw.log_time_ns, e.node, p.name, list(p.value.integer_array_value)) for raw, e in
+              open_bag(tmp_path / "bag").iter_decoded(["/parameter_events"])
+              for p in [*e.new_parameters, *e.changed_parameters] if raw.log_time_ns > 0]
+    assert events == [(2_000_000_000, "/wheels", "available", [2, 3, 4])]  # the bag keeps the declaration

@@ -159,3 +159,40 @@ def test_the_sensors_node_takes_an_added_star_tracker_outage_from_its_next_step(
         node.destroy_node()
     finally:
         rclpy.shutdown(context=context)
+
+
+def _status(t_ns: int, *said: tuple[str, bytes]):
+    from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
+
+    msg = DiagnosticArray(status=[DiagnosticStatus(level=level, hardware_id=hw) for hw, level in said])
+    msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(t_ns, 1_000_000_000)
+    return msg
+
+
+def test_the_wheels_node_takes_a_wheel_status_after_its_stamp_and_checks_it_as_a_parameter_set():
+    from diagnostic_msgs.msg import DiagnosticStatus
+
+    from attitude_sil.nodes.wheels_node import WheelsNode
+
+    error, ok = DiagnosticStatus.ERROR, DiagnosticStatus.OK
+    context = rclpy.Context()
+    rclpy.init(args=[], context=context)
+    try:
+        node = WheelsNode(context=context)
+        node._on_wheel_status(_status(20_000_000, ("wheel1", error)))
+        node._take_declared(20_000_000)  # the command of the declaration's own step: not yet
+        assert node.param("available") == []
+        node._take_declared(30_000_000)
+        assert node.param("available") == [2, 3, 4]
+        node._on_wheel_status(_status(30_000_000, ("wheel2", error)))  # two of four left: no three axes
+        node._take_declared(40_000_000)
+        assert node.param("available") == [2, 3, 4]
+        node._on_wheel_status(_status(40_000_000, ("wheel1", ok), ("wheel3", error)))  # wheel 1 back, 3 out
+        node._take_declared(50_000_000)
+        assert node.param("available") == [1, 2, 4]
+        node._on_wheel_status(_status(50_000_000, ("wheel9", error)))  # no such wheel: ignored in one line
+        node._take_declared(60_000_000)
+        assert node.param("available") == [1, 2, 4] and not node.declared
+        node.destroy_node()
+    finally:
+        rclpy.shutdown(context=context)
