@@ -1,7 +1,8 @@
 """``estimator`` node: the attitude the flight software uses, from the gyro and the star tracker.
 
-A multiplicative extended Kalman filter on attitude and gyro bias
-(:class:`attitude_sil.core.sensing.mekf.Mekf`). For step k it waits for
+The filter ``type`` selects (:mod:`attitude_sil.core.sensing.registry`; by
+default ``mekf``, the multiplicative EKF on attitude and gyro bias of
+:mod:`attitude_sil.core.sensing.mekf`). For step k it waits for
 ``imu`` stamped t_k and, when the star tracker's schedule
 (``star_tracker.rate_hz``, ``star_tracker.latency_s``) has a report due at
 step k, for that step's ``star_tracker`` message (the tracker's next, in the
@@ -27,8 +28,10 @@ from collections import deque
 import numpy as np
 
 from attitude_sil.core.plant.quaternion import unit_or_none
-from attitude_sil.core.sensing.mekf import Mekf, MekfSettings, report_reach
+from attitude_sil.core.sensing.estimator import Filter
+from attitude_sil.core.sensing.mekf import report_reach
 from attitude_sil.core.sensing.models import StarTrackerReport, TrackerSchedule
+from attitude_sil.core.sensing.registry import build_filter
 from attitude_sil.errors import ScenarioError
 from attitude_sil.ros.contract import (
     ESTIMATE_ATTITUDE,
@@ -60,7 +63,7 @@ class EstimatorNode(LockstepNode):
         self.imu: dict[int, tuple[np.ndarray, np.ndarray]] = {}  # stamp -> (rate, variance)
         #: the tracker's reports in the order published: (exposure stamp, (q, variance) or None)
         self.star: deque[tuple[int, tuple[np.ndarray, np.ndarray] | None]] = deque()
-        self.filter: Mekf | None = None
+        self.filter: Filter | None = None
         self.new_episode()
 
     def rebuild(self) -> None:
@@ -74,8 +77,13 @@ class EstimatorNode(LockstepNode):
         self.new_episode()
         dt = self.param("control_period")
         arw = float(np.sqrt(np.max(variance) * dt))
-        settings = MekfSettings.from_values(self.values(), arw, np.zeros(3))
-        self.filter = Mekf(settings, dt, 1, report_reach(self.values(), self.latency_steps, dt))
+        try:
+            self.filter = build_filter(self.values(), arw, np.zeros(3), dt, 1,
+                                       report_reach(self.values(), self.latency_steps, dt))
+        except Exception as exc:  # a plugin filter's own code: its failure is one line, the episode waits
+            self.filter = None
+            self.get_logger().error(f"estimator {self.param('type')!r} could not be built: "
+                                    f"{type(exc).__name__}: {exc}")
         self.k = 0
 
     def _on_imu(self, msg) -> None:

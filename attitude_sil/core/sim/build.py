@@ -34,8 +34,9 @@ from attitude_sil.core.plant.quaternion import quat_from_euler, quat_multiply
 from attitude_sil.core.plant.rigid_body import inertia_matrix
 from attitude_sil.core.plant.scene import BodyScene, body_scene
 from attitude_sil.core.plant.wheels import GEOMETRIES, MotorParams, WheelAssembly
-from attitude_sil.core.sensing.mekf import Mekf, MekfSettings, report_reach
+from attitude_sil.core.sensing.mekf import report_reach
 from attitude_sil.core.sensing.models import SensorSuite
+from attitude_sil.core.sensing.registry import build_filter
 from attitude_sil.core.sim.models import Guidance, MagneticLoop, Plant, Sensing, Wheels, per_episode
 from attitude_sil.core.sim.params import NODE_PARAMS, spec_for
 from attitude_sil.core.sim.scenario import Scenario, effective_values
@@ -356,9 +357,9 @@ def build_sensing(scn: Scenario, n_episodes: int = 1, seeds=None, gyro_bias_deg_
     estimator = effective_values(scn, "estimator")
     if initial_rpy_deg is not None:
         estimator["initial_attitude_rpy_deg"] = np.asarray(initial_rpy_deg, dtype=float).reshape(n_episodes, 3)
-    settings = MekfSettings.from_values(estimator, suite.gyro.errors.arw, suite.star_tracker.errors.sigma_B)
-    mekf = Mekf(settings, scn.dt, n_episodes, report_reach(estimator, suite.star_tracker.schedule.latency_steps,
-                                                          scn.dt))
+    reach = report_reach(estimator, suite.star_tracker.schedule.latency_steps, scn.dt)
+    mekf = build_filter(estimator, suite.gyro.errors.arw, suite.star_tracker.errors.sigma_B, scn.dt, n_episodes,
+                        reach)
     return Sensing(suite, mekf, scn.feedback)
 
 

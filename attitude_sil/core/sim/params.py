@@ -30,6 +30,7 @@ from attitude_sil.core.paramspec import nonzero as _nonzero
 from attitude_sil.core.plant.disturbance import DISTURBANCE_MODELS
 from attitude_sil.core.plant.magnetorquers import rod_axes
 from attitude_sil.core.plant.wheels import HST_MOTOR
+from attitude_sil.core.sensing import registry as estimator_registry
 from attitude_sil.core.sim.lockstep import COMMAND_TIMINGS
 from attitude_sil.errors import ScenarioError
 
@@ -345,6 +346,10 @@ NODE_PARAMS: dict[str, list[ParamSpec]] = {
     ],
     "estimator": [
         _d("control_period", 0.01, "control step dt, s (shared by every node)", min=0.0, min_exclusive=True, max=1.0),
+        ParamSpec("type", "string", "mekf", "the attitude filter: " + "; ".join(
+            f"{e.name}: {e.description}" for e in estimator_registry.estimators().values())
+            + " (or a plugin's, entry-point group attitude_sil.estimators)", rule=estimator_registry.unknown),
+        *estimator_registry.parameter_table(),
         _d("bias_walk_deg_h_rt_h", 0.01, "the filter's gyro bias random walk sigma_u, deg/h/sqrt(h) (covers "
            "bias instability: about B sqrt(2 / tau))", min=0.0),
         _da("initial_attitude_rpy_deg", [0, 0, 0], "initial attitude estimate, roll/pitch/yaw deg (the runner "
