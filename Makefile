@@ -9,14 +9,14 @@ STAMP := $(VENV)/.installed
 # the live-view tests' Foxglove client (Node): installed for the test suite only, so that every other target
 # runs where there is no Node
 JS_STAMP := test/js/node_modules/.installed
-# the ROS 2 Jazzy wheels, the package with its test extras, and the example law package installed as a user
-# installs theirs (the suite proves the plugin path with it)
+# the ROS 2 Jazzy wheels, the package with its test extras, and the example law and estimator packages installed
+# as a user installs theirs (the suite proves the plugin paths with them)
 REQUIREMENTS := 'ros-jazzy-rclpy[fastrtps]' ros-jazzy-common-interfaces ros-jazzy-std-srvs ros-jazzy-rosgraph-msgs \
-	-e '.[test]' -e ./examples/custom_law
+	-e '.[test]' -e ./examples/custom_law -e ./examples/custom_estimator
 
 .PHONY: run test test-unit lint bench soak docs clean
 
-$(STAMP): setup.py package.xml examples/custom_law/pyproject.toml
+$(STAMP): setup.py package.xml examples/custom_law/pyproject.toml examples/custom_estimator/pyproject.toml
 	$(PYTHON) -m venv $(VENV)
 	# uv installs the same wheels as pip in under half the time (downloads and unpacks in parallel; 30 s against
 	# 70 s here), byte-compiled as pip does; pip, the venv's own, is the fallback where uv cannot be had
@@ -24,7 +24,7 @@ $(STAMP): setup.py package.xml examples/custom_law/pyproject.toml
 		$(REQUIREMENTS) || $(BIN)/pip install --quiet $(REQUIREMENTS)
 	# the package's own bytecode, once (pip compiles what it installs, not an editable source tree): where
 	# PYTHONDONTWRITEBYTECODE is set, every process would compile it again, 0.2 s of each node's start
-	$(BIN)/python -m compileall -q attitude_sil examples/custom_law
+	$(BIN)/python -m compileall -q attitude_sil examples/custom_law examples/custom_estimator
 	$(BIN)/python -m attitude_sil.tools.warm
 	touch $(STAMP)
 

@@ -7,8 +7,6 @@ domain is claimed with the lock files every attitude-sil run uses
 
 import os
 import sys
-import textwrap
-from importlib.metadata import EntryPoint
 from pathlib import Path
 
 import pytest
@@ -17,7 +15,6 @@ ROOT = Path(__file__).resolve().parents[1]
 CONFIG = ROOT / "config"
 sys.path.insert(0, str(ROOT))
 
-from attitude_sil.core.sensing import registry as estimator_registry  # noqa: E402
 from attitude_sil.ros.environment import discovery_profile, isolated_domain  # noqa: E402 - ROS-free, no rclpy
 
 # a domain no other attitude-sil process holds (runs started without ROS_DOMAIN_ID take free ones too)
@@ -128,53 +125,3 @@ def stop_processes(procs: list) -> list[int]:
             os.killpg(p.pid, signal.SIGKILL)
             codes.append(p.wait())
     return codes
-
-
-#: an estimator plugin's module (test/unit/test_estimators.py): it integrates the gyro and takes no report
-GYRO_ONLY = '''
-"""A filter that integrates the gyro, less a fixed bias of its own, and takes no star tracker report."""
-import numpy as np
-from attitude_sil.core.paramspec import ParamSpec
-from attitude_sil.core.plant.quaternion import quat_from_euler, quat_multiply, quat_normalize, rotation_quaternion
-from attitude_sil.core.sensing.estimator import Estimate, Estimator
-
-
-class GyroOnly:
-    def __init__(self, values, dt, n):
-        self.dt, self.n, self.dropped = dt, n, 0
-        self.bias = np.radians(np.asarray(values["bias_deg_h"], dtype=float)) / 3600.0
-        rpy = np.radians(np.asarray(values["initial_attitude_rpy_deg"], dtype=float))
-        self.q = np.array(np.broadcast_to(quat_normalize(quat_from_euler(rpy)), (n, 4)))
-        self.sigma = np.radians(values["initial_attitude_sigma_deg"])
-
-    def set_star_tracker_variance(self, variance):
-        pass
-
-    def step(self, k, omega_meas_B, star_tracker=None):
-        w = omega_meas_B - self.bias
-        if k > 0:
-            self.q = quat_normalize(quat_multiply(self.q, rotation_quaternion(w * self.dt)))
-        cov = np.array(np.broadcast_to(np.diag([self.sigma ** 2] * 3 + [1e-12] * 3), (self.n, 6, 6)))
-        return Estimate(self.q, w, np.array(np.broadcast_to(self.bias, (self.n, 3))), np.full((self.n, 3), self.sigma),
-                        cov)
-
-
-ESTIMATOR = Estimator("gyro_only", "integrates the gyro", lambda v, arw, sigma, dt, n, reach: GyroOnly(v, dt, n),
-                      params=(ParamSpec("bias_deg_h", "double_array", [0.0, 0.0, 0.0], "its bias, deg/h",
-                                        lengths=(3,)),))
-'''
-
-
-@pytest.fixture
-def estimator_plugins(monkeypatch, tmp_path):
-    """``estimator_plugins(name=source, ...)``: the estimator registry rebuilt with these modules as entry points."""
-    monkeypatch.syspath_prepend(str(tmp_path))
-
-    def use(**sources):
-        for name, source in sources.items():
-            (tmp_path / f"{name}.py").write_text(textwrap.dedent(source))
-        eps = [EntryPoint(n, f"{n}:ESTIMATOR", estimator_registry.ENTRY_POINT_GROUP) for n in sources]
-        monkeypatch.setattr(estimator_registry, "entry_points", lambda group: [e for e in eps if e.group == group])
-        estimator_registry.refresh()
-    yield use
-    estimator_registry.refresh()

@@ -25,6 +25,7 @@ from attitude_sil.core.sensing.models import (
     GyroErrors,
     StarTracker,
     StarTrackerErrors,
+    StarTrackerReport,
     Tachometer,
     allan_variance_model,
 )
@@ -158,10 +159,13 @@ def _consistent_scenario(P: int):
     return scn, values
 
 
-@pytest.fixture(scope="module")
-def monte_carlo():
+@pytest.fixture(scope="module", params=["mekf", "usque"])
+def monte_carlo(request):
+    """The consistent scenario's 50 runs with each filter: the MEKF, and the unscented filter of
+    examples/custom_estimator (a plugin, on the same test)."""
     P = 50
     scn, values = _consistent_scenario(P)
+    scn = scn.with_values("estimator", type=request.param)
     tr = simulate(scn, P, duration=20.0, episode_values=values, driver="stepwise")
     return scn, values, tr
 
@@ -261,16 +265,20 @@ def test_truth_feedback_leaves_the_controller_as_it_was_and_estimate_feedback_cl
     assert np.degrees(2 * closed.q_BN[0, -1, 0]) == pytest.approx(np.degrees(2 * plain.q_BN[0, -1, 0]), abs=2e-3)
 
 
-def test_the_filter_refuses_a_report_older_than_its_latency():
+def test_the_filter_drops_a_report_older_than_it_keeps_and_refuses_one_from_the_future():
     s = MekfSettings(gyro_arw=1e-5, bias_walk=1e-8, star_tracker_sigma=(1e-5,) * 3,
                      initial_q_BN=np.array([0.0, 0.0, 0.0, 1.0]), initial_attitude_sigma=1e-3,
                      initial_bias_sigma=1e-6)
     f = Mekf(s, 0.01, 1, latency_steps=2)
-    from attitude_sil.core.sensing.models import StarTrackerReport
     for k in range(5):
         f.step(k, np.zeros((1, 3)))
-    with pytest.raises(ScenarioError, match="reaches back further than its latency"):
-        f.step(5, np.zeros((1, 3)), StarTrackerReport(1, np.array([[0.0, 0.0, 0.0, 1.0]]), True))
+    turned = np.array([[0.0, 0.0, np.sin(5e-4), np.cos(5e-4)]])  # 1 mrad about z: an update would move it
+    before = f.step(5, np.zeros((1, 3)), StarTrackerReport(1, turned, True))
+    assert f.dropped == 1 and np.array_equal(before.q_BN, [[0.0, 0.0, 0.0, 1.0]])  # no update
+    after = f.step(6, np.zeros((1, 3)), StarTrackerReport(4, turned, True))  # 2 steps back: kept
+    assert f.dropped == 1 and after.q_BN[0, 2] > 1e-4
+    with pytest.raises(ScenarioError, match="a star tracker report at step 7 of exposure step 8, after it"):
+        f.step(7, np.zeros((1, 3)), StarTrackerReport(8, turned, True))
 
 
 def test_a_star_tracker_off_the_control_grid_is_refused_in_one_line():

@@ -34,7 +34,7 @@ from attitude_sil.core.sensing.estimator import Estimator
 from attitude_sil.core.sensing.models import StarTrackerReport
 from attitude_sil.errors import ScenarioError
 
-__all__ = ["ENTRY_POINT_GROUP", "estimators", "get", "names", "unknown", "parameter_table", "plugin_fault",
+__all__ = ["ENTRY_POINT_GROUP", "estimators", "get", "names", "builtin_names", "unknown", "parameter_table", "plugin_fault",
            "refresh", "build_filter"]
 
 #: the entry-point group through which other packages add estimators (a contract)
@@ -83,6 +83,12 @@ def estimators() -> dict[str, Estimator]:
 
 def _skip(line: str) -> None:
     print(f"attitude-sil: {line}; skipped", file=sys.stderr)
+
+
+def builtin_names() -> tuple[str, ...]:
+    """The built-in estimators' names (the modules of :mod:`attitude_sil.core.sensing.estimators`)."""
+    modules = {m.name for m in pkgutil.iter_modules(_builtin.__path__)}
+    return tuple(n for n in estimators() if n in modules)
 
 
 def names() -> tuple[str, ...]:

@@ -347,8 +347,9 @@ NODE_PARAMS: dict[str, list[ParamSpec]] = {
     "estimator": [
         _d("control_period", 0.01, "control step dt, s (shared by every node)", min=0.0, min_exclusive=True, max=1.0),
         ParamSpec("type", "string", "mekf", "the attitude filter: " + "; ".join(
-            f"{e.name}: {e.description}" for e in estimator_registry.estimators().values())
-            + " (or a plugin's, entry-point group attitude_sil.estimators)", rule=estimator_registry.unknown),
+            f"{n}: {estimator_registry.get(n).description}" for n in estimator_registry.builtin_names())
+            + " (or a plugin's, entry-point group attitude_sil.estimators, docs/sensors.md)",
+            rule=estimator_registry.unknown),
         *estimator_registry.parameter_table(),
         _d("bias_walk_deg_h_rt_h", 0.01, "the filter's gyro bias random walk sigma_u, deg/h/sqrt(h) (covers "
            "bias instability: about B sqrt(2 / tau))", min=0.0),
@@ -438,7 +439,8 @@ def parameters_markdown() -> str:
     """
     lines = ["<!-- generated from attitude_sil/core/sim/params.py by parameters_markdown(); "
              "test/unit/test_docs.py keeps it equal -->", ""]
-    plugins = tuple(f"{n}." for n in set(registry.names()) - set(registry.builtin_names()))
+    plugins = tuple(f"{n}." for n in set(registry.names()) - set(registry.builtin_names())) + tuple(
+        f"{n}." for n in set(estimator_registry.names()) - set(estimator_registry.builtin_names()))
     for node, specs in NODE_PARAMS.items():
         if node == GLOBAL_NODE:
             continue
