@@ -34,8 +34,8 @@ from attitude_sil.core.sensing.estimator import Estimator
 from attitude_sil.core.sensing.models import StarTrackerReport
 from attitude_sil.errors import ScenarioError
 
-__all__ = ["ENTRY_POINT_GROUP", "estimators", "get", "names", "builtin_names", "unknown", "parameter_table", "plugin_fault",
-           "refresh", "build_filter"]
+__all__ = ["ENTRY_POINT_GROUP", "estimators", "get", "names", "builtin_names", "unknown", "parameter_table",
+           "plugin_fault", "refresh", "build_filter"]
 
 #: the entry-point group through which other packages add estimators (a contract)
 ENTRY_POINT_GROUP = "attitude_sil.estimators"
