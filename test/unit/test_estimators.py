@@ -11,6 +11,7 @@ one line, and the MEKF flies on.
 
 from __future__ import annotations
 
+import sys
 import textwrap
 from importlib.metadata import EntryPoint
 
@@ -66,6 +67,7 @@ def plugins(monkeypatch, tmp_path):
     def use(**sources):
         for name, source in sources.items():
             (tmp_path / f"{name}.py").write_text(textwrap.dedent(source))
+            monkeypatch.delitem(sys.modules, name, raising=False)  # a module of that name imported before
         eps = [EntryPoint(n, f"{n}:ESTIMATOR", registry.ENTRY_POINT_GROUP) for n in sources]
         monkeypatch.setattr(registry, "entry_points", lambda group: [e for e in eps if e.group == group])
         registry.refresh()
@@ -100,14 +102,14 @@ def test_a_filters_own_parameter_reaches_it_without_its_prefix(plugins):
 
 
 def test_a_plugin_that_fails_its_check_is_skipped_in_one_line_and_the_mekf_flies_on(plugins, capsys):
-    plugins(bad_shape=GYRO_ONLY.replace('"gyro_only"', '"bad_shape"').replace(
+    plugins(sigma_of_one=GYRO_ONLY.replace('"gyro_only"', '"sigma_of_one"').replace(
         "np.full((self.n, 3), self.sigma)", "np.full(3, self.sigma)"),
-        no_load="raise RuntimeError('broken on import')\n")
+        raises_on_import="raise RuntimeError('broken on import')\n")
     assert registry.names() == ("mekf",)
     lines = capsys.readouterr().err.splitlines()
     assert len(lines) == 2 and all(x.startswith("attitude-sil: estimator plugin ") for x in lines), lines
-    assert "its estimate's attitude_sigma is (3,), not finite (1, 3)" in lines[0]
-    assert "could not be loaded: RuntimeError: broken on import" in lines[1]
+    assert "'raises_on_import'" in lines[0] and "could not be loaded: RuntimeError: broken on import" in lines[0]
+    assert "'sigma_of_one'" in lines[1] and "its estimate's attitude_sigma is (3,), not finite (1, 3)" in lines[1]
     assert simulate(load_scenario(SENSORS), 1, duration=0.1).q_BN_est.shape == (1, 11, 4)
 
 

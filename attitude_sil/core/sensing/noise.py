@@ -13,21 +13,21 @@ from numba import njit
 
 from attitude_sil.core.plant.kernels import normal_draw
 
-__all__ = ["normals", "STREAMS"]
+__all__ = ["normals", "STREAMS", "STREAM_SHIFT"]
 
 #: one stream per error source (a contract: changing a number changes every seeded run)
 STREAMS = {"gyro_white": 1, "gyro_markov": 2, "gyro_walk": 3, "gyro_markov_init": 4, "star_tracker": 5,
            "magnetometer": 6}
 
 #: the stream's offset in the generator's seed space: seeds below 2**40 never meet another stream's
-_STREAM_SHIFT = 1 << 40
+STREAM_SHIFT = 1 << 40
 
 
 @njit(cache=True)
 def _normals(seeds, k, stream, n):
     out = np.empty((seeds.shape[0], n))
     for p in range(seeds.shape[0]):
-        s = seeds[p] + stream * _STREAM_SHIFT
+        s = seeds[p] + stream * STREAM_SHIFT
         for i in range(n):
             out[p, i] = normal_draw(s, k, i)
     return out
