@@ -26,6 +26,7 @@ from rclpy.serialization import serialize_message
 from attitude_sil.core.faults import OWNER, changes_at, faults_of
 from attitude_sil.core.plant.quaternion import euler_from_quat, quat_conjugate, quat_error
 from attitude_sil.core.plant.scene import BODY
+from attitude_sil.core.sensing.models import SensorSuite
 from attitude_sil.core.sim.build import build_environment, build_scene
 from attitude_sil.core.sim.scenario import Scenario
 from attitude_sil.core.trajectory import Trajectory
@@ -42,24 +43,35 @@ from attitude_sil.ros.contract import (
     DIAGNOSTICS,
     DIPOLE_CMD,
     DISTURBANCE_TORQUE,
+    ESTIMATE_ATTITUDE,
+    ESTIMATE_ATTITUDE_SIGMA,
+    ESTIMATE_BODY_RATE,
+    ESTIMATE_GYRO_BIAS,
+    IMU,
     MAGNETIC_FIELD,
     MAGNETIC_TORQUE,
+    MAGNETOMETER,
     ORBIT_TOPIC,
     PARAMETER_EVENTS,
     RATE_SETPOINT,
+    STAR_TRACKER,
     TF,
     VIEW_TOPICS,
     WHEEL_MOMENTUM,
+    WHEEL_SPEED,
     WHEEL_STATE,
     WHEEL_TORQUE,
     recorded_topics,
 )
 from attitude_sil.ros.convert import (
     fault_diagnostics_msg,
+    imu_msg,
     isolation_diagnostics_msg,
+    joint_state_msg,
     magnetic_field_msg,
     ns_to_stamp,
     odometry_msg,
+    star_tracker_msg,
 )
 from attitude_sil.ros.qos import offered_qos_yaml
 from attitude_sil.storage.cdr import (
@@ -103,7 +115,8 @@ def _series(scn: Scenario, tr: Trajectory, p: int, stamps: np.ndarray) -> dict:
     """Each step topic's whole series of episode ``p``, encoded at once (storage/cdr.py, equal to rclpy's
     messages, tested); ``command`` the command of each step, whichever its topic."""
     q, q_r = tr.q_BN[p], tr.q_RN[p]
-    err = euler_from_quat(quat_conjugate(quat_error(q, q_r)))
+    seen = tr.q_BN_est[p] if scn.feedback == "estimate" else q  # the attitude the controller reads
+    err = euler_from_quat(quat_conjugate(quat_error(seen, q_r)))
     names = [f"wheel_{i + 1}" for i in range(tr.wheel_speed.shape[2])]
     series = {
         CLOCK: encode_clocks(stamps),
@@ -128,6 +141,38 @@ def _series(scn: Scenario, tr: Trajectory, p: int, stamps: np.ndarray) -> dict:
         series[DIPOLE_CMD] = encode_stamped_vectors(stamps, "body", tr.dipole_cmd_B[p])
         series[MAGNETIC_TORQUE] = encode_stamped_vectors(stamps, "body", tr.magnetic_torque_B[p])
     return series
+
+
+def _sensing_series(scn: Scenario, tr: Trajectory, p: int, stamps: np.ndarray) -> tuple[dict, list]:
+    """The sensing loop's topics of episode ``p``, as the sensors and estimator nodes publish them: each step
+    topic's series, and the star tracker's reports as (stamp = exposure time, message). The reports and the
+    tachometer are the scenario's own sensors (its ``sensors.seed``) stepped again on the episode's truth."""
+    suite = SensorSuite(scn.values["sensors"], scn.dt, 1)
+    names = [f"wheel_{i + 1}" for i in range(tr.wheel_speed.shape[2])]
+    gyro_var = np.full(3, suite.gyro.errors.white_std(scn.dt) ** 2)
+    series = {
+        IMU: [serialize_message(imu_msg(w, gyro_var, int(t))) for w, t in zip(tr.omega_BN_B_meas[p], stamps,
+                                                                              strict=True)],
+        WHEEL_SPEED: [serialize_message(joint_state_msg(names, np.zeros(0), suite.tachometer.sample(a, w),
+                                                        np.zeros(0), int(t)))
+                      for a, w, t in zip(tr.wheel_angle[p], tr.wheel_speed[p], stamps, strict=True)],
+        ESTIMATE_ATTITUDE: encode_stamped_vectors(stamps, "inertial", tr.q_BN_est[p]),
+        ESTIMATE_BODY_RATE: encode_stamped_vectors(stamps, "body", tr.omega_BN_B_est[p]),
+        ESTIMATE_GYRO_BIAS: encode_stamped_vectors(stamps, "body", tr.gyro_bias_est[p]),
+        ESTIMATE_ATTITUDE_SIGMA: encode_stamped_vectors(stamps, "body", tr.attitude_sigma[p]),
+    }
+    if tr.magnetometer_B is not None:
+        var = suite.magnetometer.variance
+        series[MAGNETOMETER] = [serialize_message(magnetic_field_msg(b, var, int(t)))
+                                for b, t in zip(tr.magnetometer_B[p], stamps, strict=True)]
+    star_var = suite.star_tracker.errors.sigma_B ** 2
+    reports = []
+    for k in range(stamps.size):
+        r = suite.star_tracker.sample(tr.q_BN[p, k][None], k)
+        if r is not None:
+            t = r.exposure_step * int(round(scn.dt * 1e9))
+            reports.append((t, serialize_message(star_tracker_msg(r.q_BN[0], star_var if r.valid else None, t))))
+    return series, reports
 
 
 def _write_faults(writer: BagWriter, scn: Scenario, stamps: np.ndarray) -> None:
@@ -209,14 +254,18 @@ def record_episode(scn: Scenario, tr: Trajectory, run_dir: str | Path, *, episod
         raise RunError(str(exc)) from None
     p = int(episode)
     try:
-        # every topic, as the recorder registers them (the sensing loop's not yet: an engine bag of a run with
-        # sensors holds the lockstep's topics only; docs/sensors.md)
+        # every topic, as the recorder registers them (the sensing loop's where it ran)
         field = tr.magnetic_field_B is not None
         magnetic = tr.dipole_cmd_B is not None
-        for topic, type_name in {**recorded_topics(False, field=field, magnetic=magnetic), **VIEW_TOPICS}.items():
+        sensing = tr.q_BN_est is not None
+        for topic, type_name in {**recorded_topics(sensing, field=field, magnetic=magnetic), **VIEW_TOPICS}.items():
             writer.add_topic(_absolute(topic), type_name, offered_qos_yaml(topic), wait=False)
         _write_design(writer, params)
         series = _series(scn, tr, p, stamps)
+        if sensing:
+            sensed, reports = _sensing_series(scn, tr, p, stamps)
+            series.update(sensed)
+            writer.write_many([(_absolute(STAR_TRACKER), data, t) for t, data in reports])
         topics = {name: _absolute(name) for name in series if name != "command"}
         commands = [_absolute(COMMAND_TOPIC[kind]) for kind in tr.kind]
         writer.write_many([(commands[k] if name == "command" else topics[name], data[k], t)

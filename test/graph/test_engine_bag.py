@@ -50,16 +50,11 @@ def _messages(bag):
     return reader, out
 
 
-def test_engine_bag_equals_the_graph_recorded_bag(tmp_path):
-    scn = load_scenario(CONFIG / "hst_roll_step.yaml")
-    with GraphSession(scn, duration=3.0, controller="pid") as graph:
-        graph.run_episode(controller_params=DESIGN, record_dir=tmp_path / "graph")
-    tr = simulate(scn, 1, duration=3.0, controller="pid",
-                  controller_params={k: np.array([v]) for k, v in DESIGN.items()})
-    record_episode(scn, tr, tmp_path / "engine", controller_params=DESIGN, controller="pid", duration=3.0)
-
-    g_reader, graph_msgs = _messages(tmp_path / "graph")
-    e_reader, engine_msgs = _messages(tmp_path / "engine")
+def _same_messages(graph_bag, engine_bag, steps: int, counts: dict | None = None):
+    """The two bags hold the same topics, types, log times and fields, numbers within 1e-9: a message a step
+    on each topic (``counts`` where another number) and the body model once. Returns the engine bag's reader."""
+    g_reader, graph_msgs = _messages(graph_bag)
+    e_reader, engine_msgs = _messages(engine_bag)
     assert set(e_reader.topics) == set(g_reader.topics)
     for topic, info in g_reader.topics.items():
         assert e_reader.topics[topic].type == info.type, topic
@@ -67,7 +62,8 @@ def test_engine_bag_equals_the_graph_recorded_bag(tmp_path):
     worst = 0.0
     for topic, g in graph_msgs.items():
         e = engine_msgs[topic]
-        assert len(e) == len(g) == (1 if topic == "/body_model" else 301), topic  # the model with step 0
+        expected = (counts or {}).get(topic, 1 if topic == "/body_model" else steps)  # the model with step 0
+        assert len(e) == len(g) == expected, (topic, len(e), len(g))
         for (tg, mg), (te, me) in zip(g, e, strict=True):
             assert tg == te, topic
             assert mg.keys() == me.keys(), topic
@@ -79,6 +75,18 @@ def test_engine_bag_equals_the_graph_recorded_bag(tmp_path):
                     assert math.isfinite(ve), (topic, key)
                     worst = max(worst, abs(vg - ve))
     assert worst <= 1e-9
+    return e_reader
+
+
+def test_engine_bag_equals_the_graph_recorded_bag(tmp_path):
+    scn = load_scenario(CONFIG / "hst_roll_step.yaml")
+    with GraphSession(scn, duration=3.0, controller="pid") as graph:
+        graph.run_episode(controller_params=DESIGN, record_dir=tmp_path / "graph")
+    tr = simulate(scn, 1, duration=3.0, controller="pid",
+                  controller_params={k: np.array([v]) for k, v in DESIGN.items()})
+    record_episode(scn, tr, tmp_path / "engine", controller_params=DESIGN, controller="pid", duration=3.0)
+
+    e_reader = _same_messages(tmp_path / "graph", tmp_path / "engine", 301)
     snapshots = [yaml.safe_load(yaml.safe_load((d / "metadata.yaml").read_text())["rosbag2_bagfile_information"]
                                 ["custom_data"][PARAMETERS_KEY]) for d in (tmp_path / "graph", tmp_path / "engine")]
     assert snapshots[0] == snapshots[1]
@@ -88,3 +96,18 @@ def test_engine_bag_equals_the_graph_recorded_bag(tmp_path):
     for _, event in e_reader.iter_decoded(["/parameter_events"]):
         changes.update({p.name: list(p.value.double_array_value) for p in event.changed_parameters})
     assert changes == DESIGN
+
+
+def test_an_engine_bag_of_a_sensing_run_carries_the_sensors_and_the_estimate_as_the_graph_records_them(tmp_path):
+    # the gyro, the tachometers, the star tracker's reports (stamped with their exposures, one in an outage
+    # without its attitude) and the filter's estimate, flown on the estimate, the tracker blind from 1 to 1.2 s
+    scn = load_scenario(CONFIG / "hst_roll_step_sensors.yaml").with_values(
+        "sensors", **{"star_tracker.outages_s": [1.0, 1.2]})
+    with GraphSession(scn, duration=2.0) as graph:
+        graph.run_episode(record_dir=tmp_path / "graph")
+    record_episode(scn, simulate(scn, 1, duration=2.0), tmp_path / "engine", duration=2.0)
+    reader = _same_messages(tmp_path / "graph", tmp_path / "engine", 201, {"/star_tracker": 20})
+    assert {"/imu", "/wheel_speed", "/estimate/attitude", "/estimate/attitude_sigma"} <= set(reader.topics)
+    blind = [m.header.stamp.nanosec for _, m in reader.iter_decoded(["/star_tracker"])
+             if m.orientation_covariance[0] == -1.0]
+    assert blind == [0, 100_000_000]  # the exposures at 1.0 and 1.1 s (seconds apart: in .sec)
