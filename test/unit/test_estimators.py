@@ -104,12 +104,14 @@ def test_a_filters_own_parameter_reaches_it_without_its_prefix(plugins):
 def test_a_plugin_that_fails_its_check_is_skipped_in_one_line_and_the_mekf_flies_on(plugins, capsys):
     plugins(sigma_of_one=GYRO_ONLY.replace('"gyro_only"', '"sigma_of_one"').replace(
         "np.full((self.n, 3), self.sigma)", "np.full(3, self.sigma)"),
-        raises_on_import="raise RuntimeError('broken on import')\n")
+        raises_on_import="raise RuntimeError('broken on import')\n",
+        uncounted=GYRO_ONLY.replace('"gyro_only"', '"uncounted"').replace(", self.dropped = dt, n, 0", " = dt, n"))
     assert registry.names() == ("mekf",)
     lines = capsys.readouterr().err.splitlines()
-    assert len(lines) == 2 and all(x.startswith("attitude-sil: estimator plugin ") for x in lines), lines
+    assert len(lines) == 3 and all(x.startswith("attitude-sil: estimator plugin ") for x in lines), lines
     assert "'raises_on_import'" in lines[0] and "could not be loaded: RuntimeError: broken on import" in lines[0]
     assert "'sigma_of_one'" in lines[1] and "its estimate's attitude_sigma is (3,), not finite (1, 3)" in lines[1]
+    assert "'uncounted'" in lines[2] and "needs a count 'dropped'" in lines[2]
     assert simulate(load_scenario(SENSORS), 1, duration=0.1).q_BN_est.shape == (1, 11, 4)
 
 

@@ -141,6 +141,10 @@ def plugin_fault(est: Estimator) -> str:
     for n in (1, 2):
         try:
             filt = est.build(values, 1e-6, np.full(3, 1e-5), 0.01, n, 0)
+            if not isinstance(getattr(filt, "dropped", None), (int, np.integer)) or not callable(
+                    getattr(filt, "set_star_tracker_variance", None)):
+                return "the filter it builds needs a count 'dropped' and set_star_tracker_variance(variance)"
+            filt.set_star_tracker_variance(np.full(3, 1e-10))
             filt.step(0, np.zeros((n, 3)))
             q = np.zeros((n, 4))
             q[:, 3] = 1.0
