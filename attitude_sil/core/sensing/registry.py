@@ -10,8 +10,9 @@ node, the stepwise driver (and so tune, montecarlo and replay) and the
   docs/sensors.md), each naming an :class:`~attitude_sil.core.sensing.estimator.Estimator`
   or a module defining ``ESTIMATOR``. A plugin is checked as it is loaded: its
   parameters' defaults against their own rules, then built on them for 1 and
-  2 episodes and stepped twice (a gyro reading, then a report), each estimate
-  of the right shapes and finite. One that fails to load, fails a check or
+  2 episodes (with a ``dropped`` count and ``set_star_tracker_variance``) and
+  stepped twice (a gyro reading, then a report), each estimate of the right
+  shapes and finite. One that fails to load, fails a check or
   reuses a taken name is skipped with one line on stderr naming the entry
   point, its distribution and the reason; every other filter works on.
 """
