@@ -86,6 +86,8 @@ class WheelsNode(LockstepNode):
         scn = self.scenario()
         self.core = build_wheels(scn, 1)
         self.faults.reset()  # the list as it stands, each fault said on /diagnostics as it becomes active
+        # a past episode's declarations not yet taken are not this one's (one of its first step may be here)
+        self.declared = [d for d in self.declared if d[0] == 0]
         timing = self.param("command_timing")
         if timing != "stamped":
             zero = (np.zeros((1, 3)), self.param("actuator") in ("torque", "none"))
@@ -163,7 +165,6 @@ class WheelsNode(LockstepNode):
             self._step_held()
             return
         if self.in_sequence(TORQUE_CMD if torque_mode else VOLTAGE_CMD, t):
-            self._take_declared(t)
             self._advance(t, v, torque_mode)
 
     def _on_wheel_status(self, msg) -> None:
@@ -245,6 +246,7 @@ class WheelsNode(LockstepNode):
         self._advance(t, v, torque_mode)
 
     def _advance(self, t: int, v: np.ndarray, torque_mode: bool, wheel_cmd: np.ndarray | None = None) -> None:
+        self._take_declared(t)  # whichever way the step came: a stamped command, a held one, a per-wheel one
         out = self.core.advance(v, torque_mode) if wheel_cmd is None else self.core.advance(v, torque_mode, wheel_cmd)
         if getattr(self.core, "fdir", None) is not None and self.core.isolated_now.size:  # isolated at this step
             wheel = int(self.core.fdir.isolated[0]) + 1
