@@ -32,7 +32,6 @@ from attitude_sil.core.sensing.estimator import Filter
 from attitude_sil.core.sensing.mekf import report_reach
 from attitude_sil.core.sensing.models import StarTrackerReport, TrackerSchedule
 from attitude_sil.core.sensing.registry import build_filter
-from attitude_sil.errors import ScenarioError
 from attitude_sil.ros.contract import (
     ESTIMATE_ATTITUDE,
     ESTIMATE_ATTITUDE_SIGMA,
@@ -110,9 +109,11 @@ class EstimatorNode(LockstepNode):
             q = unit_or_none(got[0][None])
             if q is None or not self.finite(got[1]) or np.any(got[1] < 0.0):
                 self.get_logger().error(f"star_tracker at t={t * 1e-9:.6f} s: orientation not a finite unit "
-                                        "quaternion or covariance invalid; ignored", throttle_duration_sec=1.0)
-                return
-            got = (q, got[1])
+                                        "quaternion or covariance invalid; taken as no attitude",
+                                        throttle_duration_sec=1.0)
+                got = None  # in the queue still: the reports that follow keep their report steps
+            else:
+                got = (q, got[1])
         self.star.append((t, got))
         self._advance()
 
@@ -137,8 +138,10 @@ class EstimatorNode(LockstepNode):
             dropped = self.filter.dropped
             try:
                 est = self.filter.step(k, rate[None], report)
-            except ScenarioError as exc:
-                self.get_logger().error(str(exc), throttle_duration_sec=1.0)
+            except Exception as exc:  # a plugin filter's own code too: one line, and the episode stops here
+                self.get_logger().error(f"estimator {self.param('type')!r} failed at t={t * 1e-9:.6f} s: "
+                                        f"{type(exc).__name__}: {exc}; no estimate until the next episode")
+                self.filter = None
                 return
             if self.filter.dropped > dropped:
                 self.get_logger().warning(f"star_tracker report of t={t_exp * 1e-9:g} s at t={t * 1e-9:g} s: older "

@@ -72,6 +72,7 @@ class WheelsNode(LockstepNode):
         self.create_subscription(message_class("diagnostic_msgs/msg/DiagnosticArray"), WHEEL_STATUS,
                                  self._on_wheel_status, INPUT_QOS)
         self.declared: list[tuple[int, dict[int, bool]]] = []  # (stamp ns, wheel (1..n) -> sound), to apply
+        self._before_declared: list[int] | None = None  # `available` before the episode's first declaration
         self.hold: CommandHold | None = None  # a controller on a timer of its own: the command held
         if self.param("command_timing") != "stamped":
             self.pub_applied = {mode: self.step_publisher(APPLIED_COMMAND_TOPIC["torque" if mode else "voltage"])
@@ -83,6 +84,9 @@ class WheelsNode(LockstepNode):
         self.new_episode()
 
     def rebuild(self) -> None:
+        if self._before_declared is not None:  # a new episode starts from the set before the declarations
+            self.set_parameters([Parameter("available", Parameter.Type.INTEGER_ARRAY, self._before_declared)])
+            self._before_declared = None
         scn = self.scenario()
         self.core = build_wheels(scn, 1)
         self.faults.reset()  # the list as it stands, each fault said on /diagnostics as it becomes active
@@ -170,6 +174,9 @@ class WheelsNode(LockstepNode):
     def _on_wheel_status(self, msg) -> None:
         """``wheel_status``: wheels the flight software declares failed (ERROR) or sound (OK), stamped t."""
         t = stamp_to_ns(msg.header.stamp)
+        if self.param("actuator") != "reaction_wheels":
+            self.get_logger().error(f"{WHEEL_STATUS} needs actuator reaction_wheels; ignored", once=True)
+            return
         said: dict[int, bool] = {}
         for s in msg.status:
             m = re.fullmatch(r"wheel_?([1-9][0-9]*)", s.hardware_id)
@@ -196,6 +203,12 @@ class WheelsNode(LockstepNode):
         for _, said in due:
             sound.update(said)
         available = sorted(w for w, ok in sound.items() if ok)
+        if not available:  # (an empty list is 'every wheel')
+            self.get_logger().error(f"{WHEEL_STATUS}: every wheel declared failed; refused, the wheels left as they "
+                                    f"were ({self.param('available') or 'all'})")
+            return
+        if self._before_declared is None:  # the user's own set, for the next episode
+            self._before_declared = self.param("available")
         value = available if len(available) < n else []
         (result,) = self.set_parameters([Parameter("available", Parameter.Type.INTEGER_ARRAY, value)])
         if not result.successful:

@@ -42,7 +42,7 @@ import numpy as np
 from attitude_sil.core.paramspec import ParamSpec
 from attitude_sil.core.plant.quaternion import quat_conjugate, quat_multiply, quat_normalize, rotation_quaternion
 from attitude_sil.core.sensing.estimator import Estimate, Estimator
-from attitude_sil.core.sensing.mekf import MekfSettings
+from attitude_sil.core.sensing.mekf import R_FLOOR, MekfSettings
 
 A, F = 1.0, 4.0  # the GRP's a and f = 2 (a + 1)
 N = 6  # the error state's dimension
@@ -69,7 +69,7 @@ class Usque:
         sv, su = settings.gyro_arw, settings.bias_walk
         self.Qbar = 0.5 * self.dt * np.diag([sv**2 - su**2 * self.dt**2 / 6.0] * 3 + [su**2] * 3)
         self.W0, self.Wi = self.lam / (N + self.lam), 0.5 / (N + self.lam)
-        self.R = np.diag(np.asarray(settings.star_tracker_sigma, dtype=float) ** 2)
+        self.set_star_tracker_variance(np.asarray(settings.star_tracker_sigma, dtype=float) ** 2)
         self.q = np.array(np.broadcast_to(quat_normalize(settings.initial_q_BN), (self.n, 4)))
         self.b = np.zeros((self.n, 3))
         p0 = np.diag([settings.initial_attitude_sigma**2] * 3 + [settings.initial_bias_sigma**2] * 3)
@@ -79,7 +79,9 @@ class Usque:
         self._history: dict[int, tuple] = {}  # step -> (prior q, b, P, gyro reading)
 
     def set_star_tracker_variance(self, variance: np.ndarray) -> None:
-        self.R = np.diag(np.asarray(variance, dtype=float))
+        """The tracker's variance (3,) rad^2, floored as the MEKF floors it (a perfect tracker would make the
+        covariance singular, and its Cholesky factor fail)."""
+        self.R = np.diag(np.maximum(np.sqrt(np.asarray(variance, dtype=float)), R_FLOOR) ** 2)
 
     def _propagate(self, q, b, P, w_meas):
         """The 13 sigma points of (q, b, P + Qbar) over one step on the gyro reading ``w_meas`` (P, 3)."""
@@ -108,11 +110,13 @@ class Usque:
     def step(self, k: int, omega_meas_B: np.ndarray, star_tracker=None) -> Estimate:
         """Step ``k``: propagate on the gyro reading (P, 3) of [t_(k-1), t_k], take the report due at k (or
         None), return the estimate at t_k."""
+        j = star_tracker.exposure_step if star_tracker is not None and star_tracker.valid else None
+        if k != self.k or (j is not None and j > k):  # refused before anything moves
+            raise ValueError(f"usque stepped at step {k} (expected {self.k}) with a report of step {j}")
         w = np.asarray(omega_meas_B, dtype=float)
         if k > 0:
             self.q, self.b, self.P = self._propagate(self.q, self.b, self.P, w)
         self._history[k] = (self.q, self.b, self.P, w)
-        j = star_tracker.exposure_step if star_tracker is not None and star_tracker.valid else None
         if j is not None and j not in self._history:
             self.dropped += 1  # older than the filter keeps
         elif j is not None:

@@ -193,10 +193,14 @@ def test_the_wheels_node_takes_a_wheel_status_after_its_stamp_and_checks_it_as_a
         node._on_wheel_status(_status(50_000_000, ("wheel9", error)))  # no such wheel: ignored in one line
         node._take_declared(60_000_000)
         assert node.param("available") == [1, 2, 4] and not node.declared
+        node._on_wheel_status(_status(60_000_000, *((f"wheel{i}", error) for i in (1, 2, 4))))  # none left
+        node._take_declared(70_000_000)
+        assert node.param("available") == [1, 2, 4]  # refused ([] would be every wheel)
         node._on_wheel_status(_status(0, ("wheel2", error)))
         node._on_wheel_status(_status(70_000_000, ("wheel4", error)))
         node.rebuild()  # a new episode: its first step's declaration stays, the past one's goes
         assert [d[0] for d in node.declared] == [0]
+        assert node.param("available") == []  # and the set is the one before the declarations: every wheel
         node.destroy_node()
     finally:
         rclpy.shutdown(context=context)

@@ -170,3 +170,32 @@ def test_the_plugin_filter_of_the_examples_flies_on_the_graph_as_in_the_stepwise
     for name in ("q_BN", "q_BN_est", "attitude_sigma"):
         assert np.max(np.abs(getattr(graph.trajectory, name) - getattr(stepped, name))) <= 1e-9, name
     assert np.any(stepped.attitude_sigma != nominal.attitude_sigma)  # not the MEKF
+
+
+def test_a_refused_tracker_message_keeps_its_report_step_in_the_estimators_queue():
+    # the estimator node pairs the tracker's messages with report steps in the order they come: a message it
+    # refuses (here not a unit quaternion) stands as no attitude at its step, so the next report is taken at its
+    # own step (0.25 s at 4 Hz), not one report step early
+    import rclpy
+
+    from attitude_sil.nodes.estimator_node import EstimatorNode
+    from attitude_sil.ros.convert import imu_msg, star_tracker_msg
+
+    context = rclpy.Context()
+    rclpy.init(args=[], context=context)
+    try:
+        node = EstimatorNode(context=context)
+        var = np.full(3, 1e-12)
+        node._on_star_tracker(star_tracker_msg([0.0, 0.0, 0.0, 2.0], var, 0))  # refused: no attitude
+        sigma = []
+        for k in range(26):
+            if k == 25:
+                node._on_star_tracker(star_tracker_msg([0.0, 0.0, 0.0, 1.0], var, 250_000_000))
+            node._on_imu(imu_msg(np.zeros(3), np.full(3, 1e-10), k * 10_000_000))
+            sigma.append(float(node.filter.P[0, 0, 0]))
+        assert node.k == 26 and not node.star
+        assert sigma[0] == pytest.approx(np.radians(1.0) ** 2) and sigma[24] > sigma[0]  # no update at 0
+        assert sigma[25] < 1e-3 * sigma[24]  # the update at step 25
+        node.destroy_node()
+    finally:
+        rclpy.shutdown(context=context)

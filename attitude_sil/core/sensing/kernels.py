@@ -208,7 +208,7 @@ class MekfState(NamedTuple):
     hb: np.ndarray  # (P, H, 3)
     hcov: np.ndarray  # (P, H, 6, 6)
     hw: np.ndarray  # (P, H, 3)
-    dropped: np.ndarray  # (P,) int64
+    dropped: np.ndarray  # (P,) int64, per row (the numpy filter counts a step's report once for its P rows)
     work: np.ndarray  # (3, 6, 6) scratch of an update (one thread's: rows run one after another)
     small: np.ndarray  # (5, 3, 3) scratch of a propagation (likewise)
 
@@ -354,6 +354,8 @@ def mekf_row(p, k, w_meas, j, valid, q_meas, par, st):
     ``q_meas[p]``), rolling back to it when it is late and within the reach; the estimate is ``st.q[p]``,
     ``st.b[p]``, ``st.cov[p]`` (the rate: ``w_meas[p] - st.b[p]``)."""
     H = st.hq.shape[1]
+    if valid and j > k:
+        raise ValueError("a star tracker report of an exposure after its step")
     if k > 0:
         _propagate(st.q, st.b, st.cov, p, w_meas[p, 0], w_meas[p, 1], w_meas[p, 2], par, st.small)
     _keep(st, p, k % H, w_meas[p, 0], w_meas[p, 1], w_meas[p, 2])

@@ -215,13 +215,13 @@ class Mekf:
         """
         if k != self.k:
             raise ScenarioError(f"estimator stepped at step {k}, expected step {self.k}")
+        j = star_tracker.exposure_step if star_tracker is not None and star_tracker.valid else None
+        if j is not None and j > k:  # refused before anything moves: the filter stays at step k - 1
+            raise ScenarioError(f"estimator: a star tracker report at step {k} of exposure step {j}, after it")
         w_meas = np.asarray(omega_meas_B, dtype=float)
         if k > 0:
             self.q, self.b, self.P = self._propagate(self.q, self.b, self.P, w_meas)
         self._history[k] = (self.q, self.b, self.P, w_meas)
-        j = star_tracker.exposure_step if star_tracker is not None and star_tracker.valid else None
-        if j is not None and j > k:
-            raise ScenarioError(f"estimator: a star tracker report at step {k} of exposure step {j}, after it")
         if j is not None and j not in self._history:  # older than the filter keeps: dropped
             self.dropped += 1
         elif j is not None:

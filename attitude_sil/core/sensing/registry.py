@@ -134,6 +134,8 @@ def plugin_fault(est: Estimator) -> str:
     """What keeps ``est`` from flying ('' if nothing): a default that breaks its own rule, or a filter that
     does not build and step on the defaults (1 and 2 episodes) to estimates of the right shapes, finite."""
     for spec in est.params:
+        if spec.name in _CHECK_VALUES or spec.name == "type":
+            return f"its parameter {spec.name!r} has the name of one every filter reads"
         try:
             spec.validate(spec.default, f"estimator.{est.name}")
         except ValueError as exc:
