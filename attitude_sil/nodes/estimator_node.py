@@ -29,7 +29,6 @@ import numpy as np
 
 from attitude_sil.core.plant.quaternion import unit_or_none
 from attitude_sil.core.sensing.estimator import Filter
-from attitude_sil.core.sensing.mekf import report_reach
 from attitude_sil.core.sensing.models import StarTrackerReport, TrackerSchedule
 from attitude_sil.core.sensing.registry import build_filter
 from attitude_sil.ros.contract import (
@@ -77,8 +76,7 @@ class EstimatorNode(LockstepNode):
         dt = self.param("control_period")
         arw = float(np.sqrt(np.max(variance) * dt))
         try:
-            self.filter = build_filter(self.values(), arw, np.zeros(3), dt, 1,
-                                       report_reach(self.values(), self.latency_steps, dt))
+            self.filter = build_filter(self.values(), arw, np.zeros(3), dt, 1, self.latency_steps)
         except Exception as exc:  # a plugin filter's own code: its failure is one line, the episode waits
             self.filter = None
             self.get_logger().error(f"estimator {self.param('type')!r} could not be built: "

@@ -25,7 +25,6 @@ verification and ``docs/parameters.md``.
 
 from __future__ import annotations
 
-import importlib
 import os
 import pkgutil
 import sys
@@ -41,6 +40,7 @@ from attitude_sil.core.control import laws as _builtin
 from attitude_sil.core.control.law import Law, state_layout
 from attitude_sil.core.control.shared import shared_defaults
 from attitude_sil.core.paramspec import ParamSpec
+from attitude_sil.core.plugins import builtin_units, load_plugin, plugin_where
 from attitude_sil.errors import ScenarioError
 
 __all__ = ["ENTRY_POINT_GROUP", "laws", "get", "names", "declared_names", "builtin_names", "output_of",
@@ -83,21 +83,17 @@ def refresh() -> None:
 def laws() -> dict[str, Law]:
     """Every law by name: the built-ins (by module name), then the plugins (by entry-point name)."""
     found: dict[str, Law] = {}
-    for info in sorted(pkgutil.iter_modules(_builtin.__path__), key=lambda m: m.name):
-        module = importlib.import_module(f"{_builtin.__name__}.{info.name}")
-        if hasattr(module, "LAW"):
-            law = _law_of(module, module.__name__)
-            if law.name != info.name:
-                raise TypeError(f"{module.__name__} defines the law {law.name!r}; a built-in law's module must carry "
-                                "its name")
-            found[law.name] = law
+    for name, module in builtin_units(_builtin, "LAW"):
+        law = _law_of(module, module.__name__)
+        if law.name != name:
+            raise TypeError(f"{module.__name__} defines the law {law.name!r}; a built-in law's module must carry "
+                            "its name")
+        found[law.name] = law
     for ep in _plugin_entry_points():
-        dist = getattr(getattr(ep, "dist", None), "name", None)
-        where = f"law plugin {ep.name!r} ({ep.value}{f', distribution {dist}' if dist else ''})"
-        try:
-            law = _law_of(ep.load(), where)
-        except Exception as exc:  # a broken plugin must not take the simulator down with it
-            _skip(f"{where} could not be loaded: {type(exc).__name__}: {exc}")
+        where = plugin_where("law", ep)
+        law, why = load_plugin(ep, where, _law_of)
+        if why:
+            _skip(why)
             continue
         if law.name in found:
             _skip(f"{where} is named {law.name!r}, which another law already has")

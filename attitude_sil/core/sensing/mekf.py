@@ -49,16 +49,10 @@ from attitude_sil.core.plant.quaternion import (
 from attitude_sil.core.sensing.models import DEG
 from attitude_sil.errors import ScenarioError
 
-__all__ = ["MekfSettings", "Mekf", "Estimate", "transition", "report_reach"]
+__all__ = ["MekfSettings", "Mekf", "Estimate", "transition"]
 
 #: smallest star-tracker noise the update assumes, rad (a perfect tracker would make the update singular)
 R_FLOOR = 1e-9
-
-
-def report_reach(estimator: dict, latency_steps: int, dt: float) -> int:
-    """How many steps back the filter takes a star tracker report: ``star_tracker.max_age_s`` of the
-    ``estimator`` parameters in whole steps, at least the tracker's latency ``latency_steps``."""
-    return max(int(latency_steps), int(np.floor(estimator["star_tracker.max_age_s"] / dt + 1e-9)))
 
 
 def transition(omega: np.ndarray, dt: float) -> np.ndarray:

@@ -19,8 +19,6 @@ node, the stepwise driver (and so tune, montecarlo and replay) and the
 
 from __future__ import annotations
 
-import importlib
-import pkgutil
 import sys
 from dataclasses import replace
 from functools import lru_cache
@@ -30,13 +28,14 @@ from types import ModuleType
 import numpy as np
 
 from attitude_sil.core.paramspec import ParamSpec
+from attitude_sil.core.plugins import builtin_units, load_plugin, plugin_where
 from attitude_sil.core.sensing import estimators as _builtin
 from attitude_sil.core.sensing.estimator import Estimator
 from attitude_sil.core.sensing.models import StarTrackerReport
 from attitude_sil.errors import ScenarioError
 
 __all__ = ["ENTRY_POINT_GROUP", "estimators", "get", "names", "builtin_names", "unknown", "parameter_table",
-           "plugin_fault", "refresh", "build_filter"]
+           "plugin_fault", "refresh", "build_filter", "report_reach"]
 
 #: the entry-point group through which other packages add estimators (a contract)
 ENTRY_POINT_GROUP = "attitude_sil.estimators"
@@ -57,18 +56,12 @@ def refresh() -> None:
 @lru_cache(maxsize=1)
 def estimators() -> dict[str, Estimator]:
     """Every estimator by name: the built-ins (by module name), then the plugins (by entry-point name)."""
-    found: dict[str, Estimator] = {}
-    for info in sorted(pkgutil.iter_modules(_builtin.__path__), key=lambda m: m.name):
-        module = importlib.import_module(f"{_builtin.__name__}.{info.name}")
-        if hasattr(module, "ESTIMATOR"):
-            found[info.name] = _estimator_of(module, module.__name__)
+    found = {name: _estimator_of(module, module.__name__) for name, module in builtin_units(_builtin, "ESTIMATOR")}
     for ep in sorted(entry_points(group=ENTRY_POINT_GROUP), key=lambda e: e.name):
-        dist = getattr(getattr(ep, "dist", None), "name", None)
-        where = f"estimator plugin {ep.name!r} ({ep.value}{f', distribution {dist}' if dist else ''})"
-        try:
-            est = _estimator_of(ep.load(), where)
-        except Exception as exc:  # a broken plugin must not take the simulator down with it
-            _skip(f"{where} could not be loaded: {type(exc).__name__}: {exc}")
+        where = plugin_where("estimator", ep)
+        est, why = load_plugin(ep, where, _estimator_of)
+        if why:
+            _skip(why)
             continue
         if est.name in found or est.name != ep.name:
             _skip(f"{where} is named {est.name!r}: " + ("another estimator has that name" if est.name in found
@@ -88,7 +81,7 @@ def _skip(line: str) -> None:
 
 def builtin_names() -> tuple[str, ...]:
     """The built-in estimators' names (the modules of :mod:`attitude_sil.core.sensing.estimators`)."""
-    modules = {m.name for m in pkgutil.iter_modules(_builtin.__path__)}
+    modules = {name for name, _ in builtin_units(_builtin, "ESTIMATOR")}
     return tuple(n for n in estimators() if n in modules)
 
 
@@ -114,14 +107,21 @@ def parameter_table() -> list[ParamSpec]:
     return [replace(s, name=f"{e.name}.{s.name}") for e in estimators().values() for s in e.params]
 
 
+def report_reach(estimator: dict, latency_steps: int, dt: float) -> int:
+    """How many steps back the filter takes a star tracker report: ``star_tracker.max_age_s`` of the
+    ``estimator`` parameters in whole steps, at least the tracker's latency ``latency_steps``."""
+    return max(int(latency_steps), int(np.floor(estimator["star_tracker.max_age_s"] / dt + 1e-9)))
+
+
 def build_filter(values: dict, gyro_arw: float, star_tracker_sigma, dt: float, n_episodes: int,
-                 reach_steps: int):
+                 latency_steps: int):
     """The filter ``values["type"]`` selects, built from the ``estimator`` parameters ``values`` (the selected
-    filter's own under ``<type>.``, handed to it without the prefix)."""
+    filter's own under ``<type>.``, handed to it without the prefix), for a tracker of ``latency_steps``: it
+    keeps reports as far back as :func:`report_reach`."""
     est = get(values["type"])
     own = {s.name: values.get(f"{est.name}.{s.name}", s.default) for s in est.params}
     return est.build({**values, **own}, float(gyro_arw), np.asarray(star_tracker_sigma, dtype=float), float(dt),
-                     int(n_episodes), int(reach_steps))
+                     int(n_episodes), report_reach(values, latency_steps, dt))
 
 
 #: the common parameters a plugin is checked with (the estimator node's defaults)

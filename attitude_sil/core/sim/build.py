@@ -34,7 +34,6 @@ from attitude_sil.core.plant.quaternion import quat_from_euler, quat_multiply
 from attitude_sil.core.plant.rigid_body import inertia_matrix
 from attitude_sil.core.plant.scene import BodyScene, body_scene
 from attitude_sil.core.plant.wheels import GEOMETRIES, MotorParams, WheelAssembly
-from attitude_sil.core.sensing.mekf import report_reach
 from attitude_sil.core.sensing.models import SensorSuite
 from attitude_sil.core.sensing.registry import build_filter
 from attitude_sil.core.sim.models import Guidance, MagneticLoop, Plant, Sensing, Wheels, per_episode
@@ -357,9 +356,8 @@ def build_sensing(scn: Scenario, n_episodes: int = 1, seeds=None, gyro_bias_deg_
     estimator = effective_values(scn, "estimator")
     if initial_rpy_deg is not None:
         estimator["initial_attitude_rpy_deg"] = np.asarray(initial_rpy_deg, dtype=float).reshape(n_episodes, 3)
-    reach = report_reach(estimator, suite.star_tracker.schedule.latency_steps, scn.dt)
     mekf = build_filter(estimator, suite.gyro.errors.arw, suite.star_tracker.errors.sigma_B, scn.dt, n_episodes,
-                        reach)
+                        suite.star_tracker.schedule.latency_steps)
     return Sensing(suite, mekf, scn.feedback)
 
 
