@@ -47,11 +47,9 @@ from attitude_sil.ros.contract import (
     WHEEL_STATE,
     WHEEL_STATUS,
     WHEEL_TORQUE,
-    message_class,
 )
 from attitude_sil.ros.convert import isolation_diagnostics_msg, stamp_to_ns, vector_to_array
 from attitude_sil.ros.node import LockstepNode, NodeFaults, run_node
-from attitude_sil.ros.qos import INPUT_QOS
 from attitude_sil.storage.cdr import joint_state_cdr, stamped_vector_cdr
 
 
@@ -69,8 +67,7 @@ class WheelsNode(LockstepNode):
         self.step_subscription(VOLTAGE_CMD, lambda m: self._on_command(m, False))
         self.step_subscription(TORQUE_CMD, lambda m: self._on_command(m, True))
         self.step_subscription(WHEEL_CMD, self._on_wheel_command)
-        self.create_subscription(message_class("diagnostic_msgs/msg/DiagnosticArray"), WHEEL_STATUS,
-                                 self._on_wheel_status, INPUT_QOS)
+        self.step_subscription(WHEEL_STATUS, self._on_wheel_status, "diagnostic_msgs/msg/DiagnosticArray")
         self.declared: list[tuple[int, dict[int, bool]]] = []  # (stamp ns, wheel (1..n) -> sound), to apply
         self._before_declared: list[int] | None = None  # `available` before the episode's first declaration
         self.hold: CommandHold | None = None  # a controller on a timer of its own: the command held

@@ -142,10 +142,11 @@ class SchemaNode(Node):
         return self.create_publisher(message_class(TOPIC_TYPES[topic]), topic, LOCKSTEP_QOS,
                                      event_callbacks=qos_event_callbacks(self, topic, LOCKSTEP_QOS, reader=False))
 
-    def step_subscription(self, topic: str, callback: Callable[[Any], None]):
-        """A subscription to a contract topic, with its message type and the input QoS (volatile: any
-        reliable publisher matches, a default-QoS one included; :mod:`attitude_sil.ros.qos`)."""
-        return self.create_subscription(message_class(TOPIC_TYPES[topic]), topic, callback, INPUT_QOS,
+    def step_subscription(self, topic: str, callback: Callable[[Any], None], type_name: str | None = None):
+        """A subscription to a contract topic, with its message type (``type_name`` for one the bags do not
+        record) and the input QoS (volatile: any reliable publisher matches, a default-QoS one included;
+        :mod:`attitude_sil.ros.qos`)."""
+        return self.create_subscription(message_class(type_name or TOPIC_TYPES[topic]), topic, callback, INPUT_QOS,
                                         event_callbacks=qos_event_callbacks(self, topic, INPUT_QOS,
                                                                             self.qos_problems))
 
